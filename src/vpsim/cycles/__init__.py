@@ -1,0 +1,204 @@
+"""Drive cycles: the standard cycles shipped with vpsim, and user CSV files.
+
+    >>> from vpsim.cycles import load_cycle
+    >>> c = load_cycle("nedc")
+    >>> round(c.distance_m / 1000, 2)
+    11.01
+
+A cycle is a speed trace sampled at strictly increasing times, piecewise linear between samples. The
+shipped cycles are written by ``tools/build_cycles.py`` from public sources; ``data/SOURCES.md`` records
+where each number came from.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import CycleError
+
+STANDARD_CYCLES = ("nedc", "ftp75", "udds", "hwfet", "us06", "wltc3b")
+_ALIASES = {"wltc": "wltc3b", "wltc_class3b": "wltc3b", "ftp": "ftp75", "ftp-75": "ftp75", "wltc3": "wltc3b"}
+
+_SPEED_UNITS = {"m/s": 1.0, "mps": 1.0, "km/h": 1.0 / 3.6, "kmh": 1.0 / 3.6, "kph": 1.0 / 3.6, "mph": 0.44704}
+_TIME_COLUMNS = ("time_s", "time", "t", "t_s")
+_SPEED_COLUMNS = {
+    "speed_mps": "m/s",
+    "speed_m_per_s": "m/s",
+    "speed_kmh": "km/h",
+    "speed_km_per_h": "km/h",
+    "speed_kph": "km/h",
+    "speed_mph": "mph",
+}
+
+
+@dataclass(frozen=True)
+class Cycle:
+    """A speed trace: ``time_s`` strictly increasing, ``speed_mps`` >= 0, piecewise linear in between."""
+
+    name: str
+    time_s: np.ndarray
+    speed_mps: np.ndarray
+    source: str = field(default="", compare=False)
+
+    def __post_init__(self):
+        t = np.asarray(self.time_s, dtype=float)
+        v = np.asarray(self.speed_mps, dtype=float)
+        t.setflags(write=False)
+        v.setflags(write=False)
+        object.__setattr__(self, "time_s", t)
+        object.__setattr__(self, "speed_mps", v)
+        _check_arrays(t, v, self.name)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.time_s[-1] - self.time_s[0])
+
+    @property
+    def distance_m(self) -> float:
+        """Distance of the piecewise-linear trace (trapezoidal integral), m."""
+        return float(np.sum(0.5 * (self.speed_mps[1:] + self.speed_mps[:-1]) * np.diff(self.time_s)))
+
+    @property
+    def max_speed_kmh(self) -> float:
+        return float(self.speed_mps.max() * 3.6)
+
+    def speed_at(self, t):
+        """Speed of the piecewise-linear trace at times ``t`` (0 outside the cycle)."""
+        return np.interp(t, self.time_s, self.speed_mps, left=0.0, right=0.0)
+
+    def repeat(self, n: int) -> Cycle:
+        """The cycle driven ``n`` times back to back (the joining sample is not duplicated)."""
+        if n < 1:
+            raise CycleError(f"repeat count must be >= 1, got {n}")
+        t, v = [self.time_s], [self.speed_mps]
+        for _ in range(n - 1):
+            t.append(t[-1][-1] + self.time_s[1:] - self.time_s[0])
+            v.append(self.speed_mps[1:])
+        return Cycle(f"{self.name}x{n}", np.concatenate(t), np.concatenate(v), self.source)
+
+    def __repr__(self) -> str:
+        return (
+            f"Cycle({self.name!r}: {len(self.time_s)} samples, {self.duration_s:g} s, "
+            f"{self.distance_m / 1000:.3f} km, max {self.max_speed_kmh:.1f} km/h)"
+        )
+
+
+def _check_arrays(t: np.ndarray, v: np.ndarray, where: str) -> None:
+    if t.ndim != 1 or v.ndim != 1 or t.shape != v.shape:
+        raise CycleError(f"{where}: time and speed must be 1-D arrays of equal length")
+    if t.size < 2:
+        raise CycleError(f"{where}: a cycle needs at least two samples, got {t.size}")
+    for name, arr in (("time", t), ("speed", v)):
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            raise CycleError(f"{where}: {name} at sample {bad[0]} is {arr[bad[0]]}, expected a finite number")
+    dt = np.diff(t)
+    bad = np.flatnonzero(dt <= 0)
+    if bad.size:
+        k = bad[0] + 1
+        raise CycleError(f"{where}: time must increase strictly; sample {k} has t = {t[k]:g} after {t[k - 1]:g}")
+    bad = np.flatnonzero(v < 0)
+    if bad.size:
+        raise CycleError(f"{where}: speed at sample {bad[0]} is {v[bad[0]]:g}, expected >= 0")
+
+
+def _normalise(name: str) -> str:
+    key = name.strip().lower()
+    return _ALIASES.get(key, key)
+
+
+def load_cycle(name_or_path: str | Path, *, speed_unit: str | None = None) -> Cycle:
+    """A standard cycle by name (``nedc``, ``ftp75``, ``udds``, ``hwfet``, ``us06``, ``wltc3b``) or a CSV file.
+
+    A CSV file has a header with a time column (``time_s``) and a speed column whose name declares its unit
+    (``speed_mps``, ``speed_kmh``, ``speed_mph``), or a plain ``speed`` column with ``speed_unit`` given
+    (``"m/s"``, ``"km/h"``, ``"mph"``). Lines starting with ``#`` are comments. Errors name the line.
+    """
+    if isinstance(name_or_path, str) and _normalise(name_or_path) in STANDARD_CYCLES:
+        name = _normalise(name_or_path)
+        with resources.files("vpsim.cycles").joinpath("data", f"{name}.csv").open() as fh:
+            cyc = _read_csv(fh, f"{name}.csv", speed_unit=None, name=name)
+        return Cycle(name, cyc.time_s, cyc.speed_mps, source=f"vpsim standard cycle {name} (see cycles/data/SOURCES.md)")
+    path = Path(name_or_path)
+    if not path.exists():
+        if path.suffix == "":
+            raise CycleError(f"unknown cycle {str(name_or_path)!r}; standard cycles: {', '.join(STANDARD_CYCLES)} (or a CSV file)")
+        raise CycleError(f"{path}: no such file")
+    try:
+        with path.open(newline="") as fh:
+            return _read_csv(fh, str(path), speed_unit=speed_unit, name=path.stem)
+    except UnicodeDecodeError:
+        raise CycleError(f"{path}: not a text CSV file") from None
+
+
+def _read_csv(fh, where: str, *, speed_unit: str | None, name: str) -> Cycle:
+    if speed_unit is not None and speed_unit not in _SPEED_UNITS:
+        raise CycleError(f"speed unit {speed_unit!r} is not one of {', '.join(_SPEED_UNITS)}")
+    reader = csv.reader(fh)
+    header = None
+    times: list[float] = []
+    speeds: list[float] = []
+    t_col = v_col = -1
+    scale = 1.0
+    for lineno, row in enumerate(reader, 1):
+        if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
+            continue
+        if header is None:
+            header = [h.strip().lower() for h in row]
+            t_col = next((header.index(c) for c in _TIME_COLUMNS if c in header), -1)
+            if t_col < 0:
+                raise CycleError(f"{where}:{lineno}: no time column; expected one of {', '.join(_TIME_COLUMNS)} in the header")
+            unit = None
+            for col, u in _SPEED_COLUMNS.items():
+                if col in header:
+                    v_col, unit = header.index(col), u
+                    break
+            if v_col < 0 and "speed" in header:
+                v_col = header.index("speed")
+                if speed_unit is None:
+                    raise CycleError(
+                        f"{where}:{lineno}: column 'speed' has no declared unit; name it speed_mps / speed_kmh / "
+                        "speed_mph or pass speed_unit (CLI: --speed-unit)"
+                    )
+                unit = speed_unit
+            if v_col < 0:
+                raise CycleError(
+                    f"{where}:{lineno}: no speed column; expected one of {', '.join(_SPEED_COLUMNS)} or 'speed'"
+                )
+            if speed_unit is not None and unit != speed_unit and header[v_col] != "speed":
+                raise CycleError(f"{where}:{lineno}: column {header[v_col]!r} is in {unit}, but speed unit {speed_unit} was given")
+            scale = _SPEED_UNITS[unit]
+            continue
+        if len(row) <= max(t_col, v_col):
+            raise CycleError(f"{where}:{lineno}: expected {len(header)} fields, got {len(row)}")
+        vals = []
+        for col, label in ((t_col, "time"), (v_col, "speed")):
+            text = row[col].strip()
+            try:
+                x = float(text)
+            except ValueError:
+                raise CycleError(f"{where}:{lineno}: {label} {text!r} is not a number") from None
+            if not math.isfinite(x):
+                raise CycleError(f"{where}:{lineno}: {label} is {text}, expected a finite number")
+            vals.append(x)
+        t, v = vals
+        if times and t <= times[-1]:
+            raise CycleError(f"{where}:{lineno}: time {t:g} does not increase (previous {times[-1]:g})")
+        if v < 0:
+            raise CycleError(f"{where}:{lineno}: speed {v:g} is negative, expected >= 0")
+        times.append(t)
+        speeds.append(v * scale)
+    if header is None:
+        raise CycleError(f"{where}: empty file, expected a header and at least two samples")
+    if len(times) < 2:
+        raise CycleError(f"{where}: {len(times)} sample(s), a cycle needs at least two")
+    return Cycle(name, np.array(times), np.array(speeds), source=where)
+
+
+__all__ = ["STANDARD_CYCLES", "Cycle", "load_cycle"]
