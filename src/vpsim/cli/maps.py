@@ -1,0 +1,23 @@
+"""``vpsim maps``: the torque lines (paper Figure 2) and the fuel map (Figure 3), as PNG and CSV."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from .main import cli
+
+
+@cli.command()
+@click.option("--out", "out", required=True, type=click.Path(file_okay=False), help="Output folder.")
+@click.option("--vehicle", default="hofman2011", show_default=True, help="Preset name or a TOML parameter file.")
+def maps(out, vehicle):
+    """Write the FQM torque lines and the BQM fuel map of an engine (PNG + CSV)."""
+    from ..params import load_parameters
+    from ..plots import write_map_figures
+
+    params = load_parameters(vehicle)
+    written = write_map_figures(params.engine, Path(out))
+    for p in written:
+        click.echo(f"wrote {p}")

@@ -1,0 +1,193 @@
+"""Gear schedules prescribed in time, identical for every method (the paper shifts at fixed instants).
+
+A :class:`GearSchedule` holds the engaged gear (1..n) for each sample interval of a cycle: the gear at
+``time_s[k]`` is engaged on [t_k, t_{k+1}). It is derived once from the cycle by :func:`default_schedule`
+or read from a CSV file (``time_s,gear``) by :func:`load_schedule`. Gear 0 (neutral) in a file is
+accepted and mapped to the gear a stiff driveline must keep engaged (see :func:`load_schedule`).
+
+The default rule (documented in docs/methods.md):
+
+1. For each interval, the engine speed in every gear follows from the interval's mean speed.
+2. A gear is *admissible* if its engine speed stays below ``max_engine_speed`` and the crank torque the
+   interval asks for (road load + acceleration, engine inertia included) is at most ``torque_reserve``
+   times that gear's maximum torque.
+3. The chosen gear is the highest admissible gear whose engine speed is at least ``min_engine_speed``;
+   if none reaches it, the lowest admissible gear (gear 1 at standstill and crawling).
+4. While decelerating, the engine does not upshift (a driver holds or downshifts when braking).
+5. Short engagements (< ``min_hold_s``) are merged into the preceding gear where that gear is admissible.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import physics as ph
+from .cycles import Cycle
+from .errors import CycleError
+
+
+@dataclass(frozen=True)
+class GearSchedule:
+    """Engaged gear per cycle sample (1-based; the last sample repeats the one before)."""
+
+    time_s: np.ndarray
+    gear: np.ndarray
+    source: str = "default rule"
+
+    def __post_init__(self):
+        g = np.asarray(self.gear, dtype=np.int64)
+        t = np.asarray(self.time_s, dtype=float)
+        if g.shape != t.shape:
+            raise CycleError(f"gear schedule ({self.source}): {g.size} gears for {t.size} times")
+        object.__setattr__(self, "gear", g)
+        object.__setattr__(self, "time_s", t)
+
+    def on_cycle(self, cycle: Cycle) -> np.ndarray:
+        """Gear at each sample of ``cycle`` (held piecewise constant from the schedule's times)."""
+        if self.time_s.shape == cycle.time_s.shape and np.array_equal(self.time_s, cycle.time_s):
+            return self.gear
+        idx = np.clip(np.searchsorted(self.time_s, cycle.time_s, side="right") - 1, 0, len(self.gear) - 1)
+        return self.gear[idx]
+
+    def gear_at(self, t):
+        """Gear engaged at times t (right-continuous)."""
+        idx = np.clip(np.searchsorted(self.time_s, t, side="right") - 1, 0, len(self.gear) - 1)
+        return self.gear[idx]
+
+    @property
+    def shift_times(self) -> np.ndarray:
+        """Instants where the engaged gear changes."""
+        return self.time_s[1:][np.diff(self.gear) != 0]
+
+
+@dataclass(frozen=True)
+class GearRule:
+    """Parameters of the default schedule rule (engine speeds in rad/s)."""
+
+    min_engine_speed: float = 200.0  # about 1900 rpm: shift up once the next gear keeps the engine above this
+    max_engine_speed: float = 600.0
+    torque_reserve: float = 0.9
+    min_hold_s: float = 3.0
+
+
+def interval_demand(cycle: Cycle, ratio, params):
+    """Mean speed, acceleration, engine speed and crank torque on each interval for total ratio(s) ``ratio``.
+
+    This is the backward (quasi-static) kinematics used by the BQM and by the gear rule: the cycle is
+    piecewise linear, so on [t_k, t_{k+1}] the acceleration is constant and the mean speed is the average.
+    Rolling resistance acts only while the vehicle moves. Returns (v, a, w_e, dw_e, t_cr, t_e).
+    """
+    veh, eng, tr = params.vehicle, params.engine, params.transmission
+    t, v_s = cycle.time_s, cycle.speed_mps
+    dt = np.diff(t)
+    v = 0.5 * (v_s[1:] + v_s[:-1])
+    a = np.diff(v_s) / dt
+    moving = v > 0
+    force = veh.mass * a + ph.aero_force(v, veh) + ph.rolling_force(veh) * moving  # (18)
+    t_w = force * veh.wheel_radius  # (16)
+    w_e = ph.engine_speed(v, ratio, veh)  # (14),(17)
+    dw_e = ratio * a / veh.wheel_radius
+    t_e = ph.wheel_to_engine_torque(t_w, ratio, tr.efficiency)  # (15)
+    t_cr = t_e + eng.inertia * dw_e  # (1)
+    return v, a, w_e, dw_e, t_cr, t_e
+
+
+def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | None = None) -> GearSchedule:
+    """Derive the gear schedule of ``cycle`` once, by the documented rule (module docstring)."""
+    from .maps import max_torque
+
+    rule = rule or GearRule()
+    ratios = np.asarray(params.transmission.ratios)
+    n_g = len(ratios)
+    _, a, w_e, _, t_cr, _ = interval_demand(cycle, ratios[:, None], params)  # shape (gears, intervals)
+    t_max = engine_map.max_torque(w_e) if engine_map is not None else max_torque(w_e, params.engine)
+    speed_ok = w_e <= rule.max_engine_speed
+    admissible = speed_ok & (t_cr <= rule.torque_reserve * t_max)
+    # nothing fits: the gear with the largest traction reserve within the speed limit (the highest gear if
+    # even that is over-speed); the trace miss is then reported by the method
+    none = ~admissible.any(axis=0)
+    if np.any(none):
+        reserve = np.where(speed_ok, ratios[:, None] * (t_max - t_cr), -np.inf)
+        fallback = np.where(speed_ok.any(axis=0), np.argmax(reserve, axis=0), n_g - 1)
+        admissible[fallback[none], np.flatnonzero(none)] = True
+    high_enough = admissible & (w_e >= rule.min_engine_speed)
+    gears = np.arange(1, n_g + 1)[:, None]
+    best_high = np.where(high_enough, gears, 0).max(axis=0)
+    lowest_adm = np.where(admissible, gears, n_g + 1).min(axis=0)
+    gear = np.where(best_high > 0, best_high, lowest_adm)
+    n = gear.size
+    # no upshift while decelerating
+    for k in range(1, n):
+        if a[k] < 0 and gear[k] > gear[k - 1] and admissible[gear[k - 1] - 1, k]:
+            gear[k] = gear[k - 1]
+    # merge short engagements into the preceding gear where admissible
+    dt = np.diff(cycle.time_s)
+    k = 1
+    while k < n:
+        if gear[k] != gear[k - 1]:
+            j = k
+            while j < n and gear[j] == gear[k]:
+                j += 1
+            dur = float(np.sum(dt[k:j]))
+            prev = gear[k - 1]
+            if dur < rule.min_hold_s and j < n and np.all(admissible[prev - 1, k:j]):
+                gear[k:j] = prev
+            k = j
+        else:
+            k += 1
+    full = np.append(gear, gear[-1])
+    return GearSchedule(cycle.time_s.copy(), full, source="default rule")
+
+
+def load_schedule(path: str | Path, n_gears: int) -> GearSchedule:
+    """Read a gear schedule CSV with columns ``time_s,gear`` (gear 0 = neutral, 1..n_gears engaged).
+
+    The stiff-driveline model of the paper has no clutch: a neutral sample (0) keeps the gear engaged
+    before it (or gear 1 at the start). Errors name the line.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise CycleError(f"{path}: no such file")
+    times: list[float] = []
+    gears: list[int] = []
+    with path.open(newline="") as fh:
+        header = None
+        for lineno, row in enumerate(csv.reader(fh), 1):
+            if not row or row[0].lstrip().startswith("#"):
+                continue
+            if header is None:
+                header = [h.strip().lower() for h in row]
+                if "time_s" not in header or "gear" not in header:
+                    raise CycleError(f"{path}:{lineno}: header must contain time_s and gear, got {','.join(header)}")
+                ti, gi = header.index("time_s"), header.index("gear")
+                continue
+            try:
+                t = float(row[ti])
+                gf = float(row[gi])
+            except (ValueError, IndexError):
+                raise CycleError(f"{path}:{lineno}: expected numeric time_s and gear, got {','.join(row)}") from None
+            if not np.isfinite(t) or not gf.is_integer() or not 0 <= gf <= n_gears:
+                raise CycleError(f"{path}:{lineno}: gear {row[gi].strip()} is not a whole number in 0..{n_gears}")
+            if times and t <= times[-1]:
+                raise CycleError(f"{path}:{lineno}: time {t:g} does not increase (previous {times[-1]:g})")
+            times.append(t)
+            gears.append(int(gf))
+    if len(times) < 1:
+        raise CycleError(f"{path}: no gear samples")
+    g = np.array(gears)
+    for k in range(len(g)):
+        if g[k] == 0:
+            g[k] = g[k - 1] if k > 0 else 1
+    return GearSchedule(np.array(times), g, source=str(path))
+
+
+def agreement(a: np.ndarray, b: np.ndarray, mask=None) -> float:
+    """Share of samples where two gear sequences agree (optionally over ``mask``)."""
+    a, b = np.asarray(a), np.asarray(b)
+    if mask is None:
+        mask = np.ones(a.shape, bool)
+    return float(np.mean(a[mask] == b[mask])) if np.any(mask) else float("nan")

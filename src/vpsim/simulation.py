@@ -1,0 +1,70 @@
+"""The one high-level entry point: ``simulate(cycle, method=...)`` returns a :class:`~vpsim.result.Result`.
+
+    >>> import vpsim
+    >>> r = vpsim.simulate("nedc", method="backward")
+    >>> print(f"{r.fuel_l_per_100km:.2f} L/100 km")  # doctest: +SKIP
+
+Methods: ``backward`` (quasi-static, exact tracking), ``forward`` (dynamic, PI driver), ``inverse`` (stable
+inversion, smoothing driver). Modes: ``paper`` (the paper's model: no clutch, no brakes, idle fuel floor;
+the default, so the three methods compare as in the paper) and ``extended`` (clutch and idle at standstill,
+friction brakes).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .cycles import Cycle, load_cycle
+from .errors import VpsimError
+from .gears import GearSchedule, default_schedule, load_schedule
+from .params import Parameters, load_parameters
+
+METHODS = ("backward", "forward", "inverse")
+MODES = ("paper", "extended")
+
+
+def resolve_inputs(cycle, params, gears=None):
+    """Turn names/paths into (Cycle, Parameters, GearSchedule)."""
+    if not isinstance(cycle, Cycle):
+        cycle = load_cycle(cycle)
+    if not isinstance(params, Parameters):
+        params = load_parameters(params)
+    if gears is None or isinstance(gears, GearSchedule):
+        schedule = gears
+    else:
+        schedule = load_schedule(Path(gears), params.transmission.n_gears)
+    if schedule is None:
+        from .maps import cached_engine_map
+
+        schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
+    return cycle, params, schedule
+
+
+def simulate(cycle: str | Path | Cycle = "nedc", method: str = "backward", params: str | Path | Parameters = "hofman2011",
+             *, driver: int | str | None = None, mode: str = "paper", gears=None, **options):
+    """Simulate ``params`` (preset name, TOML file or Parameters) on ``cycle`` with ``method``.
+
+    ``driver`` (1 or 2; forward and inverse only, default 1) picks the tuning; ``gears`` is a schedule file or
+    :class:`~vpsim.gears.GearSchedule` (default: derived from the cycle by the documented rule); further
+    ``options`` go to the method (e.g. ``engine_map=`` for the backward method, ``rtol=`` for the forward).
+    """
+    if method not in METHODS:
+        raise VpsimError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
+    if mode not in MODES:
+        raise VpsimError(f"unknown mode {mode!r}; expected one of {', '.join(MODES)}")
+    cycle, params, schedule = resolve_inputs(cycle, params, gears)
+    if method == "backward":
+        if driver is not None:
+            raise VpsimError("the backward method tracks the cycle exactly and takes no driver")
+        from .methods import backward
+
+        return backward.run(cycle, params, schedule=schedule, mode=mode, **options)
+    driver = "1" if driver is None else str(driver)
+    params.driver(driver)  # validates
+    if method == "forward":
+        from .methods import forward
+
+        return forward.run(cycle, params, driver=driver, schedule=schedule, mode=mode, **options)
+    from .methods import inverse
+
+    return inverse.run(cycle, params, driver=driver, schedule=schedule, mode=mode, **options)
