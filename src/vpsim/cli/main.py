@@ -7,6 +7,7 @@ wires them and turns :class:`~vpsim.errors.VpsimError` into a one-line message.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import sys
 
 import click
@@ -14,7 +15,7 @@ import click
 from ..errors import VpsimError
 
 # command modules, imported lazily by main() so `vpsim --help` stays fast
-COMMAND_MODULES = ("simulate", "maps")
+COMMAND_MODULES = ("simulate", "maps", "paper", "engine", "scaling", "bench", "sweep")
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -25,7 +26,8 @@ def cli():
 
 def _load_commands() -> None:
     for name in COMMAND_MODULES:
-        importlib.import_module(f"{__package__}.{name}")
+        if importlib.util.find_spec(f"{__package__}.{name}") is not None:
+            importlib.import_module(f"{__package__}.{name}")
 
 
 def main(argv=None) -> int:
