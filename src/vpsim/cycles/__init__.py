@@ -55,6 +55,19 @@ class Cycle:
         object.__setattr__(self, "speed_mps", v)
         _check_arrays(t, v, self.name)
 
+    def __eq__(self, other) -> bool:
+        # the generated dataclass __eq__ compares the arrays with ``==`` and fails on arrays of size > 1
+        if not isinstance(other, Cycle):
+            return NotImplemented
+        return (
+            self.name == other.name
+            and np.array_equal(self.time_s, other.time_s)
+            and np.array_equal(self.speed_mps, other.speed_mps)
+        )
+
+    def __hash__(self) -> int:
+        return hash((self.name, self.time_s.tobytes(), self.speed_mps.tobytes()))
+
     @property
     def duration_s(self) -> float:
         return float(self.time_s[-1] - self.time_s[0])
@@ -73,9 +86,20 @@ class Cycle:
         return np.interp(t, self.time_s, self.speed_mps, left=0.0, right=0.0)
 
     def repeat(self, n: int) -> Cycle:
-        """The cycle driven ``n`` times back to back (the joining sample is not duplicated)."""
+        """The cycle driven ``n`` times back to back (the joining sample is not duplicated).
+
+        The last sample of one copy is the first sample of the next, so the cycle must end at the speed it
+        starts with (all standard cycles start and end at standstill); otherwise :class:`CycleError`.
+        """
+        if isinstance(n, bool) or not isinstance(n, int | np.integer):
+            raise CycleError(f"repeat count must be an integer >= 1, got {n!r}")
         if n < 1:
             raise CycleError(f"repeat count must be >= 1, got {n}")
+        if n > 1 and self.speed_mps[-1] != self.speed_mps[0]:
+            raise CycleError(
+                f"{self.name}: cannot repeat a cycle that ends at {self.speed_mps[-1]:g} m/s but starts at "
+                f"{self.speed_mps[0]:g} m/s; the copies would not join"
+            )
         t, v = [self.time_s], [self.speed_mps]
         for _ in range(n - 1):
             t.append(t[-1][-1] + self.time_s[1:] - self.time_s[0])
@@ -102,7 +126,9 @@ def _check_arrays(t: np.ndarray, v: np.ndarray, where: str) -> None:
     bad = np.flatnonzero(dt <= 0)
     if bad.size:
         k = bad[0] + 1
-        raise CycleError(f"{where}: time must increase strictly; sample {k} has t = {t[k]:g} after {t[k - 1]:g}")
+        raise CycleError(
+            f"{where}: time must increase strictly; sample {k} has t = {t[k]:g} after {t[k - 1]:g}"
+        )
     bad = np.flatnonzero(v < 0)
     if bad.size:
         raise CycleError(f"{where}: speed at sample {bad[0]} is {v[bad[0]]:g}, expected >= 0")
@@ -114,7 +140,7 @@ def _normalise(name: str) -> str:
 
 
 def load_cycle(name_or_path: str | Path, *, speed_unit: str | None = None) -> Cycle:
-    """A standard cycle by name (``nedc``, ``ftp75``, ``udds``, ``hwfet``, ``us06``, ``wltc3b``) or a CSV file.
+    """A standard cycle by name (``nedc``, ``ftp75``, ``udds``, ``hwfet``, ``us06``, ``wltc3b``) or a CSV.
 
     A CSV file has a header with a time column (``time_s``) and a speed column whose name declares its unit
     (``speed_mps``, ``speed_kmh``, ``speed_mph``), or a plain ``speed`` column with ``speed_unit`` given
@@ -122,38 +148,56 @@ def load_cycle(name_or_path: str | Path, *, speed_unit: str | None = None) -> Cy
     """
     if isinstance(name_or_path, str) and _normalise(name_or_path) in STANDARD_CYCLES:
         name = _normalise(name_or_path)
-        with resources.files("vpsim.cycles").joinpath("data", f"{name}.csv").open() as fh:
+        with resources.files("vpsim.cycles").joinpath("data", f"{name}.csv").open(encoding="utf-8") as fh:
             cyc = _read_csv(fh, f"{name}.csv", speed_unit=None, name=name)
-        return Cycle(name, cyc.time_s, cyc.speed_mps, source=f"vpsim standard cycle {name} (see cycles/data/SOURCES.md)")
+        return Cycle(
+            name,
+            cyc.time_s,
+            cyc.speed_mps,
+            source=f"vpsim standard cycle {name} (see cycles/data/SOURCES.md)",
+        )
     path = Path(name_or_path)
     if not path.exists():
         if path.suffix == "":
-            raise CycleError(f"unknown cycle {str(name_or_path)!r}; standard cycles: {', '.join(STANDARD_CYCLES)} (or a CSV file)")
+            raise CycleError(
+                f"unknown cycle {str(name_or_path)!r}; standard cycles: {', '.join(STANDARD_CYCLES)} "
+                "(or a CSV file)"
+            )
         raise CycleError(f"{path}: no such file")
     try:
-        with path.open(newline="") as fh:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
             return _read_csv(fh, str(path), speed_unit=speed_unit, name=path.stem)
     except UnicodeDecodeError:
         raise CycleError(f"{path}: not a text CSV file") from None
 
 
+def _uncommented(fh):
+    """The lines of ``fh`` with comment lines blanked (so a quote in a comment cannot open a CSV field)."""
+    for line in fh:
+        yield "\n" if line.lstrip().startswith("#") else line
+
+
 def _read_csv(fh, where: str, *, speed_unit: str | None, name: str) -> Cycle:
     if speed_unit is not None and speed_unit not in _SPEED_UNITS:
         raise CycleError(f"speed unit {speed_unit!r} is not one of {', '.join(_SPEED_UNITS)}")
-    reader = csv.reader(fh)
+    reader = csv.reader(_uncommented(fh))
     header = None
     times: list[float] = []
     speeds: list[float] = []
     t_col = v_col = -1
     scale = 1.0
-    for lineno, row in enumerate(reader, 1):
-        if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
+    for row in reader:
+        lineno = reader.line_num
+        if not row or not "".join(row).strip():
             continue
         if header is None:
             header = [h.strip().lower() for h in row]
             t_col = next((header.index(c) for c in _TIME_COLUMNS if c in header), -1)
             if t_col < 0:
-                raise CycleError(f"{where}:{lineno}: no time column; expected one of {', '.join(_TIME_COLUMNS)} in the header")
+                raise CycleError(
+                    f"{where}:{lineno}: no time column; expected one of {', '.join(_TIME_COLUMNS)} "
+                    "in the header"
+                )
             unit = None
             for col, u in _SPEED_COLUMNS.items():
                 if col in header:
@@ -163,16 +207,24 @@ def _read_csv(fh, where: str, *, speed_unit: str | None, name: str) -> Cycle:
                 v_col = header.index("speed")
                 if speed_unit is None:
                     raise CycleError(
-                        f"{where}:{lineno}: column 'speed' has no declared unit; name it speed_mps / speed_kmh / "
-                        "speed_mph or pass speed_unit (CLI: --speed-unit)"
+                        f"{where}:{lineno}: column 'speed' has no declared unit; name it speed_mps / "
+                        "speed_kmh / speed_mph or pass speed_unit (CLI: --speed-unit)"
                     )
                 unit = speed_unit
             if v_col < 0:
                 raise CycleError(
-                    f"{where}:{lineno}: no speed column; expected one of {', '.join(_SPEED_COLUMNS)} or 'speed'"
+                    f"{where}:{lineno}: no speed column; expected one of {', '.join(_SPEED_COLUMNS)} "
+                    "or 'speed'"
                 )
-            if speed_unit is not None and unit != speed_unit and header[v_col] != "speed":
-                raise CycleError(f"{where}:{lineno}: column {header[v_col]!r} is in {unit}, but speed unit {speed_unit} was given")
+            if (
+                speed_unit is not None
+                and _SPEED_UNITS[unit] != _SPEED_UNITS[speed_unit]
+                and header[v_col] != "speed"
+            ):
+                raise CycleError(
+                    f"{where}:{lineno}: column {header[v_col]!r} is in {unit}, but speed unit "
+                    f"{speed_unit} was given"
+                )
             scale = _SPEED_UNITS[unit]
             continue
         if len(row) <= max(t_col, v_col):
@@ -194,10 +246,15 @@ def _read_csv(fh, where: str, *, speed_unit: str | None, name: str) -> Cycle:
             raise CycleError(f"{where}:{lineno}: speed {v:g} is negative, expected >= 0")
         times.append(t)
         speeds.append(v * scale)
+    last = max(reader.line_num, 1)
     if header is None:
-        raise CycleError(f"{where}: empty file, expected a header and at least two samples")
+        raise CycleError(
+            f"{where}:{last}: empty file (no header before the end), expected a header and samples"
+        )
     if len(times) < 2:
-        raise CycleError(f"{where}: {len(times)} sample(s), a cycle needs at least two")
+        raise CycleError(
+            f"{where}:{last}: {len(times)} sample(s) at the end of the file, a cycle needs at least two"
+        )
     return Cycle(name, np.array(times), np.array(speeds), source=where)
 
 
