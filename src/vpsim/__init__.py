@@ -5,8 +5,22 @@ load) run by three simulation methods, after Hofman, van Leeuwen & Steinbuch (20
 """
 
 from .errors import CycleError, ParameterError, VpsimError
+from .cycles import Cycle, load_cycle
 from .params import Parameters, load_parameters
+from .result import Result
+from .simulation import simulate
 
 __version__ = "0.1.0"
 
-__all__ = ["CycleError", "ParameterError", "Parameters", "VpsimError", "load_parameters", "__version__"]
+__all__ = [
+    "Cycle",
+    "CycleError",
+    "ParameterError",
+    "Parameters",
+    "Result",
+    "VpsimError",
+    "__version__",
+    "load_cycle",
+    "load_parameters",
+    "simulate",
+]

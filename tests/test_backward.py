@@ -1,0 +1,110 @@
+"""The backward quasi-static method: fuel figures, energy closure, trace misses, gears."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import vpsim
+from vpsim import gears
+from vpsim.cycles import Cycle, load_cycle
+from vpsim.maps import cached_engine_map
+from vpsim.methods import backward
+
+
+@pytest.mark.parametrize(("cycle", "lo", "hi"), [("nedc", 8.0, 10.0), ("ftp75", 8.0, 10.5)])
+def test_baseline_fuel_is_plausible(params, cycle, lo, hi):
+    """A 1700 kg car with a 2.3 L engine: expected near 8-10 L/100 km."""
+    r = vpsim.simulate(cycle, method="backward")
+    assert lo < r.fuel_l_per_100km < hi
+    assert r.trace_miss.seconds == 0
+    assert r.distance_m == pytest.approx(load_cycle(cycle).distance_m, rel=1e-12)
+
+
+@pytest.mark.parametrize("cycle", ["nedc", "ftp75", "udds", "hwfet", "us06", "wltc3b"])
+@pytest.mark.parametrize("mode", ["paper", "extended"])
+def test_energy_closes_on_whole_cycle(params, cycle, mode):
+    """Indicated work (model fuel flow, before the idle floor) = road load + kinetic + losses, < 0.5 %."""
+    r = backward.run(load_cycle(cycle), params, mode=mode)
+    e = r.energy
+    assert e.relative_residual < 5e-3, str(e)
+    assert e.friction > 0 and e.aero > 0 and e.rolling > 0
+    # the vehicle starts and ends at rest
+    assert abs(e.vehicle_kinetic) < 1e-6 * e.indicated
+
+
+def test_energy_closes_exactly_with_closed_form_map(params):
+    em = cached_engine_map(params.engine).with_exact()
+    r = backward.run(load_cycle("ftp75"), params, engine_map=em)
+    assert r.energy.relative_residual < 1e-10
+
+
+def test_idle_floor_applies(params):
+    r = backward.run(load_cycle("nedc"), params)
+    used, model = r.series["fuel_flow_used_kgps"], r.series["fuel_flow_kgps"]
+    assert np.all(used >= params.simulation.idle_fuel_flow)
+    assert np.all(used >= model)
+    assert np.any(model < params.simulation.idle_fuel_flow)  # braking and standstill are on the floor
+
+
+def test_trace_miss_is_reported_not_clipped_silently(params):
+    """A 0-100 km/h in 5 s ramp is beyond the engine: the shortfall is reported in seconds and N m."""
+    t = np.arange(0.0, 31.0)
+    v = np.minimum(t * (100 / 3.6) / 5.0, 100 / 3.6)
+    r = vpsim.simulate(Cycle("launch", t, v), method="backward")
+    assert r.trace_miss.seconds >= 4
+    assert r.trace_miss.max_torque_shortfall_nm > 10
+    assert r.summary()["trace_miss_s"] == r.trace_miss.seconds
+    assert any("trace miss" in n for n in r.notes)
+    assert np.all(r.series["crank_torque_nm"] <= cached_engine_map(params.engine).max_torque(
+        r.series["engine_speed_radps"]) + 1e-9)
+    # the missed work is carried in the energy balance, which still closes
+    assert r.energy.trace_miss > 0 and r.energy.relative_residual < 5e-3
+
+
+def test_extended_mode_brakes_and_idles(params):
+    r = backward.run(load_cycle("nedc"), params, mode="extended")
+    assert r.energy.brake > 0
+    s = r.series
+    standstill = s["speed_mps"] == 0
+    assert np.all(s["engine_speed_radps"][standstill] == backward.IDLE_SPEED)
+    assert np.allclose(s["fuel_flow_used_kgps"][standstill], params.simulation.idle_fuel_flow)
+
+
+def test_heavier_car_uses_more_fuel(params):
+    light = backward.run(load_cycle("nedc"), params.with_changes(vehicle={"mass": 1200.0}))
+    heavy = backward.run(load_cycle("nedc"), params.with_changes(vehicle={"mass": 2200.0}))
+    assert heavy.fuel_kg > light.fuel_kg
+
+
+@pytest.mark.parametrize("name", ["nedc", "ftp75"])
+def test_default_gear_rule_against_reference_schedule(params, shared_dir, name):
+    """Agreement of the default rule with the QSS Toolbox gear vectors (a reference, not the paper's own).
+
+    Measured: NEDC 81 % of driving seconds in the same gear, FTP-75 72 %, both 100 % within one gear.
+    The rule is not tuned to this reference (a higher shift speed would raise NEDC and lower FTP-75).
+    """
+    cyc = load_cycle(name)
+    ref = gears.load_schedule(shared_dir / "data" / "gears" / f"{name}_qss.csv", params.transmission.n_gears)
+    raw = np.loadtxt(shared_dir / "data" / "gears" / f"{name}_qss.csv", delimiter=",", skiprows=1)
+    mask = (raw[: cyc.time_s.size, 1] > 0) & (cyc.speed_mps > 0.5)
+    ours = gears.default_schedule(cyc, params).on_cycle(cyc)
+    same = gears.agreement(ours, ref.on_cycle(cyc), mask)
+    within_one = float(np.mean(np.abs(ours - ref.on_cycle(cyc))[mask] <= 1))
+    assert same > {"nedc": 0.78, "ftp75": 0.68}[name], same
+    assert within_one > 0.99
+
+
+def test_gear_schedule_file_is_used_by_the_method(params, tmp_path):
+    cyc = load_cycle("nedc")
+    f = tmp_path / "g.csv"
+    f.write_text("time_s,gear\n" + "".join(f"{t:g},{3}\n" for t in cyc.time_s))
+    r = vpsim.simulate(cyc, method="backward", gears=f)
+    assert set(np.unique(r.series["gear"])) == {3}
+
+
+def test_bad_gear_file(params, tmp_path):
+    f = tmp_path / "g.csv"
+    f.write_text("time_s,gear\n0,1\n1,7\n")
+    with pytest.raises(vpsim.CycleError, match=r"g\.csv:3: gear 7 is not a whole number in 0\.\.5"):
+        gears.load_schedule(f, 5)
