@@ -1,0 +1,66 @@
+"""Every example in the README and docs/ runs: Python blocks are executed, `vpsim ...` lines are invoked.
+
+Files the examples name as a user's own (``my_trip.csv``, ``my_car.toml``) are created in a scratch folder
+first: the TOML from the README's own block, the trip as a short speed trace.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from vpsim.cli.main import main
+
+REPO = Path(__file__).resolve().parents[1]
+DOCS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
+FENCE = re.compile(r"^[ \t]*```(\w+)\n(.*?)^[ \t]*```", re.S | re.M)
+# commands that install or test rather than use vpsim, and the long study runs that have their own tests
+SKIP_PREFIXES = ("pip ", "pytest", "python -m pytest", "cd ", "git ")
+
+
+def _blocks(lang):
+    for doc in DOCS:
+        for m in FENCE.finditer(doc.read_text()):
+            if m.group(1) == lang:
+                yield pytest.param(doc, textwrap.dedent(m.group(2)), id=f"{doc.name}:{doc.read_text()[: m.start()].count(chr(10)) + 1}")
+
+
+@pytest.fixture
+def scratch(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    toml = next(textwrap.dedent(m.group(2)) for m in FENCE.finditer((REPO / "README.md").read_text()) if m.group(1) == "toml")
+    (tmp_path / "my_car.toml").write_text(toml)
+    (tmp_path / "my_trip.csv").write_text("time_s,speed_kmh\n" + "".join(
+        f"{t},{min(t, 40 - t, 10) * 5}\n" for t in range(41)))
+    return tmp_path
+
+
+@pytest.mark.parametrize(("doc", "code"), list(_blocks("python")))
+def test_python_examples_run(scratch, doc, code):
+    import matplotlib.pyplot as plt
+
+    exec(compile(code, str(doc), "exec"), {"__name__": "__doc_example__"})
+    plt.close("all")
+
+
+@pytest.mark.parametrize(("doc", "code"), list(_blocks("bash")))
+def test_shell_examples_run(scratch, doc, code, capsys):
+    ran = 0
+    for line in code.splitlines():
+        cmd = line.split("#", 1)[0].strip()
+        for part in (p.strip() for p in cmd.split("&&")):
+            if not part or part.startswith(SKIP_PREFIXES):
+                continue
+            args = shlex.split(part)
+            assert args[0] == "vpsim", f"{doc.name}: unexpected command {part!r}"
+            code_ = main(args[1:])
+            out, err = capsys.readouterr()
+            assert code_ == 0, f"{part}: {err}"
+            ran += 1
+    assert ran or "pip install" in code, "a shell block with nothing to run"
+    assert os.getcwd() == str(scratch)
