@@ -56,8 +56,10 @@ def test_trace_miss_is_reported_not_clipped_silently(params):
     assert r.trace_miss.max_torque_shortfall_nm > 10
     assert r.summary()["trace_miss_s"] == r.trace_miss.seconds
     assert any("trace miss" in n for n in r.notes)
-    assert np.all(r.series["crank_torque_nm"] <= cached_engine_map(params.engine).max_torque(
-        r.series["engine_speed_radps"]) + 1e-9)
+    assert np.all(
+        r.series["crank_torque_nm"]
+        <= cached_engine_map(params.engine).max_torque(r.series["engine_speed_radps"]) + 1e-9
+    )
     # the missed work is carried in the energy balance, which still closes
     assert r.energy.trace_miss > 0 and r.energy.relative_residual < 5e-3
 

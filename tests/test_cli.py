@@ -10,8 +10,17 @@ import pytest
 
 from vpsim.cli.main import main
 
-JSON_KEYS = {"method", "cycle", "driver", "fuel_l_per_100km", "fuel_kg", "distance_km", "cpu_time_s", "steps",
-             "trace_miss_s"}
+JSON_KEYS = {
+    "method",
+    "cycle",
+    "driver",
+    "fuel_l_per_100km",
+    "fuel_kg",
+    "distance_km",
+    "cpu_time_s",
+    "steps",
+    "trace_miss_s",
+}
 
 
 def run(capsys, *args):
@@ -41,7 +50,12 @@ def test_simulate_text_and_out(capsys, tmp_path):
 def test_maps_writes_figures_and_csv(capsys, tmp_path):
     code, out, _ = run(capsys, "maps", "--out", str(tmp_path))
     assert code == 0
-    for f in ("figure2_torque_lines.png", "figure2_torque_lines.csv", "figure3_fuel_map.png", "figure3_fuel_map.csv"):
+    for f in (
+        "figure2_torque_lines.png",
+        "figure2_torque_lines.csv",
+        "figure3_fuel_map.png",
+        "figure3_fuel_map.csv",
+    ):
         assert (tmp_path / f).stat().st_size > 100
 
 
@@ -49,12 +63,36 @@ def test_maps_writes_figures_and_csv(capsys, tmp_path):
     ("args", "match", "files"),
     [
         (["simulate", "--cycle", "nope"], "unknown cycle 'nope'", {}),
-        (["simulate", "--cycle", "{d}/bad.csv"], "bad.csv:4: time 1 does not increase", {"bad.csv": "time_s,speed_mps\n0,0\n1,1\n1,2\n"}),
-        (["simulate", "--cycle", "{d}/nan.csv"], "nan.csv:3: speed is nan", {"nan.csv": "time_s,speed_mps\n0,0\n1,nan\n"}),
-        (["simulate", "--cycle", "{d}/neg.csv"], "neg.csv:3: speed -1 is negative", {"neg.csv": "time_s,speed_kmh\n0,0\n1,-1\n"}),
-        (["simulate", "--cycle", "{d}/one.csv"], "a cycle needs at least two", {"one.csv": "time_s,speed_mps\n0,0\n"}),
-        (["simulate", "--vehicle", "{d}/car.toml"], "vehicle.mass = -1", {"car.toml": "[vehicle]\nmass = -1.0\n"}),
-        (["simulate", "--vehicle", "{d}/car.toml"], "engine.bore = 90", {"car.toml": "[engine]\nbore = 90.0\n"}),
+        (
+            ["simulate", "--cycle", "{d}/bad.csv"],
+            "bad.csv:4: time 1 does not increase",
+            {"bad.csv": "time_s,speed_mps\n0,0\n1,1\n1,2\n"},
+        ),
+        (
+            ["simulate", "--cycle", "{d}/nan.csv"],
+            "nan.csv:3: speed is nan",
+            {"nan.csv": "time_s,speed_mps\n0,0\n1,nan\n"},
+        ),
+        (
+            ["simulate", "--cycle", "{d}/neg.csv"],
+            "neg.csv:3: speed -1 is negative",
+            {"neg.csv": "time_s,speed_kmh\n0,0\n1,-1\n"},
+        ),
+        (
+            ["simulate", "--cycle", "{d}/one.csv"],
+            "a cycle needs at least two",
+            {"one.csv": "time_s,speed_mps\n0,0\n"},
+        ),
+        (
+            ["simulate", "--vehicle", "{d}/car.toml"],
+            "vehicle.mass = -1",
+            {"car.toml": "[vehicle]\nmass = -1.0\n"},
+        ),
+        (
+            ["simulate", "--vehicle", "{d}/car.toml"],
+            "engine.bore = 90",
+            {"car.toml": "[engine]\nbore = 90.0\n"},
+        ),
         (["simulate", "--method", "backward", "--driver", "1"], "--driver applies to", {}),
     ],
 )
@@ -70,6 +108,8 @@ def test_bad_input_is_one_line_exit_2(capsys, tmp_path, args, match, files):
 
 def test_console_script_exit_status():
     """The installed entry point: error on stderr, status 2, no traceback."""
-    p = subprocess.run([sys.executable, "-m", "vpsim", "simulate", "--cycle", "nope"], capture_output=True, text=True)
+    p = subprocess.run(
+        [sys.executable, "-m", "vpsim", "simulate", "--cycle", "nope"], capture_output=True, text=True
+    )
     assert p.returncode == 2
     assert p.stderr.startswith("vpsim: error: unknown cycle") and "Traceback" not in p.stderr

@@ -27,16 +27,25 @@ def _blocks(lang):
     for doc in DOCS:
         for m in FENCE.finditer(doc.read_text()):
             if m.group(1) == lang:
-                yield pytest.param(doc, textwrap.dedent(m.group(2)), id=f"{doc.name}:{doc.read_text()[: m.start()].count(chr(10)) + 1}")
+                yield pytest.param(
+                    doc,
+                    textwrap.dedent(m.group(2)),
+                    id=f"{doc.name}:{doc.read_text()[: m.start()].count(chr(10)) + 1}",
+                )
 
 
 @pytest.fixture
 def scratch(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    toml = next(textwrap.dedent(m.group(2)) for m in FENCE.finditer((REPO / "README.md").read_text()) if m.group(1) == "toml")
+    toml = next(
+        textwrap.dedent(m.group(2))
+        for m in FENCE.finditer((REPO / "README.md").read_text())
+        if m.group(1) == "toml"
+    )
     (tmp_path / "my_car.toml").write_text(toml)
-    (tmp_path / "my_trip.csv").write_text("time_s,speed_kmh\n" + "".join(
-        f"{t},{min(t, 40 - t, 10) * 5}\n" for t in range(41)))
+    (tmp_path / "my_trip.csv").write_text(
+        "time_s,speed_kmh\n" + "".join(f"{t},{min(t, 40 - t, 10) * 5}\n" for t in range(41))
+    )
     return tmp_path
 
 

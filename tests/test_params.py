@@ -28,7 +28,11 @@ def _write(tmp_path, text, name="car.toml"):
 
 
 def test_user_file_overrides_base(tmp_path):
-    p = load_parameters(_write(tmp_path, "[vehicle]\nmass = 1200.0\n[engine]\nbore = { value = 0.08, confidence = 'measured' }\n"))
+    p = load_parameters(
+        _write(
+            tmp_path, "[vehicle]\nmass = 1200.0\n[engine]\nbore = { value = 0.08, confidence = 'measured' }\n"
+        )
+    )
     assert p.vehicle.mass == 1200.0
     assert p.engine.bore == 0.08
     assert p.engine.stroke == 0.09  # from the base preset

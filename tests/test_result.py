@@ -14,8 +14,17 @@ def test_result_views():
     r = vpsim.simulate("udds", method="backward")
     df = r.to_dataframe()
     assert len(df) == r.steps
-    for col in ("time_s", "speed_mps", "accel_mps2", "gear", "engine_speed_radps", "crank_torque_nm",
-                "intake_pressure_pa", "fuel_flow_kgps", "fuel_flow_used_kgps"):
+    for col in (
+        "time_s",
+        "speed_mps",
+        "accel_mps2",
+        "gear",
+        "engine_speed_radps",
+        "crank_torque_nm",
+        "intake_pressure_pa",
+        "fuel_flow_kgps",
+        "fuel_flow_used_kgps",
+    ):
         assert col in df.columns
     # fuel in the summary is the integral of the series
     dt = np.diff(vpsim.load_cycle("udds").time_s)

@@ -4,8 +4,8 @@ One physical powertrain model (mean-value SI engine with intake-manifold dynamic
 load) run by three simulation methods, after Hofman, van Leeuwen & Steinbuch (2011).
 """
 
-from .errors import CycleError, ParameterError, VpsimError
 from .cycles import Cycle, load_cycle
+from .errors import CycleError, ParameterError, VpsimError
 from .params import Parameters, load_parameters
 from .result import Result
 from .simulation import simulate

@@ -162,16 +162,22 @@ def load_schedule(path: str | Path, n_gears: int) -> GearSchedule:
             if header is None:
                 header = [h.strip().lower() for h in row]
                 if "time_s" not in header or "gear" not in header:
-                    raise CycleError(f"{path}:{lineno}: header must contain time_s and gear, got {','.join(header)}")
+                    raise CycleError(
+                        f"{path}:{lineno}: header must contain time_s and gear, got {','.join(header)}"
+                    )
                 ti, gi = header.index("time_s"), header.index("gear")
                 continue
             try:
                 t = float(row[ti])
                 gf = float(row[gi])
             except (ValueError, IndexError):
-                raise CycleError(f"{path}:{lineno}: expected numeric time_s and gear, got {','.join(row)}") from None
+                raise CycleError(
+                    f"{path}:{lineno}: expected numeric time_s and gear, got {','.join(row)}"
+                ) from None
             if not np.isfinite(t) or not gf.is_integer() or not 0 <= gf <= n_gears:
-                raise CycleError(f"{path}:{lineno}: gear {row[gi].strip()} is not a whole number in 0..{n_gears}")
+                raise CycleError(
+                    f"{path}:{lineno}: gear {row[gi].strip()} is not a whole number in 0..{n_gears}"
+                )
             if times and t <= times[-1]:
                 raise CycleError(f"{path}:{lineno}: time {t:g} does not increase (previous {times[-1]:g})")
             times.append(t)

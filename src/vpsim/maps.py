@@ -39,7 +39,8 @@ def steady_state(a_eff, w_e, eng, *, max_iter: int = 30, rtol: float = 1e-12) ->
     above the critical one (11) the flow is subcritical and theta(p_i) = 0 (19) is solved by Newton's method.
     theta is concave and decreasing in p_i, so Newton started to the right of the root (the choked estimate,
     or just below p_a as the paper does) converges monotonically. The paper stops at 10 iterations and a
-    relative tolerance; ``max_iter``/``rtol`` default tighter so maps agree with the dynamic model to rounding.
+    relative tolerance; ``max_iter``/``rtol`` default tighter so maps agree with the dynamic model to
+    rounding.
     At w_e = 0 nothing leaves the manifold and p_i = p_a.
     """
     a_eff, w_e = np.broadcast_arrays(np.asarray(a_eff, float), np.asarray(w_e, float))
@@ -51,9 +52,9 @@ def steady_state(a_eff, w_e, eng, *, max_iter: int = 30, rtol: float = 1e-12) ->
     with np.errstate(divide="ignore", invalid="ignore"):
         # choked: mdot_at fixed; w_e (s_i p_i - y_i) V_d / (2 pi n_r R T_i) = mdot_at
         mdot_choked = ph.throttle_mass_flow(a_eff, 0.0, eng)
-        p_choked = (mdot_choked * ph.TWO_PI * eng.revolutions_per_cycle * rt_i / (w_e * vd) + eng.air_charge_intercept) / (
-            eng.air_charge_slope
-        )
+        p_choked = (
+            mdot_choked * ph.TWO_PI * eng.revolutions_per_cycle * rt_i / (w_e * vd) + eng.air_charge_intercept
+        ) / (eng.air_charge_slope)
     moving = w_e > 0
     choked = moving & (p_choked / p_a <= crit)
     p = np.where(choked, p_choked, p_a)
@@ -105,7 +106,7 @@ class TorqueMap:
 
 
 def torque_map(eng, a_eff=None, speed=None) -> TorqueMap:
-    """Torque lines T_cr(w_e) for a set of throttle areas (default: 12 areas up to A_max, the paper's range)."""
+    """Torque lines T_cr(w_e) for a set of throttle areas (default: 12 areas up to A_max)."""
     if a_eff is None:
         a_eff = np.geomspace(2e-5, eng.max_throttle_area, 12)
     if speed is None:
@@ -178,8 +179,14 @@ class GeneratedEngineMap:
         return replace(self, exact=exact)
 
 
-def generate_engine_map(eng, *, max_speed: float | None = None, speed_step: float = 2.0, torque_step: float = 2.0,
-                        exact: bool = False) -> GeneratedEngineMap:
+def generate_engine_map(
+    eng,
+    *,
+    max_speed: float | None = None,
+    speed_step: float = 2.0,
+    torque_step: float = 2.0,
+    exact: bool = False,
+) -> GeneratedEngineMap:
     """Build the BQM fuel map and the max-torque line of an engine.
 
     The table spans w_e from 0 to ``max_speed`` (default 1.25 x the upper map speed) and T_cr from the

@@ -120,7 +120,9 @@ class Parameters:
     def driver(self, key: int | str) -> Driver:
         k = str(key)
         if k not in self.drivers:
-            raise ParameterError(f"driver {key!r} is not defined; available: {', '.join(sorted(self.drivers))}")
+            raise ParameterError(
+                f"driver {key!r} is not defined; available: {', '.join(sorted(self.drivers))}"
+            )
         return self.drivers[k]
 
     def with_changes(self, **sections: dict[str, Any]) -> Parameters:
@@ -258,7 +260,9 @@ def validate(p: Parameters, where: str = "parameters") -> None:
                 hint = f" (values are in m^3: did you mean {v / 1000:g}?)"
             elif v <= lo and lo == 0.0:
                 hint = " (it must be positive)"
-            raise ParameterError(f"{where}: {key} = {v:g} is outside the plausible range {_fmt_range(key)}{hint}")
+            raise ParameterError(
+                f"{where}: {key} = {v:g} is outside the plausible range {_fmt_range(key)}{hint}"
+            )
     for i, g in enumerate(p.transmission.gearbox_ratios, 1):
         if not 0.0 < g <= 20.0:
             raise ParameterError(f"{where}: transmission.gearbox_ratios[{i}] = {g:g} is outside (0, 20]")
@@ -268,7 +272,9 @@ def validate(p: Parameters, where: str = "parameters") -> None:
             f"{where}: engine.map_speed_range = [{lo:g}, {hi:g}] must be increasing positive rad/s below 2000"
         )
     if p.engine.min_throttle_area >= p.engine.max_throttle_area:
-        raise ParameterError(f"{where}: engine.min_throttle_area must be smaller than engine.max_throttle_area")
+        raise ParameterError(
+            f"{where}: engine.min_throttle_area must be smaller than engine.max_throttle_area"
+        )
     for k, d in p.drivers.items():
         for f in fields(d):
             v = getattr(d, f.name)
@@ -291,7 +297,9 @@ def _from_mapping(data: dict[str, Any], where: str, base: Parameters | None) -> 
     known_top = set(_SECTIONS) | {"drivers", "base", "name", "citation"}
     for key in data:
         if key not in known_top:
-            raise ParameterError(f"{where}: unknown section {key!r}; expected one of {', '.join(sorted(known_top))}")
+            raise ParameterError(
+                f"{where}: unknown section {key!r}; expected one of {', '.join(sorted(known_top))}"
+            )
     provenance = dict(base.provenance) if base else {}
     sections: dict[str, Any] = {}
     for sec, cls in _SECTIONS.items():
@@ -331,7 +339,9 @@ def _from_mapping(data: dict[str, Any], where: str, base: Parameters | None) -> 
         kw = {}
         for name, e in entry.items():
             if name not in dnames:
-                raise ParameterError(f"{where}: unknown field drivers.{k}.{name}; expected {', '.join(sorted(dnames))}")
+                raise ParameterError(
+                    f"{where}: unknown field drivers.{k}.{name}; expected {', '.join(sorted(dnames))}"
+                )
             value, note = _raw_value(e)
             if isinstance(value, bool) or not isinstance(value, int | float):
                 raise ParameterError(f"{where}: drivers.{k}.{name} = {value!r} is not a number")
@@ -374,7 +384,9 @@ def load_parameters(source: str | Path = "hofman2011") -> Parameters:
         return _preset(source)
     path = Path(source)
     if not path.suffix and not path.exists():
-        raise ParameterError(f"unknown preset {str(source)!r}; available presets: {', '.join(PRESETS)} (or a .toml file)")
+        raise ParameterError(
+            f"unknown preset {str(source)!r}; available presets: {', '.join(PRESETS)} (or a .toml file)"
+        )
     try:
         text = path.read_text()
     except FileNotFoundError:

@@ -27,8 +27,10 @@ def displacement(eng) -> float:
 
 def air_charge(p_i, eng):
     """m_ac = eta_vol p_i V_d / (R T_i) = (s_i p_i - y_i) V_d / (R T_i)   (8)."""
-    return (eng.air_charge_slope * p_i - eng.air_charge_intercept) * displacement(eng) / (
-        eng.gas_constant * eng.intake_temperature
+    return (
+        (eng.air_charge_slope * p_i - eng.air_charge_intercept)
+        * displacement(eng)
+        / (eng.gas_constant * eng.intake_temperature)
     )
 
 
@@ -116,7 +118,12 @@ def intake_pressure_for_torque(t_cr, w_e, eng):
     q = _q(eng)
     k_f = friction_factor(eng)
     bmep = torque_to_mep(t_cr, eng)
-    rhs = bmep * (1.0 + 0.0215 * k_f) + _speed_friction(w_e, eng) + eng.exhaust_pressure + eng.air_charge_intercept * q
+    rhs = (
+        bmep * (1.0 + 0.0215 * k_f)
+        + _speed_friction(w_e, eng)
+        + eng.exhaust_pressure
+        + eng.air_charge_intercept * q
+    )
     return rhs / (eng.air_charge_slope * q + 1.0)
 
 
@@ -146,7 +153,9 @@ def psi(p_r, gamma):
     crit = critical_pressure_ratio(gamma)
     choked = np.sqrt(gamma * (2.0 / (gamma + 1.0)) ** ((gamma + 1.0) / (gamma - 1.0)))
     pr = np.clip(p_r, crit, 1.0)
-    sub = np.sqrt(np.maximum(2.0 * gamma / (gamma - 1.0) * (pr ** (2.0 / gamma) - pr ** ((gamma + 1.0) / gamma)), 0.0))
+    sub = np.sqrt(
+        np.maximum(2.0 * gamma / (gamma - 1.0) * (pr ** (2.0 / gamma) - pr ** ((gamma + 1.0) / gamma)), 0.0)
+    )
     return np.where(p_r <= crit, choked, sub)
 
 
@@ -156,8 +165,11 @@ def dpsi_dpr(p_r, gamma):
     crit = critical_pressure_ratio(gamma)
     pr = np.clip(p_r, crit, 1.0 - 1e-15)
     f = 2.0 * gamma / (gamma - 1.0) * (pr ** (2.0 / gamma) - pr ** ((gamma + 1.0) / gamma))
-    df = 2.0 * gamma / (gamma - 1.0) * (
-        (2.0 / gamma) * pr ** (2.0 / gamma - 1.0) - ((gamma + 1.0) / gamma) * pr ** (1.0 / gamma)
+    df = (
+        2.0
+        * gamma
+        / (gamma - 1.0)
+        * ((2.0 / gamma) * pr ** (2.0 / gamma - 1.0) - ((gamma + 1.0) / gamma) * pr ** (1.0 / gamma))
     )
     return np.where(p_r <= crit, 0.0, df / (2.0 * np.sqrt(np.maximum(f, 1e-300))))
 
@@ -166,7 +178,10 @@ def throttle_mass_flow(a_eff, p_i, eng):
     """mdot_at = p_a A_eff Psi(p_i/p_a) / sqrt(R T_a)   (10)."""
     p_r = p_i / eng.ambient_pressure
     return (
-        eng.ambient_pressure * a_eff * psi(p_r, eng.specific_heat_ratio) / np.sqrt(eng.gas_constant * eng.ambient_temperature)
+        eng.ambient_pressure
+        * a_eff
+        * psi(p_r, eng.specific_heat_ratio)
+        / np.sqrt(eng.gas_constant * eng.ambient_temperature)
     )
 
 
@@ -232,13 +247,16 @@ def statespace_coefficients(ratio, veh, eng, eta):
     kv = ratio * vd / (TWO_PI * n_r * r * eng.intake_manifold_volume)  # R T_i cancels in (8)x(9)
     c5 = kv * eng.air_charge_intercept
     c6 = -kv * eng.air_charge_slope
-    c7 = eng.gas_constant * eng.intake_temperature * eng.ambient_pressure / (
-        eng.intake_manifold_volume * np.sqrt(eng.gas_constant * eng.ambient_temperature)
+    c7 = (
+        eng.gas_constant
+        * eng.intake_temperature
+        * eng.ambient_pressure
+        / (eng.intake_manifold_volume * np.sqrt(eng.gas_constant * eng.ambient_temperature))
     )
     return c1, c2, c3, c4, c5, c6, c7
 
 
-# --- fuel ------------------------------------------------------------------------------------------------------
+# --- fuel ------------------------------------------------------------------------------------------
 
 
 def fuel_with_idle_floor(mdot_f, idle_fuel_flow):

@@ -66,13 +66,15 @@ def write_map_figures(eng, out: Path) -> list[Path]:
     plt.close(ax.figure)
     written.append(p)
     a, w = np.meshgrid(tm.a_eff, tm.speed, indexing="ij")
-    df = pd.DataFrame({
-        "a_eff_m2": a.ravel(),
-        "speed_radps": w.ravel(),
-        "torque_nm": tm.torque.ravel(),
-        "intake_pressure_pa": tm.intake_pressure.ravel(),
-        "fuel_flow_kgps": tm.fuel_flow.ravel(),
-    })
+    df = pd.DataFrame(
+        {
+            "a_eff_m2": a.ravel(),
+            "speed_radps": w.ravel(),
+            "torque_nm": tm.torque.ravel(),
+            "intake_pressure_pa": tm.intake_pressure.ravel(),
+            "fuel_flow_kgps": tm.fuel_flow.ravel(),
+        }
+    )
     p = out / "figure2_torque_lines.csv"
     df.to_csv(p, index=False)
     written.append(p)

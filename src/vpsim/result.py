@@ -1,11 +1,11 @@
 """The one result type every method returns: time series, summary, energy bookkeeping; print, plot, tabulate.
 
-    >>> import vpsim
-    >>> r = vpsim.simulate("nedc", method="backward")
-    >>> r.summary()["fuel_l_per_100km"] > 0
-    True
-    >>> df = r.to_dataframe()          # one row per time sample
-    >>> fig = r.plot()                 # speed, gear, engine torque/speed, intake pressure, fuel flow
+>>> import vpsim
+>>> r = vpsim.simulate("nedc", method="backward")
+>>> r.summary()["fuel_l_per_100km"] > 0
+True
+>>> df = r.to_dataframe()          # one row per time sample
+>>> fig = r.plot()                 # speed, gear, engine torque/speed, intake pressure, fuel flow
 """
 
 from __future__ import annotations
@@ -38,12 +38,14 @@ class EnergyBalance:
     """Energy bookkeeping over a run (J), from the model's own quantities.
 
     indicated = friction + pumping + engine_kinetic + driveline_loss + vehicle_kinetic + aero + rolling
-                + brake - trace_miss  (+ residual)
+                + brake - trace_miss + idle_control  (+ residual)
 
     ``indicated`` is the work of the model's own fuel flow before the idle floor (q_hv eta_th int mdot_f dt);
     ``driveline_loss`` is (1 - eta_tm) int T_e w_e dt, negative while the engine brakes (the paper's constant
     efficiency applies both ways); ``trace_miss`` is the work the cycle asked for that the engine could not
-    give (backward method at the max-torque line).
+    give (backward method at the max-torque line); ``idle_control`` is the work of the idealised idle
+    governor that holds a declutched engine at idle speed when its crank torque is negative (forward method,
+    extended mode).
     """
 
     indicated: float
@@ -56,6 +58,7 @@ class EnergyBalance:
     rolling: float
     brake: float = 0.0
     trace_miss: float = 0.0
+    idle_control: float = 0.0
 
     @property
     def consumers(self) -> float:
@@ -69,6 +72,7 @@ class EnergyBalance:
             + self.rolling
             + self.brake
             - self.trace_miss
+            + self.idle_control
         )
 
     @property
@@ -87,7 +91,9 @@ class EnergyBalance:
 
     def __str__(self) -> str:
         rows = [f"  {k:<16} {v / 1e3:12.2f} kJ" for k, v in asdict(self).items()]
-        rows.append(f"  {'residual':<16} {self.residual / 1e3:12.2f} kJ ({self.relative_residual:.2e} of indicated)")
+        rows.append(
+            f"  {'residual':<16} {self.residual / 1e3:12.2f} kJ ({self.relative_residual:.2e} of indicated)"
+        )
         return "EnergyBalance\n" + "\n".join(rows)
 
 
@@ -137,6 +143,7 @@ class Result:
     energy: EnergyBalance | None = None
     vehicle: str = ""
     notes: tuple[str, ...] = ()
+    solver: dict = field(default_factory=dict)  # integrator statistics (steps, rejections, evaluations)
 
     @property
     def fuel_l_per_100km(self) -> float:
@@ -187,8 +194,9 @@ class Result:
 
     def __repr__(self) -> str:
         return (
-            f"Result({self.method}{'' if self.driver is None else ' driver ' + self.driver}, {self.cycle}, {self.mode}: "
-            f"{self.fuel_l_per_100km:.3f} L/100 km, {self.fuel_kg * 1e3:.1f} g over {self.distance_km:.3f} km, "
+            f"Result({self.method}{'' if self.driver is None else ' driver ' + self.driver}, "
+            f"{self.cycle}, {self.mode}: {self.fuel_l_per_100km:.3f} L/100 km, "
+            f"{self.fuel_kg * 1e3:.1f} g over {self.distance_km:.3f} km, "
             f"{self.steps} steps, {self.cpu_time_s * 1e3:.2f} ms, trace miss {self.trace_miss})"
         )
 
@@ -206,7 +214,10 @@ class Result:
             ("crank torque (N m)", [("crank_torque_nm", 1, None)]),
             ("intake pressure (kPa)", [("intake_pressure_pa", 1e-3, None)]),
             ("throttle area (mm^2)", [("throttle_area_m2", 1e6, None)]),
-            ("fuel flow (g/s)", [("fuel_flow_kgps", 1e3, "model"), ("fuel_flow_used_kgps", 1e3, "with idle floor")]),
+            (
+                "fuel flow (g/s)",
+                [("fuel_flow_kgps", 1e3, "model"), ("fuel_flow_used_kgps", 1e3, "with idle floor")],
+            ),
         ]
         panels = [(lab, [c for c in cs if c[0] in s and np.any(np.isfinite(s[c[0]]))]) for lab, cs in panels]
         panels = [p for p in panels if p[1]]

@@ -40,8 +40,16 @@ def resolve_inputs(cycle, params, gears=None):
     return cycle, params, schedule
 
 
-def simulate(cycle: str | Path | Cycle = "nedc", method: str = "backward", params: str | Path | Parameters = "hofman2011",
-             *, driver: int | str | None = None, mode: str = "paper", gears=None, **options):
+def simulate(
+    cycle: str | Path | Cycle = "nedc",
+    method: str = "backward",
+    params: str | Path | Parameters = "hofman2011",
+    *,
+    driver: int | str | None = None,
+    mode: str = "paper",
+    gears=None,
+    **options,
+):
     """Simulate ``params`` (preset name, TOML file or Parameters) on ``cycle`` with ``method``.
 
     ``driver`` (1 or 2; forward and inverse only, default 1) picks the tuning; ``gears`` is a schedule file or

@@ -10,7 +10,9 @@ from .main import cli
 
 
 @cli.command("params")
-@click.option("--vehicle", default="hofman2011", show_default=True, help="Preset name or a TOML parameter file.")
+@click.option(
+    "--vehicle", default="hofman2011", show_default=True, help="Preset name or a TOML parameter file."
+)
 @click.option("--json", "as_json", is_flag=True, help="Print {field: {value, provenance}} as JSON.")
 def params_cmd(vehicle, as_json):
     """Show every parameter value (SI) and where it comes from (paper / derived / reconstructed / user)."""
@@ -19,11 +21,15 @@ def params_cmd(vehicle, as_json):
     p = load_parameters(vehicle)
     flat = p.flat()
     if as_json:
-        click.echo(json.dumps({k: {"value": v, "provenance": p.provenance.get(k, "")} for k, v in flat.items()}))
+        click.echo(
+            json.dumps({k: {"value": v, "provenance": p.provenance.get(k, "")} for k, v in flat.items()})
+        )
         return
     click.echo(f"parameter set {p.name}" + (f"\n  {p.citation}" if p.citation else ""))
-    click.echo(f"  displacement (derived) {p.engine.displacement * 1e3:.3f} L; total ratios "
-               + " ".join(f"{r:.3f}" for r in p.transmission.ratios))
+    click.echo(
+        f"  displacement (derived) {p.engine.displacement * 1e3:.3f} L; total ratios "
+        + " ".join(f"{r:.3f}" for r in p.transmission.ratios)
+    )
     for k, v in flat.items():
         val = ", ".join(f"{x:g}" for x in v) if isinstance(v, tuple) else f"{v:g}"
         click.echo(f"  {k:<38} {val:<28} {p.provenance.get(k, '')}")

@@ -12,28 +12,62 @@ from .main import cli
 
 
 @cli.command()
-@click.option("--cycle", "cycle", default="nedc", show_default=True,
-              help="Standard cycle (nedc, ftp75, udds, hwfet, us06, wltc3b) or a CSV file (time_s + speed column).")
-@click.option("--method", type=click.Choice(["backward", "forward", "inverse"]), default="backward", show_default=True)
-@click.option("--vehicle", default="hofman2011", show_default=True, help="Preset name or a TOML parameter file.")
-@click.option("--driver", type=click.Choice(["1", "2"]), default=None,
-              help="Driver tuning for forward/inverse (default 1); not used by backward.")
-@click.option("--mode", type=click.Choice(["paper", "extended"]), default="paper", show_default=True,
-              help="paper: no clutch, no brakes (the paper's model); extended: clutch/idle at standstill, brakes.")
-@click.option("--gears", "gears", default=None, type=click.Path(dir_okay=False),
-              help="Gear schedule CSV (time_s,gear); default: derived from the cycle by the documented rule.")
-@click.option("--speed-unit", type=click.Choice(["m/s", "km/h", "mph"]), default=None,
-              help="Unit of a plain 'speed' column in a cycle CSV.")
+@click.option(
+    "--cycle",
+    "cycle",
+    default="nedc",
+    show_default=True,
+    help="Standard cycle (nedc, ftp75, udds, hwfet, us06, wltc3b) or a CSV file (time_s + speed column).",
+)
+@click.option(
+    "--method", type=click.Choice(["backward", "forward", "inverse"]), default="backward", show_default=True
+)
+@click.option(
+    "--vehicle", default="hofman2011", show_default=True, help="Preset name or a TOML parameter file."
+)
+@click.option(
+    "--driver",
+    type=click.Choice(["1", "2"]),
+    default=None,
+    help="Driver tuning for forward/inverse (default 1); not used by backward.",
+)
+@click.option(
+    "--mode",
+    type=click.Choice(["paper", "extended"]),
+    default="paper",
+    show_default=True,
+    help="paper: no clutch, no brakes (the paper's model); extended: clutch/idle at standstill, brakes.",
+)
+@click.option(
+    "--gears",
+    "gears",
+    default=None,
+    type=click.Path(dir_okay=False),
+    help="Gear schedule CSV (time_s,gear); default: derived from the cycle by the documented rule.",
+)
+@click.option(
+    "--speed-unit",
+    type=click.Choice(["m/s", "km/h", "mph"]),
+    default=None,
+    help="Unit of a plain 'speed' column in a cycle CSV.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object with the summary.")
-@click.option("--out", "out", default=None, type=click.Path(file_okay=False),
-              help="Write timeseries.csv, summary.json and timeseries.png into this folder.")
+@click.option(
+    "--out",
+    "out",
+    default=None,
+    type=click.Path(file_okay=False),
+    help="Write timeseries.csv, summary.json and timeseries.png into this folder.",
+)
 def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, out):
     """Simulate a vehicle on a drive cycle and report its fuel consumption."""
     from ..cycles import load_cycle
     from ..simulation import simulate as run
 
     if driver is not None and method == "backward":
-        raise VpsimError("--driver applies to --method forward or inverse; the backward method tracks exactly")
+        raise VpsimError(
+            "--driver applies to --method forward or inverse; the backward method tracks exactly"
+        )
     cyc = load_cycle(cycle, speed_unit=speed_unit)
     result = run(cyc, method=method, params=vehicle, driver=driver, mode=mode, gears=gears)
     summary = result.summary()
@@ -53,15 +87,19 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
     if as_json:
         click.echo(json.dumps(summary))
         return
-    click.echo(f"{method} on {result.cycle} ({mode} mode, vehicle {result.vehicle}"
-               f"{'' if result.driver is None else ', driver ' + result.driver})")
+    click.echo(
+        f"{method} on {result.cycle} ({mode} mode, vehicle {result.vehicle}"
+        f"{'' if result.driver is None else ', driver ' + result.driver})"
+    )
     click.echo(f"  fuel consumption  {result.fuel_l_per_100km:8.3f} L/100 km")
     click.echo(f"  fuel              {result.fuel_kg * 1e3:8.1f} g")
     click.echo(f"  distance          {result.distance_km:8.3f} km")
     click.echo(f"  CPU time          {result.cpu_time_s * 1e3:8.2f} ms ({result.steps} steps)")
     click.echo(f"  trace miss        {result.trace_miss}")
     if result.energy is not None:
-        click.echo(f"  energy balance    residual {result.energy.relative_residual:.1e} of the indicated work")
+        click.echo(
+            f"  energy balance    residual {result.energy.relative_residual:.1e} of the indicated work"
+        )
     for note in result.notes:
         click.echo(f"  note: {note}")
     if out:

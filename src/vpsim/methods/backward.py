@@ -16,6 +16,7 @@ Modes:
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
@@ -27,10 +28,23 @@ from ..result import EnergyBalance, Result, TraceMiss
 IDLE_SPEED = 80.0  # rad/s, the engine speed held in extended mode below which the clutch slips or opens
 
 
-def run(cycle, params, *, engine_map=None, schedule: GearSchedule | None = None, mode: str = "paper",
-        keep_series: bool = True) -> Result:
-    """Run the BQM on ``cycle``. ``engine_map`` defaults to the map generated from ``params.engine``."""
-    from ..maps import cached_engine_map
+def run(
+    cycle,
+    params,
+    *,
+    engine_map=None,
+    schedule: GearSchedule | None = None,
+    mode: str = "paper",
+    keep_series: bool = True,
+    compiled: bool = True,
+) -> Result:
+    """Run the BQM on ``cycle``. ``engine_map`` defaults to the map generated from ``params.engine``.
+
+    With a generated map (:class:`vpsim.maps.GeneratedEngineMap`) the per-interval loop runs compiled
+    (:func:`vpsim._kernels.backward_single`, cached on disk by Numba); ``compiled=False``, or a map of another
+    kind, runs the NumPy reference. Both give the same result to rounding (checked by tests/test_kernels.py).
+    """
+    from ..maps import GeneratedEngineMap, cached_engine_map
 
     if mode not in ("paper", "extended"):
         raise ValueError(f"mode must be 'paper' or 'extended', got {mode!r}")
@@ -38,6 +52,13 @@ def run(cycle, params, *, engine_map=None, schedule: GearSchedule | None = None,
         engine_map = cached_engine_map(params.engine)
     if schedule is None:
         schedule = default_schedule(cycle, params, engine_map)
+    if compiled and isinstance(engine_map, GeneratedEngineMap):
+        return _run_compiled(cycle, params, engine_map, schedule, mode, keep_series)
+    return _run_numpy(cycle, params, engine_map, schedule, mode, keep_series)
+
+
+def _run_numpy(cycle, params, engine_map, schedule: GearSchedule, mode: str, keep_series: bool) -> Result:
+    """The reference implementation: the BQM as vectorised NumPy over the cycle's intervals."""
     t0 = time.process_time()
     veh, tr, sim = params.vehicle, params.transmission, params.simulation
     ratios = np.asarray(tr.ratios)
@@ -135,6 +156,104 @@ def run(cycle, params, *, engine_map=None, schedule: GearSchedule | None = None,
             "brake_force_n": brake_force,
             "torque_shortfall_nm": shortfall,
         }
+    return _result(cycle, params, mode, series, fuel_kg, distance, cpu, int(dt.size), trace, energy)
+
+
+def _run_compiled(cycle, params, engine_map, schedule: GearSchedule, mode: str, keep_series: bool) -> Result:
+    """The same computation as :func:`_run_numpy`, its per-interval loop compiled (vpsim._kernels)."""
+    from .. import _kernels as kn
+
+    t0 = time.process_time()
+    eng = engine_map.engine
+    c = _constants(params.vehicle, params.transmission, eng, params.simulation)
+    gear = schedule.on_cycle(cycle)[:-1]
+    i = np.asarray(params.transmission.ratios)[gear - 1]
+    n = gear.size
+    s = np.empty((kn.N_SERIES, n))
+    w = np.empty((kn.N_INTEGRANDS, n))
+    extended = mode == "extended"
+    max_short, deficit = kn.backward_single(
+        cycle.time_s,
+        cycle.speed_mps,
+        i,
+        c,
+        extended,
+        bool(engine_map.exact),
+        engine_map.speed,
+        engine_map.torque,
+        engine_map.table,
+        engine_map.max_torque_speed,
+        engine_map.max_torque_values,
+        engine_map.min_torque_values,
+        s,
+        w,
+    )
+    sums = w.sum(axis=1)  # pairwise summation per row, as np.sum over each integrand in the reference
+    coupled = None
+    if extended:
+        coupled = s[kn.S_COUPLED] > 0
+        for k in kn.MASKED_INTEGRANDS:
+            sums[k] = np.sum(w[k][coupled])
+    cpu = time.process_time() - t0
+    missed_s = 0.0
+    if max_short > 1e-9:
+        missed_s = float(np.sum(np.diff(cycle.time_s)[s[kn.S_MISSED] > 0]))
+    trace = TraceMiss(
+        seconds=missed_s,
+        max_torque_shortfall_nm=float(max_short),
+        details={"speed_deficit_mps": float(deficit)},
+    )
+    energy = EnergyBalance(
+        indicated=float(sums[kn.I_INDICATED]),
+        friction=float(sums[kn.I_FRICTION]),
+        pumping=float(sums[kn.I_PUMPING]),
+        engine_kinetic=float(sums[kn.I_ENGINE_KIN]),
+        driveline_loss=float(sums[kn.I_DRIVELINE]),
+        vehicle_kinetic=float(sums[kn.I_VEHICLE_KIN]),
+        aero=float(sums[kn.I_AERO]),
+        rolling=float(sums[kn.I_ROLLING]),
+        brake=float(sums[kn.I_BRAKE]),
+        trace_miss=float(sums[kn.I_TRACE]),
+    )
+    if extended:
+        energy = _replace(energy, driveline_loss=energy.driveline_loss + float(sums[kn.I_SLIP]))
+    series = {}
+    if keep_series:
+        t = cycle.time_s
+        v = s[kn.S_V]
+        p_i = s[kn.S_P] if coupled is None else np.where(coupled, s[kn.S_P], np.nan)
+        series = {
+            "time_s": 0.5 * (t[1:] + t[:-1]),
+            "reference_speed_mps": v,
+            "speed_mps": v,
+            "accel_mps2": s[kn.S_A],
+            "gear": gear,
+            "engine_speed_radps": s[kn.S_W],
+            "crank_torque_nm": s[kn.S_TCR],
+            "engine_torque_nm": s[kn.S_TCR] - engine_map.inertia * s[kn.S_DW],
+            "intake_pressure_pa": p_i,
+            "fuel_flow_kgps": s[kn.S_MDOT],
+            "fuel_flow_used_kgps": s[kn.S_MDOT_USED],
+            "brake_force_n": s[kn.S_BRAKE],
+            "torque_shortfall_nm": s[kn.S_SHORT],
+        }
+    return _result(
+        cycle, params, mode, series, float(sums[kn.I_FUEL]), float(sums[kn.I_DIST]), cpu, n, trace, energy
+    )
+
+
+@functools.lru_cache(maxsize=128)
+def _constants(vehicle, transmission, engine, simulation) -> np.ndarray:
+    """The compiled kernel's constants for one parameter set (vpsim._kernels.pack_constants), cached."""
+    from .._kernels import pack_constants
+
+    c = pack_constants(vehicle, transmission, engine, simulation)[0]
+    c.setflags(write=False)
+    return c
+
+
+def _result(cycle, params, mode, series, fuel_kg, distance, cpu, steps, trace, energy) -> Result:
+    sim = params.simulation
     notes = []
     if trace.seconds:
         notes.append(
@@ -151,7 +270,7 @@ def run(cycle, params, *, engine_map=None, schedule: GearSchedule | None = None,
         distance_m=distance,
         fuel_density_kg_per_l=sim.fuel_density,
         cpu_time_s=cpu,
-        steps=int(dt.size),
+        steps=steps,
         trace_miss=trace,
         energy=energy,
         vehicle=params.name,
