@@ -23,7 +23,7 @@ from typing import Any
 
 from .errors import ParameterError
 
-PRESETS = ("hofman2011",)
+PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l")
 
 
 @dataclass(frozen=True)
@@ -370,7 +370,7 @@ def _preset(name: str) -> Parameters:
     text = resources.files("vpsim.presets").joinpath(f"{name}.toml").read_text()
     data = tomllib.loads(text)
     data.setdefault("name", name)
-    return _from_mapping(data, f"preset {name}", None)
+    return _from_mapping(data, f"preset {name}", _preset(data["base"]) if data.get("base") else None)
 
 
 def load_parameters(source: str | Path = "hofman2011") -> Parameters:

@@ -30,6 +30,11 @@ while a real engine at zero torque still burns idle fuel. Points at low torque a
 use an idle or motoring fuel model there. The Saturn map (``FC_SI63_emis``) has a zero-torque column, but its
 full-load curve (up to 145 N*m) rises above its highest map column (135.8 N*m) at mid speeds, so full-load
 points are extrapolated and flagged too.
+
+:class:`MeasuredEngineMap` (``engine.engine_map()``) is the view the backward method consumes, with the same
+``fuel_flow(T, w)``, ``max_torque(w)``, ``min_torque(w)``, ``inertia`` and ``name`` as the generated map
+(:class:`vpsim.maps.GeneratedEngineMap`). It adds the rules for the part of a drive cycle the measurements do
+not cover (zero and negative torque, speeds below the map); see its docstring and docs/scaling.md.
 """
 
 from __future__ import annotations
@@ -45,7 +50,7 @@ import numpy as np
 from ..errors import EngineFileError
 from .matlab import MAX_FILE_BYTES, read_m_file
 
-__all__ = ["MeasuredEngine", "load_engine"]
+__all__ = ["MeasuredEngine", "MeasuredEngineMap", "load_engine"]
 
 # Units the JSON conversions in shared/data/engines state in their "units" table (ADVISOR's own units).
 _JSON_UNITS = {
@@ -57,7 +62,10 @@ _JSON_UNITS = {
     "fc_inertia": "kg*m^2",
     "fc_fuel_den": "g/L",
     "fc_fuel_lhv": "J/g",
+    "fc_max_trq_spd": "rad/s",
+    "fc_ct_trq": "N*m",
 }
+JSON_FORMAT = "vpsim-engine/1"  # the "format" tag of the JSON that MeasuredEngine.write_json writes
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -73,7 +81,9 @@ class MeasuredEngine:
     Attributes are SI: ``speed_grid`` rad/s (strictly increasing), ``torque_grid`` N*m (strictly
     increasing), ``fuel_flow`` kg/s with shape ``(n_speed, n_torque)``, ``max_torque_speed`` rad/s and
     ``max_torque`` N*m (full-load curve), ``inertia`` kg*m^2, ``displacement`` m^3, ``fuel_density`` kg/L,
-    ``fuel_lhv`` J/kg. ``source`` says where the data came from. Arrays are stored read-only.
+    ``fuel_lhv`` J/kg. ``source`` says where the data came from. ``closed_throttle_torque`` (N*m, <= 0, over
+    ``speed_grid``) is ADVISOR's ``fc_ct_trq``, the torque of the closed-throttle (motoring) engine, where the
+    file gives it; ``None`` otherwise. Arrays are stored read-only.
     Instances compare by identity (``eq=False``) because their fields are arrays.
     """
 
@@ -88,6 +98,7 @@ class MeasuredEngine:
     fuel_density: float
     fuel_lhv: float
     source: str
+    closed_throttle_torque: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         where = self.source or self.name
@@ -122,6 +133,18 @@ class MeasuredEngine:
             raise bad("max_torque and max_torque_speed differ in length")
         if not np.all(arrays["max_torque"] > 0):
             raise bad("max_torque must be positive everywhere")
+        if self.closed_throttle_torque is not None:
+            try:
+                ct = np.array(self.closed_throttle_torque, dtype=float)
+            except (TypeError, ValueError):
+                raise bad("closed_throttle_torque is not numeric") from None
+            if ct.ndim == 0:
+                ct = np.full(shape[0], float(ct))
+            if ct.shape != (shape[0],):
+                raise bad(f"closed_throttle_torque has shape {ct.shape}, expected ({shape[0]},)")
+            if not np.all(np.isfinite(ct)) or np.any(ct > 0):
+                raise bad("closed_throttle_torque must be finite and not positive (a motoring torque)")
+            arrays["closed_throttle_torque"] = ct
         for field_name, a in arrays.items():
             object.__setattr__(self, field_name, _frozen(a))
         for field_name, positive in (
@@ -176,6 +199,77 @@ class MeasuredEngine:
         out = np.interp(np.asarray(speed, dtype=float), self.max_torque_speed, self.max_torque)
         return float(out) if np.ndim(out) == 0 else out
 
+    def engine_map(
+        self, *, low_speed: str = "proportional", zero_torque_column: str = "ignore"
+    ) -> MeasuredEngineMap:
+        """This engine as the backward method sees it (:class:`MeasuredEngineMap`, same options)."""
+        return MeasuredEngineMap(self, low_speed=low_speed, zero_torque_column=zero_torque_column)
+
+    def summary(self) -> dict[str, Any]:
+        """Grids, peak torque and power, minimum BSFC: what ``vpsim engine import`` prints (SI units).
+
+        The minimum BSFC (g/kWh) is taken over the measured nodes with positive torque that lie on or below
+        the full-load curve; nodes above it are fill-in of a rectangular table, not operating points.
+        """
+        sg, tg = self.speed_grid, self.torque_grid
+        power = self.max_torque * self.max_torque_speed
+        k_t, k_p = int(np.argmax(self.max_torque)), int(np.argmax(power))
+        t_node, w_node = np.meshgrid(tg, sg)
+        usable = (t_node > 0) & (t_node <= self.max_torque_at(w_node) + 1e-9)
+        bsfc = np.full(t_node.shape, np.inf)
+        bsfc[usable] = self.fuel_flow[usable] * 1e3 / (t_node[usable] * w_node[usable] / 1e3) * 3600.0
+        k_b = np.unravel_index(int(np.argmin(bsfc)), bsfc.shape)
+        ok = bool(np.isfinite(bsfc[k_b]))
+        return {
+            "name": self.name,
+            "source": self.source,
+            "displacement_l": self.displacement * 1e3,
+            "inertia_kgm2": self.inertia,
+            "speed_grid_radps": [float(sg[0]), float(sg[-1]), int(sg.size)],
+            "torque_grid_nm": [float(tg[0]), float(tg[-1]), int(tg.size)],
+            "zero_torque_column": bool(tg[0] <= 0),
+            "peak_torque_nm": float(self.max_torque[k_t]),
+            "peak_torque_speed_radps": float(self.max_torque_speed[k_t]),
+            "peak_power_kw": float(power[k_p] / 1e3),
+            "peak_power_speed_radps": float(self.max_torque_speed[k_p]),
+            "min_bsfc_g_per_kwh": float(bsfc[k_b]) if ok else None,
+            "min_bsfc_torque_nm": float(t_node[k_b]) if ok else None,
+            "min_bsfc_speed_radps": float(w_node[k_b]) if ok else None,
+            "full_load_above_grid": bool(np.any(self.max_torque > tg[-1])),
+            "closed_throttle_torque": self.closed_throttle_torque is not None,
+            "fuel_density_kg_per_l": self.fuel_density,
+            "fuel_lhv_j_per_kg": self.fuel_lhv,
+        }
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """vpsim's JSON form: ADVISOR's variable names and units, which :meth:`from_json` reads back."""
+        d: dict[str, Any] = {
+            "format": JSON_FORMAT,
+            "name": self.name,
+            "fc_description": self.source,
+            "units": dict(_JSON_UNITS),
+            "fc_map_spd": self.speed_grid.tolist(),
+            "fc_map_trq": self.torque_grid.tolist(),
+            "fc_fuel_map": (self.fuel_flow * 1000.0).tolist(),
+            "fc_max_trq_spd": self.max_torque_speed.tolist(),
+            "fc_max_trq": self.max_torque.tolist(),
+            "fc_inertia": self.inertia,
+            "fc_disp": self.displacement * 1000.0,
+            "fc_fuel_den": self.fuel_density * 1000.0,
+            "fc_fuel_lhv": self.fuel_lhv / 1000.0,
+        }
+        if self.closed_throttle_torque is not None:
+            d["fc_ct_trq"] = self.closed_throttle_torque.tolist()
+        return d
+
+    def write_json(self, path: str | Path) -> Path:
+        """Write :meth:`to_json_dict` to ``path`` (``.json``); :func:`load_engine` reads it back."""
+        p = Path(path)
+        if p.suffix.lower() != ".json":
+            raise EngineFileError(f"{p}: the output must be a .json file (load_engine reads by suffix)")
+        p.write_text(json.dumps(self.to_json_dict(), indent=1) + "\n", encoding="utf-8")
+        return p
+
     # ------------------------------------------------------------------ constructors
 
     @classmethod
@@ -222,6 +316,7 @@ class MeasuredEngine:
             fuel_density=get("fc_fuel_den", "scalar") / 1000.0,
             fuel_lhv=get("fc_fuel_lhv", "scalar") * 1000.0,
             source=source,
+            closed_throttle_torque=get("fc_ct_trq") if "fc_ct_trq" in v else None,
         )
 
     @classmethod
@@ -292,7 +387,118 @@ class MeasuredEngine:
             fuel_density=get("fc_fuel_den", scalar=True) / 1000.0,
             fuel_lhv=get("fc_fuel_lhv", scalar=True) * 1000.0,
             source=source,
+            closed_throttle_torque=get("fc_ct_trq") if "fc_ct_trq" in data else None,
         )
+
+
+LOW_SPEED_RULES = ("proportional", "clamp")
+ZERO_TORQUE_RULES = ("ignore", "use")
+
+
+@dataclass(frozen=True, eq=False)
+class MeasuredEngineMap:
+    """A measured engine as the backward method consumes it, like :class:`vpsim.maps.GeneratedEngineMap`.
+
+    ``fuel_flow(t_cr, w_e)`` (kg/s), ``max_torque(w_e)``, ``min_torque(w_e)`` (N*m), ``inertia``, ``name``.
+    The measured map is steady-state data at positive brake torque, read as the crank torque T_cr of the
+    model. Where a drive cycle leaves it, these rules apply (docs/scaling.md quantifies them):
+
+    * ``T_cr <= 0`` (coasting, braking, standstill): fuel flow 0, so the backward method's idle floor
+      ``params.simulation.idle_fuel_flow`` applies. The measurements hold nothing about a motoring engine.
+    * ``zero_torque_column="ignore"`` (default): a zero-torque column in the file is not used; for
+      ``0 < T_cr`` below the lowest loaded column the flow follows the straight (Willans) line through the two
+      lowest loaded columns, never below 0. ADVISOR's FC_SI63_emis holds the same 0.1935 g/s at every speed
+      from 73 to 576 rad/s in that column, an idle flow rather than a zero-load measurement, and interpolating
+      towards it would let a 2500 rpm engine at 5 N*m burn little more than idle. ``"use"`` interpolates to
+      it, as ADVISOR does.
+    * ``low_speed="proportional"`` (default): below the lowest map speed w_0, the flow at (T, w_0) is scaled
+      by w / w_0, i.e. the fuel per engine cycle (and the BSFC) at that torque is held. ``"clamp"`` holds the
+      flow itself, as :meth:`MeasuredEngine.fuel_flow_at` does. Above the highest map speed the speed is
+      clamped.
+    * Above the highest torque column the flow is extrapolated linearly in torque (Willans line).
+    * ``min_torque`` is the closed-throttle line ADVISOR gives as ``fc_ct_trq`` where the file has it, else 0
+      (no engine braking known); only the backward method's extended mode uses it.
+
+    :meth:`coverage` says which of these rules a set of operating points relied on.
+    """
+
+    engine: MeasuredEngine
+    low_speed: str = "proportional"
+    zero_torque_column: str = "ignore"
+
+    def __post_init__(self) -> None:
+        if self.low_speed not in LOW_SPEED_RULES:
+            raise ValueError(f"low_speed must be one of {LOW_SPEED_RULES}, got {self.low_speed!r}")
+        if self.zero_torque_column not in ZERO_TORQUE_RULES:
+            raise ValueError(
+                f"zero_torque_column must be one of {ZERO_TORQUE_RULES}, got {self.zero_torque_column!r}"
+            )
+        e = self.engine
+        keep = e.torque_grid > 0 if self.zero_torque_column == "ignore" else np.ones(e.torque_grid.size, bool)
+        if np.count_nonzero(keep) < 2:
+            raise EngineFileError(f"{e.source or e.name}: fewer than two map columns with positive torque")
+        table = e
+        if not keep.all():
+            from dataclasses import replace
+
+            table = replace(e, torque_grid=e.torque_grid[keep], fuel_flow=e.fuel_flow[:, keep])
+        object.__setattr__(self, "_table", table)
+
+    @property
+    def inertia(self) -> float:
+        return self.engine.inertia
+
+    @property
+    def name(self) -> str:
+        return self.engine.name
+
+    @property
+    def loaded_torque_grid(self) -> np.ndarray:
+        """The torque columns the map is read from (positive torques unless ``zero_torque_column="use"``)."""
+        return self._table.torque_grid
+
+    def fuel_flow(self, t_cr: Any, w_e: Any) -> np.ndarray:
+        """Fuel mass flow (kg/s) at crank torque ``t_cr`` (N*m) and speed ``w_e`` (rad/s), as above."""
+        t, w = np.broadcast_arrays(np.asarray(t_cr, dtype=float), np.asarray(w_e, dtype=float))
+        w0 = float(self.engine.speed_grid[0])
+        flow = np.asarray(self._table.fuel_flow_at(t, np.maximum(w, w0)), dtype=float)
+        if self.low_speed == "proportional":
+            flow = np.where(w < w0, flow * np.clip(w, 0.0, None) / w0, flow)
+        return np.where(t > 0, flow, 0.0)
+
+    def max_torque(self, w_e: Any) -> Any:
+        """Full-load torque (N*m), the measured curve (clamped to its end values outside it)."""
+        return self.engine.max_torque_at(w_e)
+
+    def min_torque(self, w_e: Any) -> np.ndarray:
+        """Closed-throttle torque (N*m): ADVISOR's ``fc_ct_trq`` over the map speeds where given, else 0."""
+        w = np.asarray(w_e, dtype=float)
+        ct = self.engine.closed_throttle_torque
+        if ct is None:
+            return np.zeros_like(w)
+        return np.interp(w, self.engine.speed_grid, ct)
+
+    def coverage(self, t_cr: Any, w_e: Any) -> dict[str, np.ndarray]:
+        """Boolean masks of the operating points by how the map was read.
+
+        ``no_traction`` (T_cr <= 0: idle floor), and among the points with traction: ``below_speed``,
+        ``above_speed``, ``below_torque`` (under the lowest loaded column), ``above_torque``; ``outside`` is
+        any of these four.
+        """
+        t, w = np.broadcast_arrays(np.asarray(t_cr, dtype=float), np.asarray(w_e, dtype=float))
+        sg, tg = self.engine.speed_grid, self.loaded_torque_grid
+        trac = t > 0
+        masks = {
+            "no_traction": ~trac,
+            "below_speed": trac & (w < sg[0]),
+            "above_speed": trac & (w > sg[-1]),
+            "below_torque": trac & (t < tg[0]),
+            "above_torque": trac & (t > tg[-1]),
+        }
+        masks["outside"] = (
+            masks["below_speed"] | masks["above_speed"] | masks["below_torque"] | masks["above_torque"]
+        )
+        return masks
 
 
 def load_engine(path: str | Path) -> MeasuredEngine:

@@ -1,0 +1,151 @@
+"""``vpsim scaling``: the model engine scaled to a measured one, compared (Figure 7) and calibrated."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from ..errors import VpsimError
+from .main import cli
+
+
+def _names(text: str, what: str) -> list[str]:
+    names = [c.strip() for c in text.split(",") if c.strip()]
+    if not names:
+        raise VpsimError(f"{what}: give at least one cycle name, e.g. nedc,ftp75")
+    return names
+
+
+@cli.command()
+@click.option(
+    "--measured",
+    required=True,
+    type=click.Path(dir_okay=False),
+    help="Measured engine: ADVISOR fuel-converter .m or its .json form.",
+)
+@click.option("--bore", required=True, type=float, help="Bore B of the scaled engine, in metres (0.074).")
+@click.option("--stroke", required=True, type=float, help="Stroke S of the scaled engine, in metres (0.077).")
+@click.option("--cylinders", required=True, type=int, help="Number of cylinders z.")
+@click.option(
+    "--inertia",
+    default=None,
+    type=float,
+    help="Engine inertia J_e (kg m^2); default: the measured file's fc_inertia.",
+)
+@click.option(
+    "--vehicle",
+    default="hofman2011",
+    show_default=True,
+    help="Preset or TOML file giving the vehicle, gears, idle flow and the engine to scale from.",
+)
+@click.option(
+    "--cycles",
+    default="nedc,ftp75",
+    show_default=True,
+    help="Cycles for the fuel comparison (backward method), comma-separated.",
+)
+@click.option(
+    "--calibrate",
+    is_flag=True,
+    help="Also fit eta_th and xi_aux to the measured map (bounded least squares) and compare again.",
+)
+@click.option(
+    "--calibration-cycles",
+    default="wltc3b",
+    show_default=True,
+    help="Cycles whose operating points (time-weighted) the calibration fits.",
+)
+@click.option("--out", "out", required=True, type=click.Path(file_okay=False), help="Output folder.")
+def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibrate, calibration_cycles, out):
+    """Scale the model engine to a measured one; write Figure 7, statistics and a fuel table.
+
+    Writes figure7.png, map_comparison.csv (measured vs generated at every measured node),
+    map_stats.json (median and 90th percentile of the fuel-flow error, over the nodes and weighted by cycle
+    time) and fuel.csv (backward-method L/100 km per cycle with each map, the error, the share of cycle time
+    outside the measured map); with --calibrate also calibration.json (fitted values, standard errors,
+    correlations).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..calibration import calibrate as fit
+    from ..engines import load_engine
+    from ..params import load_parameters
+    from ..scaling import (
+        TABLE4_COLUMNS,
+        compare_maps,
+        compare_on_cycle,
+        coverage_rows,
+        cycle_points,
+        plot_figure7,
+        scaled_parameters,
+        write_csv,
+    )
+
+    cycle_names = _names(cycles, "--cycles")
+    cal_cycles = _names(calibration_cycles, "--calibration-cycles")
+    eng = load_engine(measured)
+    params = scaled_parameters(
+        load_parameters(vehicle),
+        bore=bore,
+        stroke=stroke,
+        cylinders=cylinders,
+        inertia=eng.inertia if inertia is None else inertia,
+    )
+    mmap = eng.engine_map()
+    cmp = compare_maps(eng, params.engine, name=eng.name)
+    cal = fit(mmap, params, cycles=cal_cycles) if calibrate else None
+    cells = [
+        compare_on_cycle(mmap, params, c, label=eng.name, calibrated_engine=cal.engine if cal else None)
+        for c in cycle_names
+    ]
+
+    path = Path(out)
+    path.mkdir(parents=True, exist_ok=True)
+    fig = plot_figure7(
+        [cmp],
+        path / "figure7.png",
+        points=[cycle_points(mmap, params, cycle_names)],
+        points_label=" + ".join(cycle_names) + " points",
+    )
+    plt.close(fig)
+    write_csv(path / "map_comparison.csv", cmp.rows())
+    rows = [{**c.table4_row(), **cov} for c, cov in zip(cells, coverage_rows(cells), strict=True)]
+    extra = [k for k in rows[0] if k not in TABLE4_COLUMNS]
+    write_csv(path / "fuel.csv", rows, list(TABLE4_COLUMNS) + extra)
+    stats = {"nodes": cmp.stats(), **{f"time_on_{c.cycle}": c.point_stats for c in cells}}
+    (path / "map_stats.json").write_text(json.dumps(stats, indent=2) + "\n")
+    if cal is not None:
+        (path / "calibration.json").write_text(json.dumps(cal.as_dict(), indent=2) + "\n")
+
+    e = params.engine
+    click.echo(
+        f"{eng.name} vs the model scaled to B {e.bore * 1e3:.1f} mm, S {e.stroke * 1e3:.1f} mm, "
+        f"z {e.cylinders} (V_d {e.displacement * 1e3:.3f} L), in vehicle {params.name}"
+    )
+    s = cmp.stats()
+    click.echo(
+        f"  map: |generated/measured - 1| median {s['median_abs_pct']:.1f} %, "
+        f"90th percentile {s['p90_abs_pct']:.1f} % over {s['n']} measured nodes"
+    )
+    for c in cells:
+        line = (
+            f"  {c.cycle:8s} measured {c.measured_l_per_100km:6.3f}  "
+            f"generated {c.generated_l_per_100km:6.3f} L/100 km ({c.error_pct:+.1f} %)"
+        )
+        if cal is not None:
+            line += f"  calibrated {c.calibrated_l_per_100km:6.3f} ({c.calibrated_error_pct:+.1f} %)"
+        click.echo(line + f"; {100 * c.coverage['outside']:.1f} % of the time outside the measured map")
+    if cal is not None:
+        for k, n in enumerate(cal.names):
+            click.echo(f"  fitted {n} = {cal.values[k]:.4g} +- {cal.std_errors[k]:.2g}")
+        if cal.message:
+            click.echo(f"  note: {cal.message}")
+    click.echo(
+        f"  wrote {out}/figure7.png, map_comparison.csv, map_stats.json, fuel.csv"
+        + (", calibration.json" if cal is not None else "")
+    )
