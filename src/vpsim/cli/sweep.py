@@ -1,0 +1,177 @@
+"""``vpsim sweep``: a design-space sweep from a TOML spec, on local cores or a Dask cluster, resumable."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import click
+
+from ..errors import VpsimError
+from .main import cli
+
+
+class _Progress:
+    """A one-line progress bar on stderr with rate and ETA (a line every few seconds when not a terminal)."""
+
+    def __init__(self, enabled: bool = True, width: int = 28):
+        self.enabled = enabled
+        self.width = width
+        self.tty = sys.stderr.isatty()
+        self.t0 = None
+        self.last = -1e9
+        self.total = 0
+
+    def __call__(self, done: int, total: int) -> None:
+        if not self.enabled or total == 0:
+            return
+        self.total = total
+        now = time.perf_counter()
+        if self.t0 is None:  # the first call comes when the work starts (after a cluster is up)
+            self.t0 = now
+        final = done >= total
+        if not final and now - self.last < (0.2 if self.tty else 5.0):
+            return
+        self.last = now
+        elapsed = now - self.t0
+        rate = done / elapsed if elapsed > 0 and done else 0.0
+        eta = (total - done) / rate if rate > 0 else float("nan")
+        frac = done / total if total else 1.0
+        bar = "#" * int(round(frac * self.width))
+        line = (
+            f"[{bar:<{self.width}}] {done}/{total} rows {frac:4.0%}  {rate:7.1f} rows/s  "
+            f"ETA {_hms(eta)}  elapsed {_hms(elapsed)}"
+        )
+        if self.tty:
+            click.echo("\r" + line, err=True, nl=final)
+        else:
+            click.echo(line, err=True)
+
+    def close(self) -> None:
+        if self.enabled and self.tty and self.last > -1e9:
+            click.echo("", err=True)
+
+
+def _hms(s: float) -> str:
+    if s != s or s == float("inf"):
+        return "--:--"
+    s = int(round(s))
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60:02d}:{s % 60:02d}"
+
+
+@cli.command()
+@click.argument("spec", type=click.Path(dir_okay=False))
+@click.option(
+    "--out",
+    "out",
+    required=True,
+    type=click.Path(file_okay=False),
+    help="Output folder: results.parquet (or results.csv), sweep.json, figures.",
+)
+@click.option("--scheduler", default=None, metavar="ADDRESS", help="Run on a Dask cluster (tcp://host:8786).")
+@click.option(
+    "--local-cluster",
+    "local_cluster",
+    type=int,
+    default=None,
+    metavar="N",
+    help="Run on an embedded Dask LocalCluster of N single-threaded worker processes.",
+)
+@click.option(
+    "--workers",
+    type=int,
+    default=None,
+    metavar="N",
+    help="Local worker processes (default: all cores; 1 runs in this process).",
+)
+@click.option("--resume", is_flag=True, help="Complete the sweep in --out: compute only the missing rows.")
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["parquet", "csv"]),
+    default=None,
+    help="Output format of a new sweep [default: parquet]; a resumed sweep keeps its own.",
+)
+@click.option(
+    "--chunk-size",
+    "chunk_size",
+    type=int,
+    default=None,
+    metavar="ROWS",
+    help="Rows per chunk of work (default: sized to a few tenths of a second each).",
+)
+@click.option(
+    "--plots/--no-plots",
+    default=True,
+    show_default=True,
+    help="Write fuel_vs_displacement.png and pareto_<cycle>.png into --out at the end.",
+)
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size, plots, quiet):
+    """Run the design-space sweep described by SPEC (a TOML file); results are appended as chunks finish."""
+    from ..sweep import load_spec, run_sweep
+
+    if scheduler is not None and local_cluster is not None:
+        raise VpsimError("--scheduler and --local-cluster exclude each other")
+    if workers is not None and (scheduler is not None or local_cluster is not None):
+        raise VpsimError("--workers applies to local processes; with a Dask cluster its workers do the work")
+    sp = load_spec(spec)
+    bar = _Progress(enabled=not quiet)
+    where = (
+        f"Dask scheduler {scheduler}"
+        if scheduler
+        else (
+            f"a local Dask cluster of {local_cluster} workers"
+            if local_cluster
+            else (
+                "this process"
+                if workers == 1
+                else f"{workers} local worker processes"
+                if workers
+                else "local cores"
+            )
+        )
+    )
+    if not quiet:
+        extra = " (resuming)" if resume else ""
+        click.echo(
+            f"sweep {sp.name!r}: {sp.n_designs} design points{' and the baseline' if sp.baseline else ''} "
+            f"x {len(sp.combos)} cycle/method/driver combinations on {where}{extra}",
+            err=True,
+        )
+    try:
+        run = run_sweep(
+            sp,
+            out,
+            workers=workers,
+            scheduler=scheduler,
+            local_cluster=local_cluster,
+            resume=resume,
+            fmt=fmt,
+            chunk_size=chunk_size,
+            progress=bar,
+        )
+    except KeyboardInterrupt:
+        bar.close()
+        click.echo(
+            f"vpsim: interrupted; the rows finished so far are kept in {out}; "
+            "run the same command with --resume to complete the sweep",
+            err=True,
+        )
+        raise
+    bar.close()
+    click.echo(
+        f"{run.n_rows} rows: {run.n_computed} computed now, {run.n_skipped} already present, "
+        f"{run.n_failed} failed (see the error column); {run.elapsed_s:.1f} s"
+    )
+    click.echo(f"wrote {run.path}")
+    if plots and not run.results.empty:
+        from ..sweep.plots import write_sweep_figures
+
+        for p in write_sweep_figures(run.results, out):
+            click.echo(f"wrote {p}")
+    if run.chunk_errors:
+        raise VpsimError(
+            f"{len(run.chunk_errors)} chunk(s) could not be computed ({run.chunk_errors[0]}); "
+            "run again with --resume to retry them"
+        )

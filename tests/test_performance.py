@@ -1,0 +1,115 @@
+"""0-100 km/h at full throttle (vpsim.performance) against an adaptive implicit solver with event location."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from vpsim import physics as ph
+from vpsim.maps import max_torque, steady_state
+from vpsim.performance import acceleration_time, acceleration_times, max_power_speed
+
+
+def _reference(p, w_launch=250.0, shift_fraction=0.9, target_kmh=100.0):
+    """The same model integrated phase by phase with scipy's Radau and exact events (slow, accurate)."""
+    eng, veh, tr = p.engine, p.vehicle, p.transmission
+    ratios, eta, r = tr.ratios, tr.efficiency, veh.wheel_radius
+    w_shift = shift_fraction * max_power_speed(eng)
+    a = eng.max_throttle_area
+    target = target_kmh / 3.6
+    tol = {"method": "Radau", "rtol": 1e-10, "atol": [1e-9, 1e-4]}
+
+    def f_slip(t, y):
+        v, p_i = y
+        t_cr = ph.crank_torque(p_i, w_launch, eng)
+        return [
+            (ratios[0] * eta * t_cr / r - ph.road_load(v, veh)) / veh.mass,
+            ph.manifold_pressure_rate(p_i, a, w_launch, eng),
+        ]
+
+    def lock(t, y):
+        return ratios[0] * y[0] / r - w_launch
+
+    lock.terminal = True
+    y0 = [0.0, float(steady_state(a, w_launch, eng).intake_pressure)]
+    s = solve_ivp(f_slip, (0, 60), y0, events=lock, **tol)
+    t0, y = s.t[-1], s.y[:, -1]
+    for i in ratios:
+
+        def f(t, y, i=i):
+            v, p_i = y
+            w = i * v / r
+            t_cr = ph.crank_torque(p_i, w, eng)
+            return [
+                (i * eta * t_cr / r - ph.road_load(v, veh)) / ph.equivalent_mass(i, veh, eng, eta),
+                ph.manifold_pressure_rate(p_i, a, w, eng),
+            ]
+
+        def shift(t, y, i=i):
+            return i * y[0] / r - w_shift
+
+        def hit(t, y):
+            return y[0] - target
+
+        shift.terminal = hit.terminal = True
+        s = solve_ivp(f, (t0, 60), y, events=[shift, hit], **tol)
+        if s.t_events[1].size:
+            return float(s.t_events[1][0])
+        t0, y = s.t[-1], s.y[:, -1]
+    return math.inf
+
+
+@pytest.mark.parametrize("changes", [{}, {"engine": {"bore": 0.075}}, {"vehicle": {"mass": 1200.0}}])
+def test_agrees_with_adaptive_reference(params, changes):
+    p = params.with_changes(**changes)
+    a = acceleration_time(p)
+    assert a.reached and a.reason == ""
+    assert a.time_s == pytest.approx(_reference(p), abs=2e-3)
+    assert len(a.shift_times_s) >= 1
+
+
+def test_batch_equals_one_by_one(params):
+    ps = [params.with_changes(engine={"bore": b}) for b in (0.075, 0.09, 0.1)]
+    together = [a.time_s for a in acceleration_times(ps)]
+    alone = [acceleration_time(p).time_s for p in ps]
+    assert together == pytest.approx(alone, rel=1e-12)
+    assert together[0] > together[1] > together[2]  # more displacement, quicker
+
+
+def test_defaults_are_stated(params):
+    a = acceleration_time(params, keep_series=True)
+    w_p = max_power_speed(params.engine)
+    lo, hi = params.engine.map_speed_range
+    w = np.linspace(lo, hi, 301)
+    assert w_p == pytest.approx(w[np.argmax(max_torque(w, params.engine) * w)])
+    assert a.shift_speed == pytest.approx(0.9 * w_p)
+    assert a.launch_speed == 250.0
+    s = a.series
+    assert np.all(np.diff(s["speed_mps"]) >= 0)
+    assert s["engine_speed_radps"].max() <= a.shift_speed + 1e-6
+    assert np.all(s["intake_pressure_pa"] <= params.engine.ambient_pressure * 1.001)
+    assert acceleration_time(params, shift_speed=450.0).time_s != a.time_s
+
+
+def test_not_reached_is_inf_with_a_reason(params):
+    cases = [
+        ({"vehicle": {"mass": 1e5}}, "cannot launch"),
+        ({"vehicle": {"frontal_area": 20.0}}, "stops accelerating at"),
+        ({"vehicle": {"mass": 60000.0}}, "not reached within 60 s"),
+    ]
+    for changes, reason in cases:
+        a = acceleration_time(params.with_changes(**changes))
+        assert a.time_s == math.inf and not a.reached
+        assert reason in a.reason
+    c = acceleration_time(params, t_max=3.0)
+    assert c.time_s == math.inf and "within 3 s" in c.reason
+
+
+def test_bad_arguments(params):
+    with pytest.raises(ValueError, match="launch_speed"):
+        acceleration_time(params, launch_speed=0.0)
+    with pytest.raises(ValueError, match="shift_fraction"):
+        acceleration_time(params, shift_fraction=1.5)
