@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import re
 import shlex
+import shutil
 import textwrap
 from pathlib import Path
 
@@ -37,6 +38,7 @@ def _blocks(lang):
 @pytest.fixture
 def scratch(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    shutil.copytree(REPO / "examples", tmp_path / "examples")
     toml = next(
         textwrap.dedent(m.group(2))
         for m in FENCE.finditer((REPO / "README.md").read_text())
