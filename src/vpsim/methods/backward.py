@@ -18,11 +18,14 @@ from __future__ import annotations
 
 import functools
 import time
+import weakref
 
 import numpy as np
 
+from .. import _kernels as kn
 from .. import physics as ph
 from ..gears import GearSchedule, default_schedule
+from ..maps import GeneratedEngineMap, cached_engine_map
 from ..result import EnergyBalance, Result, TraceMiss
 
 IDLE_SPEED = 80.0  # rad/s, the engine speed held in extended mode below which the clutch slips or opens
@@ -44,8 +47,6 @@ def run(
     (:func:`vpsim._kernels.backward_single`, cached on disk by Numba); ``compiled=False``, or a map of another
     kind, runs the NumPy reference. Both give the same result to rounding (checked by tests/test_kernels.py).
     """
-    from ..maps import GeneratedEngineMap, cached_engine_map
-
     if mode not in ("paper", "extended"):
         raise ValueError(f"mode must be 'paper' or 'extended', got {mode!r}")
     if engine_map is None:
@@ -161,21 +162,20 @@ def _run_numpy(cycle, params, engine_map, schedule: GearSchedule, mode: str, kee
 
 def _run_compiled(cycle, params, engine_map, schedule: GearSchedule, mode: str, keep_series: bool) -> Result:
     """The same computation as :func:`_run_numpy`, its per-interval loop compiled (vpsim._kernels)."""
-    from .. import _kernels as kn
-
     t0 = time.process_time()
     eng = engine_map.engine
-    c = _constants(params.vehicle, params.transmission, eng, params.simulation)
-    gear = schedule.on_cycle(cycle)[:-1]
-    i = np.asarray(params.transmission.ratios)[gear - 1]
-    n = gear.size
+    c, ratios = _kernel_inputs(params, eng)
+    n = cycle.time_s.size - 1
+    gear = np.empty(n, dtype=np.int64)
     s = np.empty((kn.N_SERIES, n))
-    w = np.empty((kn.N_INTEGRANDS, n))
+    res = np.empty(kn.N_RESULTS)
     extended = mode == "extended"
-    max_short, deficit = kn.backward_single(
+    kn.backward_single(
         cycle.time_s,
         cycle.speed_mps,
-        i,
+        schedule.time_s,
+        schedule.gear,
+        ratios,
         c,
         extended,
         bool(engine_map.exact),
@@ -185,69 +185,85 @@ def _run_compiled(cycle, params, engine_map, schedule: GearSchedule, mode: str, 
         engine_map.max_torque_speed,
         engine_map.max_torque_values,
         engine_map.min_torque_values,
+        gear,
         s,
-        w,
+        res,
     )
-    sums = w.sum(axis=1)  # pairwise summation per row, as np.sum over each integrand in the reference
-    coupled = None
-    if extended:
-        coupled = s[kn.S_COUPLED] > 0
-        for k in kn.MASKED_INTEGRANDS:
-            sums[k] = np.sum(w[k][coupled])
     cpu = time.process_time() - t0
-    missed_s = 0.0
-    if max_short > 1e-9:
-        missed_s = float(np.sum(np.diff(cycle.time_s)[s[kn.S_MISSED] > 0]))
+    sums = res.tolist()
     trace = TraceMiss(
-        seconds=missed_s,
-        max_torque_shortfall_nm=float(max_short),
-        details={"speed_deficit_mps": float(deficit)},
+        seconds=sums[kn.R_MISS_S],
+        max_torque_shortfall_nm=sums[kn.R_MAX_SHORT],
+        details={"speed_deficit_mps": sums[kn.R_DEFICIT]},
     )
     energy = EnergyBalance(
-        indicated=float(sums[kn.I_INDICATED]),
-        friction=float(sums[kn.I_FRICTION]),
-        pumping=float(sums[kn.I_PUMPING]),
-        engine_kinetic=float(sums[kn.I_ENGINE_KIN]),
-        driveline_loss=float(sums[kn.I_DRIVELINE]),
-        vehicle_kinetic=float(sums[kn.I_VEHICLE_KIN]),
-        aero=float(sums[kn.I_AERO]),
-        rolling=float(sums[kn.I_ROLLING]),
-        brake=float(sums[kn.I_BRAKE]),
-        trace_miss=float(sums[kn.I_TRACE]),
+        indicated=sums[kn.I_INDICATED],
+        friction=sums[kn.I_FRICTION],
+        pumping=sums[kn.I_PUMPING],
+        engine_kinetic=sums[kn.I_ENGINE_KIN],
+        driveline_loss=sums[kn.I_DRIVELINE] + sums[kn.I_SLIP] if extended else sums[kn.I_DRIVELINE],
+        vehicle_kinetic=sums[kn.I_VEHICLE_KIN],
+        aero=sums[kn.I_AERO],
+        rolling=sums[kn.I_ROLLING],
+        brake=sums[kn.I_BRAKE],
+        trace_miss=sums[kn.I_TRACE],
     )
-    if extended:
-        energy = _replace(energy, driveline_loss=energy.driveline_loss + float(sums[kn.I_SLIP]))
     series = {}
     if keep_series:
-        t = cycle.time_s
         v = s[kn.S_V]
-        p_i = s[kn.S_P] if coupled is None else np.where(coupled, s[kn.S_P], np.nan)
+        p_i = np.where(s[kn.S_COUPLED] > 0, s[kn.S_P], np.nan) if extended else s[kn.S_P]
         series = {
-            "time_s": 0.5 * (t[1:] + t[:-1]),
+            "time_s": s[kn.S_TIME],
             "reference_speed_mps": v,
             "speed_mps": v,
             "accel_mps2": s[kn.S_A],
             "gear": gear,
             "engine_speed_radps": s[kn.S_W],
             "crank_torque_nm": s[kn.S_TCR],
-            "engine_torque_nm": s[kn.S_TCR] - engine_map.inertia * s[kn.S_DW],
+            "engine_torque_nm": s[kn.S_TE],
             "intake_pressure_pa": p_i,
             "fuel_flow_kgps": s[kn.S_MDOT],
             "fuel_flow_used_kgps": s[kn.S_MDOT_USED],
             "brake_force_n": s[kn.S_BRAKE],
             "torque_shortfall_nm": s[kn.S_SHORT],
         }
-    return _result(
-        cycle, params, mode, series, float(sums[kn.I_FUEL]), float(sums[kn.I_DIST]), cpu, n, trace, energy
-    )
+    return _result(cycle, params, mode, series, sums[kn.I_FUEL], sums[kn.I_DIST], cpu, n, trace, energy)
+
+
+_INPUTS: dict = {}  # (id(params), id(engine)) -> (weak refs to both, constants, ratios): see _kernel_inputs
+
+
+def _kernel_inputs(params, engine) -> tuple[np.ndarray, np.ndarray]:
+    """(constants, total ratios) of the kernel for this parameter set and engine, memoised by identity.
+
+    Hashing the frozen parameter sections for an lru_cache costs about a microsecond per run, a tenth of the
+    Python around a compiled run; an identity look-up (checked through weak references, so a recycled id
+    never returns another set's values) is nearly free. Values are rebuilt from scratch after 64 entries.
+    """
+    key = (id(params), id(engine))
+    hit = _INPUTS.get(key)
+    if hit is not None and hit[0]() is params and hit[1]() is engine:
+        return hit[2], hit[3]
+    c = _constants(params.vehicle, params.transmission, engine, params.simulation)
+    r = _ratios(params.transmission)
+    if len(_INPUTS) >= 64:
+        _INPUTS.clear()
+    _INPUTS[key] = (weakref.ref(params), weakref.ref(engine), c, r)
+    return c, r
+
+
+@functools.lru_cache(maxsize=128)
+def _ratios(transmission) -> np.ndarray:
+    """Total ratio per gear as an array (read-only), cached per transmission."""
+    r = np.asarray(transmission.ratios, dtype=float)
+    r.setflags(write=False)
+    return r
 
 
 @functools.lru_cache(maxsize=128)
 def _constants(vehicle, transmission, engine, simulation) -> np.ndarray:
     """The compiled kernel's constants for one parameter set (vpsim._kernels.pack_constants), cached."""
-    from .._kernels import pack_constants
-
-    c = pack_constants(vehicle, transmission, engine, simulation)[0]
+    c = kn.pack_constants(vehicle, transmission, engine, simulation)[0]
     c.setflags(write=False)
     return c
 

@@ -1,0 +1,437 @@
+"""Batch evaluation: many design variants through one method in one call, one row per variant.
+
+    >>> import numpy as np
+    >>> from vpsim.batch import run_batch
+    >>> df = run_batch("udds", {"engine.bore": np.linspace(0.08, 0.095, 4), "vehicle.mass": 1500.0})
+    >>> list(df.columns[:3])
+    ['engine.bore', 'vehicle.mass', 'fuel_l_per_100km']
+    >>> len(df)
+    4
+
+Variants name parameters as ``section.field`` (``engine.bore``, ``vehicle.mass``,
+``transmission.final_drive``, ``engine.lambda``, ``simulation.idle_fuel_flow``; one gear as
+``transmission.gearbox_ratios[2]``, 1-based). They may be given as a pandas DataFrame (one column per
+parameter), a list of dicts (a parameter missing from a dict keeps the base value) or a dict of arrays
+(scalars broadcast). Every value is validated by :meth:`vpsim.params.Parameters.with_changes`, so a bad
+name or an implausible value raises :class:`~vpsim.errors.ParameterError` naming the variant row.
+
+Methods:
+
+* ``backward``: compiled over variants (:func:`vpsim._kernels.backward_batch`, parallel over the cores).
+  Each variant has its own engine, hence its own fuel map and max-torque line. The fuel flow is the BQM in
+  closed form (:func:`vpsim.maps.bqm_fuel_flow`, linear in p_i, so there is nothing to tabulate); this is
+  what :func:`vpsim.methods.backward.run` computes with ``engine_map=generate_engine_map(eng, exact=True)``
+  (the default table lookup differs from it by < 1e-5 relative). The max-torque line (the FQM at A_max,
+  a Newton solve per speed, tabulated at 1 rad/s like :func:`vpsim.maps.generate_engine_map` and
+  interpolated) is evaluated lazily: the wide-open-throttle intake pressure p_max(w_e) decreases with w_e,
+  so one Newton solve per variant, at a node above the run's top speed, gives a pressure below which no point
+  of the run can reach the line (allowing for the friction rise over one node interval). Only points above
+  it evaluate the line, at the two nodes around them, each node solved once per variant. Per point that
+  leaves about twenty floating-point operations and no transcendental function (the friction term's
+  c_m^1.8 is split into a per-gear factor and a per-point v^1.8 shared by all variants).
+* ``forward``: the forward dynamic method's compiled integrator (:mod:`vpsim.methods.forward`) run for each
+  variant inside one compiled call, parallel over variants.
+
+Gear schedule (``gears``): by default every variant follows the base design's schedule (derived once from
+the cycle by the documented rule, or the :class:`~vpsim.gears.GearSchedule` / CSV given). The paper
+prescribes gears in time, and a fair sweep compares designs on the same shifts: a design change then shows
+its own effect, not that of a different shift pattern. ``gears="per_variant"`` derives each variant's own
+schedule by the rule instead (what :func:`vpsim.simulate` does for one design; slower, a few ms per variant).
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+from dataclasses import fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from .cycles import Cycle, load_cycle
+from .errors import ParameterError, VpsimError
+from .gears import GearSchedule, default_schedule, load_schedule
+from .params import Parameters, load_parameters
+
+METHODS = ("backward", "forward")
+RESULT_COLUMNS = (
+    "fuel_l_per_100km",
+    "fuel_kg",
+    "distance_km",
+    "trace_miss_s",
+    "trace_miss_max_torque_shortfall_nm",
+    "max_speed_error_mps",
+    "steps",
+)
+
+_SECTIONS = ("vehicle", "transmission", "engine", "simulation")
+_ALIASES = {"lambda": "lambda_"}
+_GEAR_RE = re.compile(r"^transmission\.gearbox_ratios\[(\d+)\]$")
+
+
+# --- the public entry -----------------------------------------------------------------------------------
+
+
+def run_batch(
+    cycle: str | Path | Cycle = "udds",
+    variants=None,
+    method: str = "backward",
+    params: str | Path | Parameters = "hofman2011",
+    *,
+    mode: str = "paper",
+    gears="baseline",
+    driver: int | str | None = None,
+    rtol: float | None = None,
+):
+    """Simulate every variant of ``params`` on ``cycle`` with ``method``; a DataFrame, one row per variant.
+
+    ``variants``: DataFrame, list of dicts or dict of arrays of parameter values (see the module docstring);
+    ``None`` runs the base design alone. ``gears``: ``"baseline"`` (default: every variant on the base
+    design's schedule), ``"per_variant"``, a :class:`~vpsim.gears.GearSchedule` or a schedule CSV.
+    ``driver`` (forward only, default 1) and ``rtol`` (forward only) as in :func:`vpsim.simulate`.
+
+    Columns: the variant parameters as given, then ``fuel_l_per_100km``, ``fuel_kg``, ``distance_km``,
+    ``trace_miss_s``, ``trace_miss_max_torque_shortfall_nm`` (backward), ``max_speed_error_mps`` and
+    ``steps`` (forward).
+    """
+    import pandas as pd
+
+    if method not in METHODS:
+        raise VpsimError(f"batch method {method!r} is not available; expected one of {', '.join(METHODS)}")
+    if mode not in ("paper", "extended"):
+        raise VpsimError(f"unknown mode {mode!r}; expected paper or extended")
+    if method == "backward" and (driver is not None or rtol is not None):
+        raise VpsimError("the backward method tracks the cycle exactly and takes no driver or rtol")
+    if not isinstance(cycle, Cycle):
+        cycle = load_cycle(cycle)
+    if not isinstance(params, Parameters):
+        params = load_parameters(params)
+    names, values = normalise_variants(variants, params)
+    validate_variants(params, names, values)
+    schedules, schedule_of_variant = _schedules(cycle, params, names, values, gears)
+    if method == "backward":
+        out = _backward(cycle, params, names, values, schedules, schedule_of_variant, mode)
+    else:
+        out = _forward(cycle, params, names, values, schedules, schedule_of_variant, mode, driver, rtol)
+    df = pd.DataFrame({name: values[:, j] for j, name in enumerate(names)})
+    for col, arr in out.items():
+        df[col] = arr
+    df.index.name = "variant"
+    return df
+
+
+# --- variants: normalise and validate -------------------------------------------------------------------
+
+
+def normalise_variants(variants, params: Parameters) -> tuple[list[str], np.ndarray]:
+    """(names, values[n_variants, n_names]) from a DataFrame, a list of dicts or a dict of arrays."""
+    import pandas as pd
+
+    if variants is None:
+        return [], np.zeros((1, 0))
+    if isinstance(variants, pd.DataFrame):
+        cols = {str(c): variants[c].to_numpy() for c in variants.columns}
+        n = len(variants)
+    elif isinstance(variants, dict):
+        cols = {str(k): v for k, v in variants.items()}
+        lengths = {k: np.size(v) for k, v in cols.items() if np.ndim(v) > 0}
+        if len(set(lengths.values())) > 1:
+            detail = ", ".join(f"{k}: {n}" for k, n in lengths.items())
+            raise ParameterError(f"variants: the arrays have different lengths ({detail})")
+        n = next(iter(lengths.values()), 1)
+        cols = {
+            k: (np.full(n, v, dtype=object) if np.ndim(v) == 0 else np.asarray(v)) for k, v in cols.items()
+        }
+    elif isinstance(variants, list | tuple):
+        if not all(isinstance(row, dict) for row in variants):
+            raise ParameterError("variants: a list of variants must hold dicts of parameter values")
+        keys: list[str] = []
+        for row in variants:
+            keys += [str(k) for k in row if str(k) not in keys]
+        n = len(variants)
+        flat = params.flat()
+        cols = {}
+        for k in keys:
+            base = _base_value(flat, k, params)
+            cols[k] = np.array([row.get(k, base) for row in variants], dtype=object)
+    else:
+        raise ParameterError(
+            "variants must be a pandas DataFrame, a list of dicts or a dict of arrays, "
+            f"got {type(variants).__name__}"
+        )
+    if n == 0:
+        raise ParameterError("variants: no variant given (an empty table)")
+    names = list(cols)
+    canon = [_canonical(name) for name in names]
+    for k, c in enumerate(canon):
+        if c in canon[:k]:
+            raise ParameterError(
+                f"variants: {names[k]!r} names the same parameter as {names[canon.index(c)]!r}"
+            )
+    values = np.empty((n, len(names)))
+    for j, name in enumerate(names):
+        col = cols[name]
+        if isinstance(col, np.ndarray) and col.dtype.kind in "fiu":  # numeric already: no per-value check
+            values[:, j] = col
+            continue
+        for i in range(n):
+            v = col[i]
+            v = v.item() if isinstance(v, np.generic) else v
+            if isinstance(v, bool | np.bool_) or not isinstance(v, int | float | np.integer | np.floating):
+                raise ParameterError(f"variant {i}: {name} = {v!r} is not a number")
+            values[i, j] = float(v)
+    return names, values
+
+
+def _canonical(name: str) -> str:
+    sec, _, fld = name.partition(".")
+    return f"{sec}.{_ALIASES.get(fld, fld)}"
+
+
+def _base_value(flat: dict, name: str, params: Parameters):
+    m = _GEAR_RE.match(name)
+    if m:
+        g = int(m.group(1))
+        ratios = params.transmission.gearbox_ratios
+        return ratios[g - 1] if 1 <= g <= len(ratios) else float("nan")
+    return flat.get(name, float("nan"))
+
+
+def _split(name: str, params: Parameters) -> tuple[str, str, int | None]:
+    """(section, field, gear) of a variant column; raises ParameterError for unknown or non-scalar names."""
+    m = _GEAR_RE.match(name)
+    if m:
+        g = int(m.group(1))
+        n_g = params.transmission.n_gears
+        if not 1 <= g <= n_g:
+            raise ParameterError(f"variants: {name}: gear {g} does not exist (gears 1..{n_g})")
+        return "transmission", "gearbox_ratios", g
+    sec, dot, fld = name.partition(".")
+    scalar = {
+        s: {
+            _ALIASES.get(f.name, f.name) if f.name != "lambda_" else "lambda": f.type
+            for f in fields(getattr(params, s))
+        }
+        for s in _SECTIONS
+    }
+    known = [f"{s}.{f}" for s, fs in scalar.items() for f, t in fs.items() if t in ("float", "int")]
+    if not dot or sec not in scalar or fld not in scalar[sec]:
+        close = difflib.get_close_matches(name, known, n=3)
+        hint = f"; did you mean {' or '.join(close)}?" if close else f"; parameters are named like {known[0]}"
+        raise ParameterError(f"variants: unknown parameter {name!r}{hint}")
+    if scalar[sec][fld] not in ("float", "int"):
+        raise ParameterError(
+            f"variants: {name} is a list; vary one entry (e.g. transmission.gearbox_ratios[2]) "
+            "or use a separate parameter set"
+        )
+    return sec, fld, None
+
+
+def validate_variants(params: Parameters, names: list[str], values: np.ndarray) -> None:
+    """Check every variant through :meth:`Parameters.with_changes`; errors name the variant row.
+
+    The per-field checks are intervals, so each column is validated at its smallest and largest value (and
+    every value for whole-number fields); the one check that couples fields (A_min < A_max) is then applied
+    to every row.
+    """
+    for j, name in enumerate(names):
+        sec, fld, gear = _split(name, params)
+        col = values[:, j]
+        bad = np.flatnonzero(~np.isfinite(col))
+        rows = [int(bad[0])] if bad.size else []
+        typ = {f.name: f.type for f in fields(getattr(params, sec))}.get(_ALIASES.get(fld, fld))
+        if typ == "int":
+            frac = np.flatnonzero(col != np.round(col))
+            rows += [int(frac[0])] if frac.size else []
+        rows += [int(np.argmin(col)), int(np.argmax(col))]
+        for i in rows:
+            _check_row(params, names, values, i, only=j)
+    if any(_canonical(n) in ("engine.min_throttle_area", "engine.max_throttle_area") for n in names):
+        lo = _column(params, names, values, "engine.min_throttle_area")
+        hi = _column(params, names, values, "engine.max_throttle_area")
+        bad = np.flatnonzero(~(lo < hi))
+        if bad.size:
+            _check_row(params, names, values, int(bad[0]))
+
+
+def _column(params, names, values, key):
+    canon = [_canonical(n) for n in names]
+    if key in canon:
+        return values[:, canon.index(key)]
+    sec, fld = key.split(".")
+    return np.full(values.shape[0], float(getattr(getattr(params, sec), fld)))
+
+
+def variant_parameters(params: Parameters, names: list[str], row) -> Parameters:
+    """The validated :class:`Parameters` of one variant (``row``: its values in the order of ``names``)."""
+    sections: dict[str, dict] = {}
+    gears: dict[int, float] = {}
+    for name, value in zip(names, row, strict=True):
+        sec, fld, gear = _split(name, params)
+        if gear is not None:
+            gears[gear] = float(value)
+            continue
+        typ = {f.name: f.type for f in fields(getattr(params, sec))}[_ALIASES.get(fld, fld)]
+        v = float(value)
+        sections.setdefault(sec, {})[fld] = int(v) if typ == "int" and v.is_integer() else v
+    if gears:
+        ratios = list(params.transmission.gearbox_ratios)
+        for g, v in gears.items():
+            ratios[g - 1] = v
+        sections.setdefault("transmission", {})["gearbox_ratios"] = ratios
+    return params.with_changes(**sections) if sections else params
+
+
+def _check_row(params, names, values, i, only=None):
+    sel = range(len(names)) if only is None else [only]
+    try:
+        variant_parameters(params, [names[j] for j in sel], [values[i, j] for j in sel])
+    except ParameterError as exc:
+        msg = str(exc)
+        for prefix in ("parameters: ", "with_changes: "):
+            msg = msg.removeprefix(prefix)
+        raise ParameterError(f"variant {i}: {msg}") from None
+
+
+# --- array-valued parameter sections ------------------------------------------------------------------
+
+
+def _sections(params: Parameters, names: list[str], values: np.ndarray):
+    """Vehicle, transmission, engine, simulation whose varied fields are arrays over the variants, and the
+    total ratios per variant and gear (n_variants, n_gears)."""
+    n = values.shape[0]
+    changes: dict[str, dict] = {s: {} for s in _SECTIONS}
+    gearbox = np.tile(np.asarray(params.transmission.gearbox_ratios, float), (n, 1))
+    for j, name in enumerate(names):
+        sec, fld, gear = _split(name, params)
+        if gear is not None:
+            gearbox[:, gear - 1] = values[:, j]
+        else:
+            changes[sec][_ALIASES.get(fld, fld)] = values[:, j]
+    secs = [
+        replace(getattr(params, s), **changes[s]) if changes[s] else getattr(params, s) for s in _SECTIONS
+    ]
+    final = np.broadcast_to(np.asarray(secs[1].final_drive, float), (n,))
+    ratios = np.ascontiguousarray(gearbox * final[:, None])
+    return secs, ratios
+
+
+def _schedules(cycle, params, names, values, gears):
+    """(gear arrays per schedule (n_schedules, n_samples), schedule index per variant)."""
+    n = values.shape[0]
+    if isinstance(gears, str) and gears == "per_variant":
+        from .maps import generate_engine_map
+
+        rows = []
+        for i in range(n):
+            p = variant_parameters(params, names, values[i])
+            em = generate_engine_map(p.engine, exact=True)
+            rows.append(default_schedule(cycle, p, em).on_cycle(cycle))
+        return np.array(rows), np.arange(n)
+    if isinstance(gears, str) and gears == "baseline":
+        from .maps import cached_engine_map
+
+        schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
+    elif isinstance(gears, GearSchedule):
+        schedule = gears
+    elif isinstance(gears, str | Path):
+        schedule = load_schedule(Path(gears), params.transmission.n_gears)
+    else:
+        raise VpsimError(
+            f"gears must be 'baseline', 'per_variant', a GearSchedule or a CSV path, got {gears!r}"
+        )
+    return schedule.on_cycle(cycle)[None, :], np.zeros(n, dtype=np.int64)
+
+
+# --- backward -----------------------------------------------------------------------------------------------
+
+
+def _backward(cycle, params, names, values, schedules, schedule_of_variant, mode):
+    from . import _kernels as kn
+
+    (veh, tr, eng, sim), ratios = _sections(params, names, values)
+    consts = kn.pack_constants(veh, tr, eng, sim)
+    n_var = values.shape[0]
+    if consts.shape[0] != n_var:
+        consts = np.ascontiguousarray(np.broadcast_to(consts, (n_var, consts.shape[1])))
+    t, vs = cycle.time_s, cycle.speed_mps
+    dt = np.diff(t)
+    v = 0.5 * (vs[1:] + vs[:-1])
+    a = np.diff(vs) / dt
+    v18 = v**1.8
+    gear_idx = np.ascontiguousarray(schedules[:, :-1] - 1, dtype=np.int64)
+    n_g = ratios.shape[1]
+    vmax_gear = np.zeros((gear_idx.shape[0], n_g))
+    for s in range(gear_idx.shape[0]):
+        np.maximum.at(vmax_gear[s], gear_idx[s], v)
+    out = np.empty((n_var, kn.N_BATCH_OUT))
+    kn.backward_batch(
+        consts,
+        ratios,
+        schedule_of_variant.astype(np.int64),
+        gear_idx,
+        vmax_gear,
+        dt,
+        v,
+        a,
+        v18,
+        mode == "extended",
+        out,
+    )
+    distance = float(np.sum(v * dt))
+    fuel = out[:, kn.B_FUEL]
+    density = consts[:, kn.FUEL_DENSITY]
+    return {
+        "fuel_l_per_100km": fuel / density / (distance / 1e5) if distance > 0 else np.full(n_var, np.nan),
+        "fuel_kg": fuel,
+        "distance_km": np.full(n_var, distance / 1e3),
+        "trace_miss_s": out[:, kn.B_MISS_S],
+        "trace_miss_max_torque_shortfall_nm": out[:, kn.B_MAX_SHORT],
+    }
+
+
+# --- forward ------------------------------------------------------------------------------------------------
+
+
+def _forward(cycle, params, names, values, schedules, schedule_of_variant, mode, driver, rtol):
+    """The forward dynamic method per variant, variants in parallel threads.
+
+    Each variant is exactly :func:`vpsim.methods.forward.run` (so a row is that run's summary); the compiled
+    integrator releases the GIL, so the threads run the variants' integrations concurrently on the cores.
+    """
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
+    import numba
+
+    from .methods import forward
+
+    driver = "1" if driver is None else str(driver)
+    params.driver(driver)  # validates the name
+    n = values.shape[0]
+    variants = [variant_parameters(params, names, values[i]) for i in range(n)]
+    shared = schedule_of_variant.max(initial=0) == 0
+    gear_schedules = [GearSchedule(cycle.time_s.copy(), g, source="batch") for g in schedules]
+
+    def one(i):
+        sched = gear_schedules[0 if shared else int(schedule_of_variant[i])]
+        return forward.run(cycle, variants[i], driver=driver, schedule=sched, mode=mode, rtol=rtol)
+
+    forward.warm_up()
+    workers = max(1, min(n, numba.config.NUMBA_NUM_THREADS, os.cpu_count() or 1))
+    if workers == 1:
+        results = [one(i) for i in range(n)]
+    else:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            results = list(pool.map(one, range(n)))
+    return {
+        "fuel_l_per_100km": np.array([r.fuel_l_per_100km for r in results]),
+        "fuel_kg": np.array([r.fuel_kg for r in results]),
+        "distance_km": np.array([r.distance_km for r in results]),
+        "trace_miss_s": np.array([r.trace_miss.seconds for r in results]),
+        "max_speed_error_mps": np.array([r.trace_miss.max_speed_error_mps for r in results]),
+        "steps": np.array([r.steps for r in results], dtype=np.int64),
+    }
+
+
+__all__ = ["METHODS", "normalise_variants", "run_batch", "validate_variants", "variant_parameters"]

@@ -1,0 +1,1036 @@
+"""Benchmarks: vpsim's methods side by side with FASTSim 3.1, batch throughput, linearity, cold start.
+
+:func:`run_benchmarks` measures, on one machine:
+
+* every method (and driver) on UDDS, NEDC and FTP-75 (and HWFET): the median wall time of repeated runs
+  with the inputs prepared (engine map, gear schedule; timed separately as setup), solver steps, and peak
+  memory of one run (``tracemalloc``: Python and NumPy allocations; and the rise of the process's peak
+  resident set, which also sees native allocations such as FASTSim's Rust heap or Numba's);
+* the peer, FASTSim 3.1 (``pip install fastsim==3.1.0``, the ``bench`` extra): its conventional 2012 Ford
+  Fusion on UDDS and HWFET, ``SimDrive.walk()`` timed alone after a warm-up (the ``SimDrive`` construction
+  separately), in this process before any vpsim code has run and in fresh processes of its own; its fastest
+  settled figure is the one compared with. If FASTSim is not installed the peer is reported missing and no
+  ratio against it is given;
+* the ratios twice: from adjacent blocks of runs of both sides (robust to the load of other processes on a
+  shared machine) and from each side's best settled median (the figure held against the targets);
+* batch throughput (:func:`vpsim.batch.run_batch`), backward and forward, runs per second;
+* linearity: FTP-75 repeated 1, 4 and 16 times (:meth:`vpsim.cycles.Cycle.repeat`), time per repetition
+  against the single cycle, sizes timed in rounds side by side;
+* cold start: a fresh Python process importing vpsim and running UDDS once with the compiled code loaded
+  from Numba's cache; and (not in quick mode) the very first compilation into an empty cache.
+
+Nothing here prints: :func:`format_report` renders the figures, the CLI (``vpsim bench``) prints them. Times
+are wall-clock ``time.perf_counter`` with the garbage collector paused, as :mod:`timeit` does. Memory is
+measured after all timings (tracemalloc leaves the process slower for a while).
+"""
+
+from __future__ import annotations
+
+import gc
+import json
+import math
+import os
+import platform
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import tracemalloc
+import warnings
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+PEER = "fastsim"
+PEER_VERSION = "3.1.0"
+PEER_VEHICLE = "2012_Ford_Fusion.yaml"
+PEER_CYCLES = {"udds": "udds.csv", "hwfet": "hwfet.csv"}
+GASOLINE_KWH_PER_GAL = 33.7  # EPA's energy content of gasoline, to turn FASTSim's fuel energy into litres
+LITRES_PER_GAL = 3.785411784
+
+# target figures of the performance issue (ratios > 1: vpsim faster; inverse_vs_backward: a time ratio)
+TARGETS = {
+    "backward_vs_fastsim_udds": (">=", 50.0),
+    "forward_vs_fastsim_udds": (">=", 3.0),
+    "inverse_vs_backward": ("<=", 2.0),
+    "batch_backward_runs_per_s": (">=", 20000.0),
+    "batch_forward_runs_per_s": (">=", 200.0),
+    "linearity_max_dev": ("<=", 0.10),
+    "cold_start_s": ("<", 2.0),
+}
+
+
+@dataclass(frozen=True)
+class Settings:
+    """How much to measure; :data:`PROFILES` holds the full, quick and tiny (test) profiles."""
+
+    cycles: tuple[str, ...]
+    methods: tuple[tuple[str, str | None], ...]  # (method, driver)
+    min_time_s: float  # time spent repeating one row at least ...
+    min_repeats: int  # ... and at least this many runs
+    max_repeats: int
+    batch_backward_variants: int
+    batch_forward_variants: int
+    batch_repeats: int
+    linearity_methods: tuple[tuple[str, str | None], ...]
+    linearity_repeats: tuple[int, ...]
+    cold_start_runs: int
+    first_compile: bool
+    peer_cycles: tuple[str, ...] = ("udds", "hwfet")
+    pairs: int = 21  # adjacent block pairs behind each ratio (see _paired)
+    peer_warm_up_s: float = 1.5  # untimed FASTSim walks before its timing
+    peer_processes: int = 3  # fresh processes timing FASTSim alone
+
+
+_ALL_METHODS = (("backward", None), ("forward", "1"), ("forward", "2"), ("inverse", "1"), ("inverse", "2"))
+_LIN_METHODS = (("backward", None), ("forward", "1"), ("inverse", "1"))
+PROFILES = {
+    "full": Settings(
+        cycles=("udds", "nedc", "ftp75", "hwfet"),
+        methods=_ALL_METHODS,
+        min_time_s=1.0,
+        min_repeats=5,
+        max_repeats=5000,
+        batch_backward_variants=20000,
+        batch_forward_variants=400,
+        batch_repeats=5,
+        linearity_methods=_LIN_METHODS,
+        linearity_repeats=(1, 4, 16),
+        cold_start_runs=5,
+        first_compile=True,
+        pairs=31,
+    ),
+    "quick": Settings(
+        cycles=("udds", "nedc", "ftp75"),
+        methods=_ALL_METHODS,
+        min_time_s=0.15,
+        min_repeats=3,
+        max_repeats=1000,
+        batch_backward_variants=20000,
+        batch_forward_variants=200,
+        batch_repeats=3,
+        linearity_methods=_LIN_METHODS,
+        linearity_repeats=(1, 4, 16),
+        cold_start_runs=2,
+        first_compile=False,
+        pairs=9,
+        peer_warm_up_s=1.0,
+        peer_processes=1,
+    ),
+    "tiny": Settings(
+        cycles=("udds",),
+        methods=(("backward", None),),
+        min_time_s=0.01,
+        min_repeats=2,
+        max_repeats=50,
+        batch_backward_variants=200,
+        batch_forward_variants=0,
+        batch_repeats=1,
+        linearity_methods=(("backward", None),),
+        linearity_repeats=(1, 4),
+        cold_start_runs=0,
+        first_compile=False,
+        peer_cycles=("udds",),
+        pairs=2,
+        peer_warm_up_s=0.02,
+        peer_processes=0,
+    ),
+}
+
+
+# --- measuring ----------------------------------------------------------------------------------------------
+
+
+def _timed(fn, settings: Settings, setup=None) -> tuple[float, int]:
+    """(median seconds, runs) of ``fn()`` after one warm-up call, the garbage collector paused.
+
+    With ``setup``, each run times ``fn(setup())`` and ``setup()`` itself stays outside the timed region.
+    """
+    call = (lambda: fn(setup())) if setup is not None else fn
+    call()
+    times: list[float] = []
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        start = time.perf_counter()
+        while len(times) < settings.max_repeats and (
+            len(times) < settings.min_repeats or time.perf_counter() - start < settings.min_time_s
+        ):
+            arg = setup() if setup is not None else None
+            t0 = time.perf_counter()
+            if setup is not None:
+                fn(arg)
+            else:
+                fn()
+            times.append(time.perf_counter() - t0)
+            del arg
+    finally:
+        if enabled:
+            gc.enable()
+    return statistics.median(times), len(times)
+
+
+def _proc_status(key: str) -> int | None:
+    try:
+        with open("/proc/self/status") as fh:
+            m = re.search(rf"^{key}:\s+(\d+) kB", fh.read(), re.M)
+    except OSError:
+        return None
+    return int(m.group(1)) if m else None
+
+
+def _malloc_trim() -> None:
+    """Give the C heap's free memory back to the system (glibc): a later peak-RSS rise is new memory."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
+def _memory(fn) -> tuple[float, float | None]:
+    """(tracemalloc peak KiB, rise of the peak resident set KiB or None) of one call of ``fn``.
+
+    tracemalloc sees Python's and NumPy's allocations; the resident-set rise (Linux: VmHWM after resetting
+    it through /proc/self/clear_refs, with the C heap trimmed first) also sees native ones (FASTSim's Rust
+    heap, Numba's), to page granularity.
+    """
+    gc.collect()
+    _malloc_trim()
+    rss_kib = None
+    try:  # Linux: writing 5 to clear_refs resets the peak RSS (VmHWM) to the current RSS
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+        before = _proc_status("VmRSS")
+        fn()
+        after = _proc_status("VmHWM")
+        if before is not None and after is not None:
+            rss_kib = float(max(after - before, 0))
+    except OSError:
+        pass
+    gc.collect()
+    tracemalloc.start()
+    try:
+        fn()
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    return peak / 1024.0, rss_kib
+
+
+def _row(tool, method, driver, cycle, median_s, runs, steps, py_kib, rss_kib, fuel, **extra) -> dict:
+    return {
+        "tool": tool,
+        "method": method,
+        "driver": driver,
+        "cycle": cycle,
+        "median_ms": median_s * 1e3,
+        "runs": runs,
+        "steps": steps,
+        "py_peak_kib": py_kib,
+        "rss_peak_kib": rss_kib,
+        "fuel_l_per_100km": fuel,
+        **extra,
+    }
+
+
+def _loadavg() -> float | None:
+    """The 1-minute load average (other processes competing for the cores show up here), or None."""
+    try:
+        return os.getloadavg()[0]
+    except (OSError, AttributeError):
+        return None
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0] if text else ''}"[:200]
+
+
+# --- vpsim --------------------------------------------------------------------------------------------------
+
+
+def _vpsim_rows(settings: Settings, progress) -> tuple[list[dict], dict, list[dict], dict]:
+    from .cycles import load_cycle
+    from .gears import default_schedule
+    from .maps import cached_engine_map, generate_engine_map
+    from .params import load_parameters
+    from .simulation import simulate
+
+    params = load_parameters("hofman2011")
+    t0 = time.perf_counter()
+    em = generate_engine_map(params.engine)
+    setup = {"engine_map_ms": (time.perf_counter() - t0) * 1e3, "gear_schedule_ms": {}}
+    cached_engine_map(params.engine)
+    rows, failures, calls = [], [], {}
+    for name in settings.cycles:
+        cyc = load_cycle(name)
+        t0 = time.perf_counter()
+        schedule = default_schedule(cyc, params, em)
+        setup["gear_schedule_ms"][name] = (time.perf_counter() - t0) * 1e3
+        for method, driver in settings.methods:
+            progress(f"vpsim {method}{'' if driver is None else ' driver ' + driver} on {name}")
+
+            def fn(method=method, driver=driver, cyc=cyc, schedule=schedule):
+                return simulate(cyc, method, params, driver=driver, gears=schedule)
+
+            try:
+                res = fn()
+                med, runs = _timed(fn, settings)
+                py_kib, rss_kib = None, None  # measured at the end (see _measure_memory)
+            except Exception as exc:  # a method that fails is reported, not fatal to the benchmark
+                failures.append({"method": method, "driver": driver, "cycle": name, "error": _one_line(exc)})
+                continue
+            calls[(method, driver, name)] = fn
+            rows.append(
+                _row(
+                    "vpsim",
+                    method,
+                    driver,
+                    name,
+                    med,
+                    runs,
+                    int(res.steps),
+                    py_kib,
+                    rss_kib,
+                    float(res.fuel_l_per_100km),
+                )
+            )
+    return rows, setup, failures, calls
+
+
+# --- the peer: FASTSim 3.1 ------------------------------------------------------------------------------
+
+
+def peer_status() -> dict:
+    """Whether FASTSim 3.1.0 can be imported here: {"name", "version", "available", "reason"}."""
+    status = {"name": PEER, "version": None, "available": False, "reason": ""}
+    try:
+        import fastsim  # noqa: F401
+    except Exception as exc:  # ImportError, or a broken install
+        status["reason"] = (
+            f"not installed ({_one_line(exc)}); pip install 'vpsim[bench]' (fastsim=={PEER_VERSION})"
+        )
+        return status
+    version = getattr(fastsim, "__version__", None)
+    status["version"] = version
+    if version != PEER_VERSION:
+        status["reason"] = f"fastsim {version} installed; the benchmark compares against {PEER_VERSION}"
+        return status
+    status["available"] = True
+    return status
+
+
+def _peer_rows(settings: Settings, progress) -> tuple[list[dict], dict, dict]:
+    import fastsim as fsim
+
+    setup: dict = {}
+    t0 = time.perf_counter()
+    veh = fsim.Vehicle.from_resource(PEER_VEHICLE)
+    setup["vehicle_from_resource_ms"] = (time.perf_counter() - t0) * 1e3
+    setup["simdrive_new_ms"] = {}
+    rows, makers = [], {}
+    for name in settings.peer_cycles:
+        progress(f"{PEER} {PEER_VERSION} conventional {PEER_VEHICLE} on {name}")
+        cyc = fsim.Cycle.from_resource(PEER_CYCLES[name])
+
+        def make(veh=veh, cyc=cyc):
+            return fsim.SimDrive(veh, cyc)
+
+        makers[name] = make
+        new_s, _ = _timed(make, settings)
+        setup["simdrive_new_ms"][name] = new_s * 1e3
+        # walk() only: each run walks a fresh SimDrive built outside the timed region. In a fresh process
+        # FASTSim's walks take ~1.7x longer for the first second or so (measured here: 12 ms, then 7 ms on
+        # UDDS); it gets that second untimed, so its settled speed is what is compared.
+        t_warm = time.perf_counter()
+        while time.perf_counter() - t_warm < settings.peer_warm_up_s:
+            _walk(make())
+        med, runs = _timed(_walk, settings, setup=make)
+        py_kib, rss_kib = None, None
+        sd = make()
+        _walk(sd)
+        d = sd.to_dict()
+        fuel_j = d["veh"]["pt_type"]["Conv"]["fc"]["state"]["energy_fuel_joules"]
+        dist_m = d["veh"]["state"]["dist_meters"]
+        litres = fuel_j / (GASOLINE_KWH_PER_GAL * 3.6e6) * LITRES_PER_GAL
+        rows.append(
+            _row(
+                f"{PEER} {PEER_VERSION}",
+                "conventional walk()",
+                None,
+                name,
+                med,
+                runs,
+                cyc.len() - 1,
+                py_kib,
+                rss_kib,
+                litres / (dist_m / 1e5),
+                vehicle=PEER_VEHICLE,
+            )
+        )
+    return rows, setup, makers
+
+
+_PEER_CODE = """
+import json, statistics, time, warnings
+warnings.simplefilter("ignore", DeprecationWarning)
+import fastsim as fsim
+veh = fsim.Vehicle.from_resource({vehicle!r})
+cyc = fsim.Cycle.from_resource({cycle!r})
+t0 = time.perf_counter()
+while time.perf_counter() - t0 < {warm!r}:
+    fsim.SimDrive(veh, cyc).walk()
+ts = []
+t0 = time.perf_counter()
+while len(ts) < 5 or time.perf_counter() - t0 < {measure!r}:
+    sd = fsim.SimDrive(veh, cyc)
+    t = time.perf_counter()
+    sd.walk()
+    ts.append(time.perf_counter() - t)
+print(json.dumps({{"median_ms": statistics.median(ts) * 1e3, "runs": len(ts)}}))
+"""
+
+
+def _peer_fresh(settings: Settings, progress) -> dict:
+    """FASTSim's walk() in fresh processes of its own (nothing of vpsim loaded), after its warm-up.
+
+    Its settled speed varies between processes on this kind of machine (7 ms or 10-12 ms on UDDS); the
+    fastest process is the one compared with, which can only understate vpsim's advantage.
+    """
+    out: dict = {}
+    for name in settings.peer_cycles:
+        meds = []
+        for _ in range(settings.peer_processes):
+            progress(f"{PEER} on {name} in a fresh process")
+            code = _PEER_CODE.format(
+                vehicle=PEER_VEHICLE,
+                cycle=PEER_CYCLES[name],
+                warm=settings.peer_warm_up_s,
+                measure=settings.min_time_s,
+            )
+            try:
+                _, d = _subprocess(code)
+            except Exception as exc:
+                out[name] = {"error": _one_line(exc)}
+                break
+            meds.append(d["median_ms"])
+        if meds:
+            out[name] = {"median_ms_per_process": meds, "best_ms": min(meds)}
+    return out
+
+
+def _measure_memory(rows: list[dict], calls: dict, makers: dict) -> None:
+    """Fill the rows' peak-memory figures, after every timing: tracemalloc and trimming the C heap leave the
+    process in a state that slows later runs (FASTSim's walk by up to 1.5x), so they come last."""
+    for r in rows:
+        if r["tool"] == "vpsim":
+            fn = calls.get((r["method"], r["driver"], r["cycle"]))
+        else:
+            make = makers.get(r["cycle"])
+            fn = None if make is None else (lambda make=make: _walk(make()))
+        if fn is not None:
+            r["py_peak_kib"], r["rss_peak_kib"] = _memory(fn)
+
+
+def _walk(sd) -> None:
+    """FASTSim 3.1's ``SimDrive.walk()`` (a deprecated alias of ``run()`` that warns on every call)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        sd.walk()
+
+
+def _block(call, setup, n: int) -> float:
+    """Median seconds of ``n`` timed runs after one untimed warm run (warm caches), ``setup`` untimed."""
+    call(setup()) if setup is not None else call()
+    ts = []
+    for _ in range(n):
+        arg = setup() if setup is not None else None
+        t0 = time.perf_counter()
+        call(arg) if setup is not None else call()
+        ts.append(time.perf_counter() - t0)
+    return statistics.median(ts)
+
+
+def _paired(a, b, pairs: int, setup_a=None, block_s: float = 0.03) -> dict:
+    """Ratio t_a / t_b from ``pairs`` adjacent blocks of runs of ``a`` and of ``b`` (order swapped each pair).
+
+    On a shared machine the load changes over seconds; blocks a few tens of ms long, side by side, see the
+    same load, so the median of the per-pair ratios is steadier than a ratio of medians taken minutes apart.
+    Within a block the caches are warm (one untimed run first), as for a user running one tool many times;
+    alternating single runs instead would time each run of the faster tool with caches emptied by the other.
+    """
+    t_a = _block(a, setup_a, 1)
+    t_b = _block(b, None, 1)
+    n_a = max(3, min(1000, math.ceil(block_s / max(t_a, 1e-7))))
+    n_b = max(3, min(1000, math.ceil(block_s / max(t_b, 1e-7))))
+    ta, tb = [], []
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        for k in range(pairs):
+            for which in (0, 1) if k % 2 == 0 else (1, 0):
+                if which == 0:
+                    ta.append(_block(a, setup_a, n_a))
+                else:
+                    tb.append(_block(b, None, n_b))
+    finally:
+        if enabled:
+            gc.enable()
+    ratios = [x / y for x, y in zip(ta, tb, strict=True)]
+    return {
+        "ratio": statistics.median(ratios),
+        "a_median_ms": statistics.median(ta) * 1e3,
+        "b_median_ms": statistics.median(tb) * 1e3,
+        "pairs": pairs,
+        "runs_per_block": [n_a, n_b],
+    }
+
+
+# --- batch, linearity, cold start ---------------------------------------------------------------------
+
+
+def batch_variants(n: int, seed: int = 0):
+    """A reproducible sweep of ``n`` designs around the base vehicle (bore, stroke, final drive, mass)."""
+    import pandas as pd
+
+    rng = np.random.default_rng(seed)
+    return pd.DataFrame(
+        {
+            "engine.bore": rng.uniform(0.085, 0.095, n),
+            "engine.stroke": rng.uniform(0.085, 0.095, n),
+            "transmission.final_drive": rng.uniform(4.0, 4.9, n),
+            "vehicle.mass": rng.uniform(1500.0, 1800.0, n),
+        }
+    )
+
+
+def _batch(settings: Settings, progress) -> dict:
+    from .batch import run_batch
+    from .cycles import load_cycle
+
+    cyc = load_cycle("udds")
+    out: dict = {}
+    for method, n in (
+        ("backward", settings.batch_backward_variants),
+        ("forward", settings.batch_forward_variants),
+    ):
+        key = f"batch_{method}"
+        if n <= 0:
+            out[key] = {"variants": 0, "runs_per_s": None, "error": "not measured in this profile"}
+            continue
+        progress(f"batch {method}: {n} variants on udds")
+        variants = batch_variants(n)
+        try:
+            run_batch(cyc, variants.iloc[: min(n, 8)], method=method)  # load / compile
+            times = []
+            for _ in range(settings.batch_repeats):
+                t0 = time.perf_counter()
+                df = run_batch(cyc, variants, method=method)
+                times.append(time.perf_counter() - t0)
+        except Exception as exc:
+            out[key] = {"variants": n, "runs_per_s": None, "error": _one_line(exc)}
+            continue
+        med = statistics.median(times)
+        out[key] = {
+            "variants": n,
+            "cycle": "udds",
+            "median_s": med,
+            "runs_per_s": n / med,
+            "trace_miss_share": float(np.mean(df["trace_miss_s"] > 0)),
+            "fuel_l_per_100km_range": [
+                float(df["fuel_l_per_100km"].min()),
+                float(df["fuel_l_per_100km"].max()),
+            ],
+        }
+    return out
+
+
+def _linearity(settings: Settings, progress) -> dict:
+    from .cycles import load_cycle
+    from .gears import default_schedule
+    from .maps import cached_engine_map
+    from .params import load_parameters
+    from .simulation import simulate
+
+    params = load_parameters("hofman2011")
+    em = cached_engine_map(params.engine)
+    base = load_cycle("ftp75")
+    out: dict = {}
+    for method, driver in settings.linearity_methods:
+        label = method if driver is None else f"{method} driver {driver}"
+        progress(f"linearity {label}: ftp75 x {', '.join(map(str, settings.linearity_repeats))}")
+        reps = settings.linearity_repeats
+        fns = {}
+        try:
+            for n in reps:
+                cyc = base.repeat(n)
+                schedule = default_schedule(cyc, params, em)
+
+                def fn(cyc=cyc, schedule=schedule, method=method, driver=driver):
+                    return simulate(cyc, method, params, driver=driver, gears=schedule)
+
+                fns[n] = (fn, max(3, min(1000, math.ceil(0.03 / max(_block(fn, None, 1), 1e-7)))))
+            # rounds of one block per size, side by side (as for the ratios): the load of the other
+            # processes on a shared machine then weighs on every size alike
+            blocks: dict[int, list[float]] = {n: [] for n in reps}
+            enabled = gc.isenabled()
+            gc.disable()
+            try:
+                for _ in range(settings.pairs):
+                    for n in reps:
+                        blocks[n].append(_block(fns[n][0], None, fns[n][1]))
+            finally:
+                if enabled:
+                    gc.enable()
+        except Exception as exc:
+            out[label] = {"error": _one_line(exc)}
+            continue
+        n0 = reps[0]
+        per_rep = {
+            str(n): statistics.median(t / n / (t0 / n0) for t, t0 in zip(blocks[n], blocks[n0], strict=True))
+            for n in reps
+        }
+        times = {n: statistics.median(blocks[n]) for n in reps}
+        marginal = None
+        if len(reps) >= 3:  # cost of one more repetition, large against small: 1 for affine growth
+            (a, b, c) = reps[-3:]
+            marginal = ((times[c] - times[b]) / (c - b)) / ((times[b] - times[a]) / (b - a))
+        out[label] = {
+            "ms": {str(n): times[n] * 1e3 for n in reps},
+            "per_repetition_vs_1x": per_rep,
+            "max_dev": max(abs(r - 1.0) for r in per_rep.values()),
+            "marginal_ratio": marginal,
+            "rounds": settings.pairs,
+        }
+    return out
+
+
+_COLD_CODE = """
+import json, time
+t0 = time.perf_counter()
+import vpsim
+from vpsim.simulation import simulate
+t1 = time.perf_counter()
+for method in {methods!r}:
+    r = simulate("udds", method=method)
+t2 = time.perf_counter()
+extra = {{}}
+if {batch!r}:
+    from vpsim.batch import run_batch
+    run_batch("udds", {{"vehicle.mass": [1500.0, 1600.0]}})
+    if {forward_batch!r}:
+        run_batch("udds", {{"vehicle.mass": [1500.0, 1600.0]}}, method="forward")
+    extra["batch_s"] = time.perf_counter() - t2
+print(json.dumps({{"import_s": t1 - t0, "first_run_s": t2 - t1, **extra}}))
+"""
+
+
+def _subprocess(code: str, env: dict | None = None) -> tuple[float, dict]:
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=900)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        lines = (proc.stderr.strip() or proc.stdout.strip() or "no output").splitlines()
+        raise RuntimeError(lines[-1])
+    return wall, json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def cache_locations() -> dict:
+    """Where Numba keeps the compiled kernels of vpsim (from the dispatchers' cache objects)."""
+    from . import _kernels
+
+    out = {"NUMBA_CACHE_DIR": os.environ.get("NUMBA_CACHE_DIR")}
+    try:
+        out["vpsim._kernels"] = _kernels.backward_single._cache._cache_path
+    except AttributeError:
+        out["vpsim._kernels"] = None
+    try:
+        from .methods import forward
+
+        out["vpsim.methods.forward"] = forward._integrate._cache._cache_path
+    except Exception:
+        out["vpsim.methods.forward"] = None
+    return out
+
+
+def _cold_start(settings: Settings, available: set[str], progress) -> dict:
+    out: dict = {"cache": cache_locations()}
+    if settings.cold_start_runs <= 0:
+        return out
+    methods = [m for m in ("backward", "forward", "inverse") if m in available]
+    for method in methods:
+        progress(
+            f"cold start: fresh process, import vpsim, {method} on udds ({settings.cold_start_runs} runs)"
+        )
+        try:
+            walls, inner = [], []
+            for _ in range(settings.cold_start_runs):
+                w, d = _subprocess(_COLD_CODE.format(methods=[method], batch=False, forward_batch=False))
+                walls.append(w)
+                inner.append(d)
+        except Exception as exc:
+            out[method] = {"error": _one_line(exc)}
+            continue
+        k = int(np.argsort(walls)[len(walls) // 2])
+        out[method] = {
+            "wall_s": statistics.median(walls),
+            "import_s": inner[k]["import_s"],
+            "first_run_s": inner[k]["first_run_s"],
+        }
+    if settings.first_compile:
+        progress("first compilation: fresh process with an empty NUMBA_CACHE_DIR (compiles every kernel)")
+        code = _COLD_CODE.format(methods=methods, batch=True, forward_batch="forward_batch" in available)
+        with tempfile.TemporaryDirectory(prefix="vpsim-numba-cache-") as tmp:
+            env = {**os.environ, "NUMBA_CACHE_DIR": tmp}
+            try:
+                wall, inner = _subprocess(code, env)
+                wall2, inner2 = _subprocess(code, env)
+                out["first_compile"] = {
+                    "wall_s": wall,
+                    "same_run_cached_wall_s": wall2,
+                    "compile_s": wall - wall2,
+                    "covers": f"import, {', '.join(methods)} on udds, backward"
+                    + (" and forward" if "forward_batch" in available else "")
+                    + " batch",
+                }
+            except Exception as exc:
+                out["first_compile"] = {"error": _one_line(exc)}
+    return out
+
+
+# --- the report ---------------------------------------------------------------------------------------------
+
+
+def _find(rows, tool_prefix, method, driver, cycle):
+    for r in rows:
+        if (
+            r["tool"].startswith(tool_prefix)
+            and r["method"] == method
+            and r["driver"] == driver
+            and r["cycle"] == cycle
+        ):
+            return r
+    return None
+
+
+def _ratios(settings: Settings, calls: dict, makers: dict, progress) -> tuple[dict, dict]:
+    """The issue's ratios, each from interleaved runs of its two sides (:func:`_paired`)."""
+    plan = {
+        "backward_vs_fastsim_udds": (("peer", "udds"), ("backward", None, "udds")),
+        "forward_vs_fastsim_udds": (("peer", "udds"), ("forward", "1", "udds")),
+        "inverse_vs_backward": (("inverse", "1", "udds"), ("backward", None, "udds")),
+        "backward_vs_fastsim_hwfet": (("peer", "hwfet"), ("backward", None, "hwfet")),
+        "forward_vs_fastsim_hwfet": (("peer", "hwfet"), ("forward", "1", "hwfet")),
+    }
+    ratios: dict = {}
+    paired: dict = {}
+    for key, (num, den) in plan.items():
+        if num[0] == "peer":
+            a, setup_a = _walk, makers.get(num[1])
+            ok = setup_a is not None
+        else:
+            a, setup_a = calls.get(num), None
+            ok = a is not None
+        b = calls.get(den)
+        if not ok or b is None:
+            if not key.endswith("hwfet"):
+                ratios[key] = None
+            continue
+        progress(f"ratio {key}: {settings.pairs} interleaved pairs")
+        res = _paired(a, b, settings.pairs, setup_a=setup_a)
+        paired[key] = res
+        ratios[key] = res["ratio"]
+    return ratios, paired
+
+
+def _ratio(num, den) -> float | None:
+    if num is None or den is None or not den["median_ms"]:
+        return None
+    return num["median_ms"] / den["median_ms"]
+
+
+def run_benchmarks(profile: str = "full", *, peer: bool = True, progress=None) -> dict:
+    """Measure everything (see the module docstring) and return one JSON-ready dict.
+
+    ``profile``: ``"full"``, ``"quick"`` (under a minute) or ``"tiny"`` (seconds; for tests). ``peer=False``
+    skips FASTSim (reported as not measured). ``progress``: a callable taking one line of text, or None.
+    """
+    if profile not in PROFILES:
+        raise ValueError(f"profile must be one of {', '.join(PROFILES)}, got {profile!r}")
+    settings = PROFILES[profile]
+    progress = progress or (lambda line: None)
+    started = time.perf_counter()
+    load_start = _loadavg()
+    import numba
+
+    # The peer first: once vpsim's compiled code has run in this process, FASTSim's walks take ~20 % longer
+    # (measured on this kind of machine); timed first, FASTSim is at its fastest, which only makes the
+    # comparison harder for vpsim.
+    status = (
+        peer_status()
+        if peer
+        else {"name": PEER, "version": None, "available": False, "reason": "skipped (--no-peer)"}
+    )
+    peer_rows: list[dict] = []
+    peer_setup: dict = {}
+    makers: dict = {}
+    if status["available"]:
+        try:
+            peer_rows, peer_setup, makers = _peer_rows(settings, progress)
+        except Exception as exc:
+            status = {**status, "available": False, "reason": f"failed: {_one_line(exc)}"}
+    peer_fresh = _peer_fresh(settings, progress) if status["available"] else {}
+    for r in peer_rows:  # the peer's figure: its fastest settled speed, in this process or a fresh one
+        best = peer_fresh.get(r["cycle"], {}).get("best_ms")
+        r["in_process_median_ms"] = r["median_ms"]
+        if best is not None and best < r["median_ms"]:
+            r["median_ms"] = best
+            r["runs"] = -1  # marks the figure as coming from the fresh processes
+    rows, setup, failures, calls = _vpsim_rows(settings, progress)
+    rows += peer_rows
+    paired_ratios, paired = _ratios(settings, calls, makers, progress)
+    batch = _batch(settings, progress)
+    linearity = _linearity(settings, progress)
+    available = {r["method"] for r in rows if r["tool"] == "vpsim"}
+    if batch.get("batch_forward", {}).get("runs_per_s"):
+        available.add("forward_batch")
+    progress("peak memory of one run of each row")
+    _measure_memory(rows, calls, makers)
+    cold = _cold_start(settings, available, progress)
+
+    # the same ratios from the table's medians (taken one after the other, so more exposed to load changes)
+    back = {c: _find(rows, "vpsim", "backward", None, c) for c in settings.cycles}
+    extra_ratios = {}
+    for c in settings.peer_cycles:
+        fs = _find(rows, PEER, "conventional walk()", None, c)
+        extra_ratios[f"backward_vs_fastsim_{c}"] = _ratio(fs, back.get(c))
+        for d in ("1", "2"):
+            extra_ratios[f"forward_driver{d}_vs_fastsim_{c}"] = _ratio(
+                fs, _find(rows, "vpsim", "forward", d, c)
+            )
+    for c in settings.cycles:
+        for d in ("1", "2"):
+            extra_ratios[f"inverse_driver{d}_vs_backward_{c}"] = _ratio(
+                _find(rows, "vpsim", "inverse", d, c), back.get(c)
+            )
+    # Against the targets: each side at its best settled speed, the same rule for both tools. FASTSim: the
+    # fastest of its in-process row and its fresh processes; vpsim: the faster of its row and its blocks in
+    # the paired measurement. (A neighbour's load only ever slows a measurement down.)
+    sides = {
+        "backward_vs_fastsim_udds": ("udds", ("backward", None, "udds")),
+        "forward_vs_fastsim_udds": ("udds", ("forward", "1", "udds")),
+        "backward_vs_fastsim_hwfet": ("hwfet", ("backward", None, "hwfet")),
+        "forward_vs_fastsim_hwfet": ("hwfet", ("forward", "1", "hwfet")),
+        "inverse_vs_backward": (("inverse", "1", "udds"), ("backward", None, "udds")),
+    }
+
+    def best_ms(side, paired_ms):
+        if isinstance(side, str):
+            row = _find(rows, PEER, "conventional walk()", None, side)
+        else:
+            row = _find(rows, "vpsim", *side)
+        values = [v for v in (None if row is None else row["median_ms"], paired_ms) if v is not None]
+        return min(values) if values else None
+
+    ratios = {}
+    for key, (num, den) in sides.items():
+        res = paired.get(key, {})
+        a_ms = best_ms(num, res.get("a_median_ms"))
+        b_ms = best_ms(den, res.get("b_median_ms"))
+        if a_ms is None or b_ms is None:
+            if not key.endswith("hwfet"):
+                ratios[key] = None
+            continue
+        ratios[key] = a_ms / b_ms
+        if res:
+            res["best_ms"] = [a_ms, b_ms]
+    lin_devs = [v["max_dev"] for v in linearity.values() if "max_dev" in v]
+    cold_walls = [
+        v["wall_s"] for k, v in cold.items() if isinstance(v, dict) and "wall_s" in v and k != "first_compile"
+    ]
+    report = {
+        "profile": profile,
+        "machine": {
+            "cores": os.cpu_count(),
+            "platform": platform.platform(),
+            "processor": platform.processor() or platform.machine(),
+            "python": platform.python_version(),
+            "numpy": np.__version__,
+            "numba": numba.__version__,
+            "numba_threads": numba.config.NUMBA_NUM_THREADS,
+            "load_average_start_end": [load_start, _loadavg()],
+        },
+        "settings": asdict(settings),
+        "peer": status,
+        "rows": rows,
+        "failures": failures,
+        "setup": {"vpsim": setup, PEER: peer_setup},
+        "peer_fresh_processes": peer_fresh,
+        "ratios": ratios,
+        "ratios_paired": paired,
+        "ratios_from_table": extra_ratios,
+        "batch": batch,
+        "batch_backward_runs_per_s": batch.get("batch_backward", {}).get("runs_per_s"),
+        "batch_forward_runs_per_s": batch.get("batch_forward", {}).get("runs_per_s"),
+        "linearity": linearity,
+        "linearity_max_dev": max(lin_devs) if lin_devs else None,
+        "cold_start": cold,
+        "cold_start_s": max(cold_walls) if cold_walls else None,
+        "first_compile_s": cold.get("first_compile", {}).get("wall_s"),
+    }
+    report["targets"] = _targets(report)
+    report["elapsed_s"] = time.perf_counter() - started
+    return report
+
+
+def _targets(report: dict) -> list[dict]:
+    values = {**report["ratios"], **{k: report.get(k) for k in TARGETS if k not in report["ratios"]}}
+    out = []
+    for key, (op, target) in TARGETS.items():
+        v = values.get(key)
+        met = None
+        if v is not None and not (isinstance(v, float) and math.isnan(v)):
+            met = {">=": v >= target, "<=": v <= target, "<": v < target}[op]
+        out.append({"figure": key, "target": f"{op} {target:g}", "measured": v, "met": met})
+    return out
+
+
+# --- text ---------------------------------------------------------------------------------------------------
+
+
+def _fmt(v, spec: str, none: str = "-") -> str:
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return none
+    return format(v, spec)
+
+
+def format_report(report: dict) -> str:
+    """The benchmark as text: one table of runs, then setup, batch, linearity, cold start, ratios, targets."""
+    m = report["machine"]
+    lines = [
+        f"vpsim bench ({report['profile']}): {m['cores']} cores, Python {m['python']}, numpy {m['numpy']}, "
+        f"numba {m['numba']}; load average {_fmt(m['load_average_start_end'][0], '.2f')} at the start, "
+        f"{_fmt(m['load_average_start_end'][1], '.2f')} at the end",
+        "median wall time of repeated runs, inputs prepared (setup below)",
+        "",
+        f"{'tool':<14} {'method':<20} {'drv':<3} {'cycle':<6} {'median ms':>10} {'runs':>5} {'steps':>6} "
+        f"{'py peak KiB':>11} {'RSS+ KiB':>9} {'L/100km':>8}",
+    ]
+    for r in report["rows"]:
+        lines.append(
+            f"{r['tool']:<14} {r['method']:<20} {r['driver'] or '-':<3} {r['cycle']:<6} "
+            f"{r['median_ms']:>10.3f} {'fresh' if r['runs'] < 0 else r['runs']:>5} {r['steps']:>6d} "
+            f"{_fmt(r['py_peak_kib'], '11.0f'):>11} "
+            f"{_fmt(r['rss_peak_kib'], '9.0f'):>9} {_fmt(r['fuel_l_per_100km'], '8.2f'):>8}"
+        )
+    for f in report["failures"]:
+        lines.append(
+            f"{'vpsim':<14} {f['method']:<20} {f['driver'] or '-':<3} {f['cycle']:<6} failed: {f['error']}"
+        )
+    peer = report["peer"]
+    if not peer["available"]:
+        lines.append(f"{PEER + ' ' + PEER_VERSION:<14} not measured: {peer['reason']}")
+    for r in report["rows"]:
+        fresh = report.get("peer_fresh_processes", {}).get(r["cycle"], {}) if r["tool"] != "vpsim" else {}
+        if fresh.get("median_ms_per_process"):
+            per = ", ".join(f"{m:.2f}" for m in fresh["median_ms_per_process"])
+            lines.append(
+                f"  {PEER} on {r['cycle']}: the faster of {r['in_process_median_ms']:.2f} ms here and "
+                f"{per} ms in fresh processes of its own, each after its warm-up"
+            )
+    su = report["setup"]["vpsim"]
+    sched = ", ".join(f"{k} {v:.2f}" for k, v in su["gear_schedule_ms"].items())
+    lines += [
+        "",
+        f"setup (outside the timed runs): vpsim engine map {su['engine_map_ms']:.1f} ms; "
+        f"gear schedule ms: {sched}",
+    ]
+    ps = report["setup"].get(PEER) or {}
+    if ps:
+        new = ", ".join(f"{k} {v:.3f}" for k, v in ps["simdrive_new_ms"].items())
+        lines.append(
+            f"  {PEER}: Vehicle.from_resource {ps['vehicle_from_resource_ms']:.2f} ms; SimDrive() ms: {new}"
+        )
+    lines.append("")
+    for key in ("batch_backward", "batch_forward"):
+        b = report["batch"].get(key, {})
+        if b.get("runs_per_s"):
+            lines.append(
+                f"{key.replace('_', ' ')}: {b['variants']} variants on {b['cycle']} "
+                f"in {b['median_s']:.3f} s = "
+                f"{b['runs_per_s']:,.0f} runs/s (variants with a trace miss: {b['trace_miss_share']:.0%})"
+            )
+        else:
+            lines.append(f"{key.replace('_', ' ')}: not measured ({b.get('error', 'unavailable')})")
+    lin = report["linearity"]
+    for label, v in lin.items():
+        if "error" in v:
+            lines.append(f"linearity {label}: failed ({v['error']})")
+            continue
+        per = ", ".join(f"x{n}: {r:.3f}" for n, r in v["per_repetition_vs_1x"].items())
+        ms = ", ".join(f"{t:.2f}" for t in v["ms"].values())
+        marg = v.get("marginal_ratio")
+        lines.append(
+            f"linearity {label} (ftp75 repeated, {v['rounds']} rounds; time per repetition / 1x): {per}; "
+            f"ms {ms}"
+            + (f"; a repetition added beyond x4 costs {marg:.2f}x one added beyond x1" if marg else "")
+        )
+    cold = report["cold_start"]
+    for method in ("backward", "forward", "inverse"):
+        c = cold.get(method)
+        if c and "wall_s" in c:
+            lines.append(
+                f"cold start {method}: {c['wall_s']:.2f} s wall for a fresh process "
+                f"(import {c['import_s']:.2f} s, "
+                f"first udds run {c['first_run_s']:.3f} s, kernels from the cache)"
+            )
+        elif c:
+            lines.append(f"cold start {method}: failed ({c['error']})")
+    fc = cold.get("first_compile")
+    if fc and "wall_s" in fc:
+        lines.append(
+            f"first compilation (empty cache; {fc['covers']}): {fc['wall_s']:.1f} s, "
+            f"then {fc['same_run_cached_wall_s']:.2f} s "
+            f"once cached (compiling: {fc['compile_s']:.1f} s)"
+        )
+    cache = cold["cache"]
+    lines.append(
+        f"Numba cache: {cache.get('vpsim._kernels')}"
+        + (f" (NUMBA_CACHE_DIR={cache['NUMBA_CACHE_DIR']})" if cache.get("NUMBA_CACHE_DIR") else "")
+    )
+    lines += [
+        "",
+        "ratios (> 1: vpsim faster; inverse_vs_backward is a time ratio, smaller is better), "
+        "median over adjacent blocks of runs of both sides:",
+    ]
+    for k, v in report["ratios_paired"].items():
+        lines.append(
+            f"  {k:<28} {v['ratio']:8.2f}  ({v['pairs']} block pairs; block medians {v['a_median_ms']:.3f} / "
+            f"{v['b_median_ms']:.3f} ms)"
+        )
+    more = {k: v for k, v in report["ratios_from_table"].items() if v is not None}
+    if more:
+        lines.append("  from the table's medians (each row timed on its own, minutes apart):")
+        items = [f"{k} {v:.2f}" for k, v in more.items()]
+        for i in range(0, len(items), 3):
+            lines.append("    " + ", ".join(items[i : i + 3]))
+    used = {k: v for k, v in report["ratios"].items() if v is not None}
+    if used:
+        lines.append(
+            "  against the targets (each side at its best settled median, FASTSim's fresh processes too):"
+        )
+        items = [f"{k} {v:.2f}" for k, v in used.items()]
+        for i in range(0, len(items), 3):
+            lines.append("    " + ", ".join(items[i : i + 3]))
+    lines += ["", "targets:"]
+    for t in report["targets"]:
+        state = {True: "met", False: "MISSED", None: "not measured"}[t["met"]]
+        lines.append(
+            f"  {t['figure']:<28} {t['target']:>9}  measured {_fmt(t['measured'], '.3g'):>8}  {state}"
+        )
+    lines.append(f"\nbenchmark took {report['elapsed_s']:.1f} s")
+    return "\n".join(lines)

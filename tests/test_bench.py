@@ -1,0 +1,74 @@
+"""``vpsim bench``: a smoke test of the tiny profile (seconds), the JSON contract, and a missing peer.
+
+No timing is asserted: machines are noisy. The figures themselves come from ``vpsim bench`` (see
+benchmarks/README.md).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+
+import pytest
+
+from vpsim.bench import format_report, peer_status, run_benchmarks
+from vpsim.cli.main import main
+
+REQUIRED = {
+    "ratios",
+    "batch_backward_runs_per_s",
+    "batch_forward_runs_per_s",
+    "cold_start_s",
+    "linearity_max_dev",
+}
+RATIOS = {"backward_vs_fastsim_udds", "forward_vs_fastsim_udds", "inverse_vs_backward"}
+HAVE_FASTSIM = importlib.util.find_spec("fastsim") is not None
+
+
+def test_bench_tiny_cli_writes_json_and_prints_one_table(capsys, tmp_path):
+    out = tmp_path / "sub" / "bench.json"
+    code = main(["bench", "--tiny", "--json", str(out)])
+    text, err = capsys.readouterr()
+    assert code == 0, err
+    report = json.loads(out.read_text())
+    assert REQUIRED <= set(report)
+    assert RATIOS <= set(report["ratios"])
+    assert report["batch_backward_runs_per_s"] > 0
+    assert report["linearity_max_dev"] >= 0
+    row = next(r for r in report["rows"] if r["tool"] == "vpsim" and r["method"] == "backward")
+    assert row["cycle"] == "udds" and row["steps"] == 1369 and row["median_ms"] > 0 and row["py_peak_kib"] > 0
+    assert "backward" in text and "targets:" in text and "vpsim backward on udds" in err
+    if report["peer"]["available"]:
+        assert report["ratios"]["backward_vs_fastsim_udds"] > 0
+        peer = next(r for r in report["rows"] if r["tool"].startswith("fastsim"))
+        assert peer["cycle"] == "udds" and peer["steps"] == 1369 and 3 < peer["fuel_l_per_100km"] < 15
+    else:
+        assert report["ratios"]["backward_vs_fastsim_udds"] is None
+        assert "not measured" in text
+
+
+def test_missing_peer_is_reported_not_faked(monkeypatch):
+    monkeypatch.setitem(sys.modules, "fastsim", None)  # import fastsim -> ImportError
+    status = peer_status()
+    assert not status["available"] and "not installed" in status["reason"]
+    report = run_benchmarks("tiny")
+    assert not report["peer"]["available"]
+    assert not any(r["tool"].startswith("fastsim") for r in report["rows"])
+    assert report["ratios"]["backward_vs_fastsim_udds"] is None
+    target = next(t for t in report["targets"] if t["figure"] == "backward_vs_fastsim_udds")
+    assert target["met"] is None
+    text = format_report(report)
+    assert "fastsim 3.1.0  not measured: not installed" in text
+
+
+@pytest.mark.skipif(not HAVE_FASTSIM, reason="fastsim 3.1.0 is not installed (pip install 'vpsim[bench]')")
+def test_peer_is_the_pinned_fastsim():
+    status = peer_status()
+    assert status["version"] is not None
+    assert status["available"] == (status["version"] == "3.1.0")
+
+
+def test_unknown_profile_is_an_error():
+    with pytest.raises(ValueError, match="profile must be one of"):
+        run_benchmarks("huge")
