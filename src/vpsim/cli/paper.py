@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
@@ -40,7 +41,7 @@ def paper(out, vehicle, advisor_dir, repeats):
             raise VpsimError(f"--advisor-dir {advisor_dir}: no such folder")
     start = time.perf_counter()
     with click.progressbar(
-        length=1, label="vpsim paper", file=click.get_text_stream("stderr"), show_pos=True
+        length=1, label="vpsim paper", file=sys.stderr, show_pos=True
     ) as bar:
         state = {"done": 0}
 
