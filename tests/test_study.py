@@ -88,7 +88,8 @@ def test_table3(study):
             assert float(f["time_vs_bqm"]) == pytest.approx(
                 float(f["cpu_time_s"]) / float(b["cpu_time_s"]), rel=0.01
             )
-            assert float(f["time_vs_bqm"]) > float(i["time_vs_bqm"])
+            # speed is measured by benchmarks, not asserted here (noisy machines); steps are deterministic
+            assert int(f["steps"]) > int(i["steps"])
 
 
 def test_tracking_and_inversion(study):
