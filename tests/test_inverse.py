@@ -187,3 +187,27 @@ def test_compiled_inversion_matches_its_python_reference(prepared):
         fn(v, dv, ddv, gear.astype(np.int64) - 1, coef, P, out)
         outs.append(out)
     np.testing.assert_allclose(outs[0], outs[1], rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["nedc", "ftp75"])
+@pytest.mark.parametrize("mode", ["paper", "extended"])
+@pytest.mark.parametrize("driver", ["1", "2"])
+def test_compiled_path_matches_numpy_reference(prepared, name, mode, driver):
+    """run(compiled=True) (one compiled pass over the grid) equals the NumPy reference path to 1e-9."""
+    c, p, s = prepared[name]
+    fast = inverse.run(c, p, driver=driver, schedule=s, mode=mode)
+    ref = inverse.run(c, p, driver=driver, schedule=s, mode=mode, compiled=False)
+    assert fast.steps == ref.steps
+    assert fast.fuel_kg == pytest.approx(ref.fuel_kg, rel=1e-9)
+    assert fast.distance_m == pytest.approx(ref.distance_m, rel=1e-9)
+    scale = ref.energy.indicated
+    for key, val in vars(ref.energy).items():
+        if isinstance(val, float):
+            assert getattr(fast.energy, key) == pytest.approx(val, rel=1e-9, abs=1e-9 * scale), key
+    for key, val in ref.trace_miss.details.items():
+        assert fast.trace_miss.details[key] == pytest.approx(val, rel=1e-9, abs=1e-12), key
+    assert fast.trace_miss.seconds == pytest.approx(ref.trace_miss.seconds, rel=1e-9, abs=1e-12)
+    assert fast.trace_miss.max_speed_error_mps == ref.trace_miss.max_speed_error_mps
+    assert fast.series.keys() == ref.series.keys()
+    for key, val in ref.series.items():
+        np.testing.assert_allclose(fast.series[key], val, rtol=1e-9, atol=0, err_msg=key)

@@ -101,6 +101,9 @@ _FUEL, _DIST, _E_IND, _E_FRIC, _E_PUMP, _E_ENG, _E_DRV, _E_VEH, _E_AERO, _E_ROLL
 _ERR2, _OUTSIDE = 15, 16  # int (v_cycle - v)^2 dt and the time with |v_cycle - v| above the band
 NY = 17
 N_ERR = 3  # states in the error norm: v, p_i, z
+# states the right side reads (v, p_i, z): the quadrature states' stage values are never used, so the stages
+# are formed for these only (the quadratures enter the step through their derivatives k_j alone)
+N_DYN = 3
 
 # --- auxiliary outputs ----------------------------------------------------------------------------------
 _X_THR, _X_W, _X_TCR, _X_TE, _X_MF, _X_MFU, _X_BRK, _X_ACC, _X_VREF, _X_CMD, _X_COUPLED = range(11)
@@ -407,19 +410,19 @@ def _integrate(
                 done = True
             nofailed = True
             while True:
-                for i in range(ny):
+                for i in range(N_DYN):
                     ytmp[i] = y[i] + h * (_A21 * k1[i])
                 _rhs(t + _C2 * h, ytmp, G, P, tab_t, tab_v, k2, aux)
-                for i in range(ny):
+                for i in range(N_DYN):
                     ytmp[i] = y[i] + h * (_A31 * k1[i] + _A32 * k2[i])
                 _rhs(t + _C3 * h, ytmp, G, P, tab_t, tab_v, k3, aux)
-                for i in range(ny):
+                for i in range(N_DYN):
                     ytmp[i] = y[i] + h * (_A41 * k1[i] + _A42 * k2[i] + _A43 * k3[i])
                 _rhs(t + _C4 * h, ytmp, G, P, tab_t, tab_v, k4, aux)
-                for i in range(ny):
+                for i in range(N_DYN):
                     ytmp[i] = y[i] + h * (_A51 * k1[i] + _A52 * k2[i] + _A53 * k3[i] + _A54 * k4[i])
                 _rhs(t + _C5 * h, ytmp, G, P, tab_t, tab_v, k5, aux)
-                for i in range(ny):
+                for i in range(N_DYN):
                     ytmp[i] = y[i] + h * (
                         _A61 * k1[i] + _A62 * k2[i] + _A63 * k3[i] + _A64 * k4[i] + _A65 * k5[i]
                     )

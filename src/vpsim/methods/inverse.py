@@ -58,7 +58,7 @@ from ..errors import VpsimError
 from ..gears import GearSchedule, default_schedule
 from ..result import EnergyBalance, Result, TraceMiss
 from .backward import IDLE_SPEED
-from .forward import _INV_AFR, _INV_PA, constants, engine_scalar, psi_scalar
+from .forward import _INV_AFR, _INV_PA, _KF, _KMEP, _PE, _QHV, constants, engine_scalar, psi_scalar
 
 BAND_KMH = 2.0  # the regulation's speed tolerance, as for the forward method
 _MOVING = 1e-9  # m/s: v_d above this counts as moving (v_d is exactly 0 only where the cycle rests +-a)
@@ -332,6 +332,143 @@ def _fuel_and_distance(mdot, v, idle, left, right, dt):
     return fuel, dist
 
 
+# rows of the per-point array of the compiled path (the inversion's outputs, as :func:`invert` returns them)
+_R_P, _R_U, _R_WENG, _R_DWENG, _R_W, _R_TCR, _R_MDOT, _R_BRAKE, _R_COUPLED, _R_MOVING, _R_FMEP = range(11)
+N_ROWS = 11
+# constants of the accounting kernel
+_K_IDLE, _K_ETA, _K_J, _K_M, _K_AERO, _K_ROLL, _K_AMIN, _K_AMAX, _K_BAND = range(9)
+# its results: fuel, distance, the energy terms (in EnergyBalance's order), then the trace figures
+_ENERGY_KEYS = (
+    "indicated",
+    "friction",
+    "pumping",
+    "engine_kinetic",
+    "driveline_loss",
+    "vehicle_kinetic",
+    "aero",
+    "rolling",
+    "brake",
+)
+_A_FUEL, _A_DIST = 0, 1
+_A_E0 = 2  # 9 energy terms
+_A_BELOW, _A_ABOVE, _A_STAND, _A_BRAKED, _A_UMIN, _A_UMAX, _A_ERR2, _A_WSUM, _A_OUT, _A_ERRMAX = range(11, 21)
+N_ACC = 21
+
+
+@njit(cache=True)
+def _invert_rows(v, dv, ddv, gi, coef, P, rows):
+    """The paper-mode inversion into ``rows`` (N_ROWS x n): (33), (31), (32), (30) point by point."""
+    for k in range(v.size):
+        c1, c2, c3, c4, c5, c6, c7, kin, roll = coef[gi[k]]
+        x1 = v[k] if v[k] > 0.0 else 0.0
+        if x1 <= _MOVING:
+            c4 = c4 + roll  # rolling resistance only while moving
+        x108 = x1**0.8
+        x2 = (dv[k] - c1 * x1 * x1 - c2 * x108 * x1 - c4) / c3  # (33)
+        lf2h = (2.0 * c1 * x1 + 1.8 * c2 * x108) * dv[k] + c3 * (c5 * x1 + c6 * x1 * x2)  # (31)
+        gain = c3 * c7 * psi_scalar(x2 * P[_INV_PA], P)  # (32)
+        num = ddv[k] - lf2h
+        if gain > 0.0:
+            u = num / gain  # (30)
+        elif num == 0.0:
+            u = 0.0
+        else:
+            u = math.inf if num > 0.0 else -math.inf  # x2 >= p_a: no flow can raise the pressure further
+        w = kin * x1
+        mdot_ac, t_cr, bmep, fric_speed = engine_scalar(x2, w, P)
+        rows[_R_FMEP, k] = fric_speed + P[_KF] * 0.0215 * bmep  # FMEP (5)
+        rows[_R_P, k] = x2
+        rows[_R_U, k] = u
+        rows[_R_WENG, k] = w
+        rows[_R_DWENG, k] = kin * dv[k]
+        rows[_R_W, k] = w
+        rows[_R_TCR, k] = t_cr
+        rows[_R_MDOT, k] = mdot_ac * P[_INV_AFR]
+        rows[_R_BRAKE, k] = 0.0
+        rows[_R_COUPLED, k] = 1.0
+        rows[_R_MOVING, k] = 1.0 if v[k] > _MOVING else 0.0
+
+
+@njit(cache=True)
+def _account(v, dv, vc, rows, left, right, dt, P, K, weight, acc):
+    """Fuel, distance, energy terms (trapezoid), infeasible and standstill seconds and the tracking figures
+    of the grid's points in one pass (the bookkeeping of :func:`run`'s NumPy reference path).
+
+    The trapezoid sums are sums over the points of weight x integrand, ``weight`` (scratch, one per point)
+    being the time each point stands for.
+    """
+    n = v.size
+    for i in range(N_ACC):
+        acc[i] = 0.0
+    for k in range(n):
+        weight[k] = 0.0
+    for j in range(dt.size):
+        hw = 0.5 * dt[j]
+        weight[left[j]] += hw
+        weight[right[j]] += hw
+    acc[_A_UMIN] = math.inf
+    acc[_A_UMAX] = -math.inf
+    n_moving = 0
+    n_moving_u = 0
+    eta = K[_K_ETA]
+    idle = K[_K_IDLE]
+    for k in range(n):
+        wk = weight[k]
+        x = v[k] if v[k] > 0.0 else 0.0
+        p = rows[_R_P, k]
+        w_eng = rows[_R_WENG, k]
+        t_cr = rows[_R_TCR, k]
+        mdot = rows[_R_MDOT, k]
+        coupled = rows[_R_COUPLED, k] != 0.0
+        moving = rows[_R_MOVING, k] != 0.0
+        brake = rows[_R_BRAKE, k]
+        cyc = P[_KMEP] * w_eng
+        if coupled:
+            t_e = t_cr - K[_K_J] * rows[_R_DWENG, k]
+            drv = (1.0 - eta) * t_e * w_eng
+        else:
+            drv = t_cr * (w_eng - eta * rows[_R_W, k]) if t_cr > 0.0 else 0.0
+        acc[_A_FUEL] += wk * (mdot if mdot > idle else idle)
+        acc[_A_DIST] += wk * x
+        acc[_A_E0 + 0] += wk * (mdot * P[_QHV])
+        acc[_A_E0 + 1] += wk * (rows[_R_FMEP, k] * cyc)
+        acc[_A_E0 + 2] += wk * ((P[_PE] - p) * cyc)
+        acc[_A_E0 + 3] += wk * (K[_K_J] * w_eng * rows[_R_DWENG, k])
+        acc[_A_E0 + 4] += wk * drv
+        acc[_A_E0 + 5] += wk * (K[_K_M] * x * dv[k])
+        acc[_A_E0 + 6] += wk * (K[_K_AERO] * x * x * x)
+        if moving:
+            acc[_A_E0 + 7] += wk * (K[_K_ROLL] * x)
+        acc[_A_E0 + 8] += wk * (brake * x)
+        u = rows[_R_U, k]
+        err = abs(v[k] - vc[k])
+        if err > acc[_A_ERRMAX]:
+            acc[_A_ERRMAX] = err
+        if moving:
+            n_moving += 1
+            if brake <= 0.0 and not (u >= K[_K_AMIN]):  # (NaN counts as infeasible)
+                acc[_A_BELOW] += wk
+            if u > K[_K_AMAX]:
+                acc[_A_ABOVE] += wk
+            if not math.isnan(u):
+                n_moving_u += 1
+                if u < acc[_A_UMIN]:
+                    acc[_A_UMIN] = u
+                if u > acc[_A_UMAX]:
+                    acc[_A_UMAX] = u
+        else:
+            acc[_A_STAND] += wk
+        if brake > 0.0:
+            acc[_A_BRAKED] += wk
+        acc[_A_ERR2] += wk * err * err
+        acc[_A_WSUM] += wk
+        if err > K[_K_BAND]:
+            acc[_A_OUT] += wk
+    if n_moving_u == 0:  # as np.nanmin / np.nanmax of the moving points' demands
+        acc[_A_UMIN] = 0.0 if n_moving == 0 else math.nan
+        acc[_A_UMAX] = acc[_A_UMIN]
+
+
 _warm = False
 
 
@@ -345,40 +482,18 @@ def warm_up() -> None:
         coef.flags.writeable = P.flags.writeable = False  # as the cached constants are
         _invert_core(z, z, z, idx, coef, P, np.empty((6, 2)))
         _fuel_and_distance(z, z, 0.0, idx[:1], idx[:1] + 1, np.ones(1))
+        rows = np.zeros((N_ROWS, 2))
+        _invert_rows(z, z, z, idx, coef, P, rows)
+        _account(z, z, z, rows, idx[:1], idx[:1] + 1, np.ones(1), P, np.ones(9), np.empty(2), np.empty(N_ACC))
         _warm = True
 
 
-def run(
-    cycle,
-    params,
-    *,
-    driver="1",
-    schedule: GearSchedule | None = None,
-    mode: str = "paper",
-    a: float | None = None,
-    keep_series: bool = True,
-) -> Result:
-    """Run the IDM on ``cycle`` with the smoothing driver ``driver`` (half-width ``a`` overrides it)."""
-    if mode not in ("paper", "extended"):
-        raise VpsimError(f"unknown mode {mode!r}; expected paper or extended")
-    driver = str(driver)
-    a = params.driver(driver).inverse_a if a is None else float(a)
-    if not (math.isfinite(a) and a > 0.0):
-        raise VpsimError(f"smoothing half-width a = {a:g} s must be positive")
-    if schedule is None:
-        from ..maps import cached_engine_map
-
-        schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
+def _bookkeeping_reference(
+    cycle, params, schedule, mode, a, t, gear, left, right, v, dv, ddv, keep_series, t_cpu
+):
+    """The NumPy reference of the inversion and its bookkeeping (``run(..., compiled=False)``)."""
     eng, sim = params.engine, params.simulation
-    warm_up()
-
-    t_cpu = time.process_time()
-    t, gear, left, right, sample = evaluation_grid(cycle, schedule)
     n_s = cycle.time_s.size
-    if _is_uniform(cycle.time_s):  # the grid's points all sit on samples: index them
-        v, dv, ddv = (x[sample] for x in smoothed_on_samples(cycle.time_s, cycle.speed_mps, a))
-    else:
-        v, dv, ddv = SmoothingDriver(cycle.time_s, cycle.speed_mps, a).evaluate(t)
     inv = invert(v, dv, ddv, gear, params, mode)
     dt = np.diff(cycle.time_s)
     fuel_kg, distance = _fuel_and_distance(inv["fuel_flow_kgps"], v, sim.idle_fuel_flow, left, right, dt)
@@ -443,6 +558,163 @@ def run(
             "torque_shortfall_nm": np.zeros(n_s),
             "clutch_engaged": inv["clutch_engaged"][k],
         }
+    return energy, trace, series, fuel_kg, distance, below_s, above_s, cpu
+
+
+def _bookkeeping_compiled(
+    cycle, params, schedule, mode, a, t, gear, left, right, sample, v, dv, ddv, keep_series, t_cpu
+):
+    """The inversion and its bookkeeping in compiled passes (paper mode: two kernels, no NumPy temporaries;
+    extended mode: the NumPy clutch/idle/brake logic, then the compiled accounting)."""
+    eng, sim = params.engine, params.simulation
+    n_s = cycle.time_s.size
+    rows = np.empty((N_ROWS, t.size))
+    if mode == "paper":
+        gi = gear - 1
+        if gi.size and not (0 <= gi.min() and gi.max() < params.transmission.n_gears):
+            raise VpsimError(f"gear numbers must be 1..{params.transmission.n_gears}")
+        P, coef = _model_constants(params)
+        _invert_rows(v, dv, ddv, gi.astype(np.int64, copy=False), coef, P, rows)
+    else:
+        inv = invert(v, dv, ddv, gear, params, mode)
+        for r, key in enumerate(_ROW_KEYS):
+            rows[r] = inv[key]
+        rows[_R_FMEP] = ph.fmep(inv["intake_pressure_pa"], inv["engine_speed_radps"], eng)
+        P = _model_constants(params)[0]
+    dt = np.diff(cycle.time_s)
+    v_c = cycle.speed_mps[sample]  # the grid's points sit on samples (np.interp there is the sample)
+    K = _accounting_constants(params)
+    acc = np.empty(N_ACC)
+    _account(v, dv, v_c, rows, left, right, dt, P, K, np.empty(t.size), acc)
+    fuel_kg, distance = float(acc[_A_FUEL]), float(acc[_A_DIST])
+    cpu = time.process_time() - t_cpu
+    energy = EnergyBalance(**{key: float(acc[_A_E0 + i]) for i, key in enumerate(_ENERGY_KEYS)})
+    below_s, above_s = float(acc[_A_BELOW]), float(acc[_A_ABOVE])
+    trace = TraceMiss(
+        seconds=below_s + above_s,
+        max_speed_error_mps=float(acc[_A_ERRMAX]),
+        infeasible_throttle_s=below_s + above_s,
+        details={
+            "below_min_throttle_s": below_s,
+            "above_max_throttle_s": above_s,
+            "standstill_s": float(acc[_A_STAND]),
+            "braked_s": float(acc[_A_BRAKED]),
+            "min_throttle_demand_m2": float(acc[_A_UMIN]),
+            "max_throttle_demand_m2": float(acc[_A_UMAX]),
+            "rms_speed_error_mps": math.sqrt(acc[_A_ERR2] / acc[_A_WSUM]),
+            "seconds_outside_band": float(acc[_A_OUT]),
+            "band_kmh": BAND_KMH,
+            "smoothing_a_s": a,
+        },
+    )
+    series = {}
+    if keep_series:
+        k = slice(0, n_s)
+        u = rows[_R_U, k]
+        coupled = rows[_R_COUPLED, k] != 0.0
+        t_cr = rows[_R_TCR, k]
+        mdot = rows[_R_MDOT, k]
+        series = {
+            "time_s": t[k],
+            "reference_speed_mps": v_c[k],
+            "speed_mps": v[k],
+            "accel_mps2": dv[k],
+            "jerk_mps3": ddv[k],
+            "gear": schedule.gear_at(t[k]),
+            "engine_speed_radps": rows[_R_WENG, k],
+            "crank_torque_nm": t_cr,
+            "engine_torque_nm": np.where(
+                coupled, t_cr - eng.inertia * rows[_R_DWENG, k], np.maximum(t_cr, 0.0)
+            ),
+            "intake_pressure_pa": rows[_R_P, k],
+            "throttle_area_m2": np.clip(u, eng.min_throttle_area, eng.max_throttle_area),
+            "throttle_demand_m2": u,
+            "fuel_flow_kgps": mdot,
+            "fuel_flow_used_kgps": np.maximum(mdot, sim.idle_fuel_flow),
+            "brake_force_n": rows[_R_BRAKE, k],
+            "torque_shortfall_nm": np.zeros(n_s),
+            "clutch_engaged": coupled,
+        }
+    return energy, trace, series, fuel_kg, distance, below_s, above_s, cpu
+
+
+_ROW_KEYS = (
+    "intake_pressure_pa",
+    "throttle_demand_m2",
+    "engine_speed_radps",
+    "engine_accel_radps2",
+    "wheel_side_speed_radps",
+    "crank_torque_nm",
+    "fuel_flow_kgps",
+    "brake_force_n",
+    "clutch_engaged",
+    "moving",
+)
+
+
+def _accounting_constants(params):
+    return _accounting_constants_of(params.vehicle, params.transmission, params.engine, params.simulation)
+
+
+@functools.lru_cache(maxsize=32)
+def _accounting_constants_of(veh, tr, eng, sim):
+    K = np.empty(9)
+    K[_K_IDLE] = sim.idle_fuel_flow
+    K[_K_ETA] = tr.efficiency
+    K[_K_J] = eng.inertia
+    K[_K_M] = veh.mass
+    K[_K_AERO] = 0.5 * veh.drag_coefficient * veh.air_density * veh.frontal_area
+    K[_K_ROLL] = ph.rolling_force(veh)
+    K[_K_AMIN] = eng.min_throttle_area
+    K[_K_AMAX] = eng.max_throttle_area
+    K[_K_BAND] = BAND_KMH / 3.6
+    K.flags.writeable = False
+    return K
+
+
+def run(
+    cycle,
+    params,
+    *,
+    driver="1",
+    schedule: GearSchedule | None = None,
+    mode: str = "paper",
+    a: float | None = None,
+    keep_series: bool = True,
+    compiled: bool = True,
+) -> Result:
+    """Run the IDM on ``cycle`` with the smoothing driver ``driver`` (half-width ``a`` overrides it).
+
+    ``compiled=False`` runs the NumPy reference of the inversion's bookkeeping (fuel, energy terms,
+    infeasible seconds, tracking figures); the compiled path (default) does it in one pass over the grid.
+    """
+    if mode not in ("paper", "extended"):
+        raise VpsimError(f"unknown mode {mode!r}; expected paper or extended")
+    driver = str(driver)
+    a = params.driver(driver).inverse_a if a is None else float(a)
+    if not (math.isfinite(a) and a > 0.0):
+        raise VpsimError(f"smoothing half-width a = {a:g} s must be positive")
+    if schedule is None:
+        from ..maps import cached_engine_map
+
+        schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
+    sim = params.simulation
+    warm_up()
+
+    t_cpu = time.process_time()
+    t, gear, left, right, sample = evaluation_grid(cycle, schedule)
+    if _is_uniform(cycle.time_s):  # the grid's points all sit on samples: index them
+        v, dv, ddv = (x[sample] for x in smoothed_on_samples(cycle.time_s, cycle.speed_mps, a))
+    else:
+        v, dv, ddv = SmoothingDriver(cycle.time_s, cycle.speed_mps, a).evaluate(t)
+    if compiled:
+        energy, trace, series, fuel_kg, distance, below_s, above_s, cpu = _bookkeeping_compiled(
+            cycle, params, schedule, mode, a, t, gear, left, right, sample, v, dv, ddv, keep_series, t_cpu
+        )
+    else:
+        energy, trace, series, fuel_kg, distance, below_s, above_s, cpu = _bookkeeping_reference(
+            cycle, params, schedule, mode, a, t, gear, left, right, v, dv, ddv, keep_series, t_cpu
+        )
     notes = [f"smoothing a = {a:g} s; {t.size} evaluation points (cycle samples and gear changes), trapezoid"]
     if below_s:
         what = "deceleration beyond engine braking (no brakes)" if mode == "paper" else "manifold too slow"
