@@ -373,6 +373,20 @@ def _preset(name: str) -> Parameters:
     return _from_mapping(data, f"preset {name}", _preset(data["base"]) if data.get("base") else None)
 
 
+def read_toml(path: Path, error: type[Exception]) -> dict[str, Any]:
+    """Parse a TOML file; a missing, unreadable or malformed file raises ``error`` with a one-line message."""
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise error(f"{path}: no such file") from None
+    except OSError as exc:
+        raise error(f"{path}: cannot read ({exc.strerror})") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{path}: not valid TOML ({exc})") from None
+
+
 def load_parameters(source: str | Path = "hofman2011") -> Parameters:
     """A parameter set from a preset name (``"hofman2011"``) or a TOML file path.
 
@@ -387,16 +401,7 @@ def load_parameters(source: str | Path = "hofman2011") -> Parameters:
         raise ParameterError(
             f"unknown preset {str(source)!r}; available presets: {', '.join(PRESETS)} (or a .toml file)"
         )
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise ParameterError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise ParameterError(f"{path}: cannot read ({exc.strerror})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ParameterError(f"{path}: not valid TOML ({exc})") from None
+    data = read_toml(path, ParameterError)
     base_name = data.get("base", "hofman2011")
     if base_name in ("", None):
         base = None

@@ -52,7 +52,6 @@ import itertools
 import json
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -60,7 +59,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import VpsimError
-from ..params import Parameters, load_parameters
+from ..params import Parameters, load_parameters, read_toml
 from ..simulation import METHODS, MODES
 
 SAMPLINGS = ("factorial", "lhs")
@@ -351,16 +350,7 @@ class SweepSpec:
 def load_spec(path: str | Path) -> SweepSpec:
     """Read and validate a sweep spec TOML file; relative paths inside it are relative to the file."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise SpecError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise SpecError(f"{path}: cannot read ({exc.strerror})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"{path}: not valid TOML ({exc})") from None
+    data = read_toml(path, SpecError)
     data.setdefault("name", path.stem)
     return SweepSpec.from_dict(data, where=str(path), root=path.parent)
 
