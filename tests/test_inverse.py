@@ -211,3 +211,24 @@ def test_compiled_path_matches_numpy_reference(prepared, name, mode, driver):
     assert fast.series.keys() == ref.series.keys()
     for key, val in ref.series.items():
         np.testing.assert_allclose(fast.series[key], val, rtol=1e-9, atol=0, err_msg=key)
+
+
+@pytest.mark.parametrize("name", ["nedc", "ftp75", "udds"])
+@pytest.mark.parametrize("a", [5.0, 1.0, 0.7])
+def test_compiled_grid_and_smoothing_match_numpy(name, a):
+    """The compiled grid, gear lookup and smoothing equal evaluation_grid and smoothed_on_samples."""
+    c, p, s = resolve_inputs(name, "hofman2011")
+    taps = inverse._sample_taps(a, float(c.time_s[1] - c.time_s[0]))
+    assert inverse._is_uniform_compiled(c.time_s)
+    F, I = inverse._grid_and_smoothing(c.time_s, c.speed_mps, s.time_s, s.gear, *taps)
+    n = c.time_s.size - 1
+    got = (F[0], I[0], I[1, :n], I[2, :n], I[3], F[1], F[2], F[3], I[4, : n + 1], F[5, :n], F[4])
+    t, gear, left, right, sample = inverse.evaluation_grid(c, s)
+    for g, r in zip(got[:5], (t, gear, left, right, sample), strict=True):
+        np.testing.assert_array_equal(g, r)
+    for g, r in zip(got[5:8], inverse.smoothed_on_samples(c.time_s, c.speed_mps, a), strict=True):
+        np.testing.assert_allclose(g, r[sample], rtol=1e-9, atol=1e-12)
+    np.testing.assert_array_equal(got[8], s.gear_at(c.time_s))
+    np.testing.assert_array_equal(got[9], np.diff(c.time_s))
+    np.testing.assert_array_equal(got[10], c.speed_mps[sample])
+    assert not inverse._is_uniform_compiled(np.array([0.0, 1.0, 2.5]))

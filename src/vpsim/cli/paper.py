@@ -40,9 +40,7 @@ def paper(out, vehicle, advisor_dir, repeats):
         if not Path(advisor_dir).is_dir():
             raise VpsimError(f"--advisor-dir {advisor_dir}: no such folder")
     start = time.perf_counter()
-    with click.progressbar(
-        length=1, label="vpsim paper", file=sys.stderr, show_pos=True
-    ) as bar:
+    with click.progressbar(length=1, label="vpsim paper", file=sys.stderr, show_pos=True) as bar:
         state = {"done": 0}
 
         def progress(done, total, label):

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import math
 import time
+import types
 
 import numpy as np
 from numba import njit
@@ -294,6 +295,13 @@ def _rhs(t, y, G, P, tab_t, tab_v, dy, aux):
     aux[_X_COUPLED] = 1.0 if coupled else 0.0
 
 
+# the same right side, inlined (at Numba-IR level) into its one call site, the integrator's stage loop: a call
+# would pass its seven arrays as some fifty scalars, 53,000 times per UDDS run
+_rhs_stage = register_jitable(inline="always")(
+    types.FunctionType(_rhs.__code__, _rhs.__globals__, "_rhs_stage", _rhs.__defaults__, _rhs.__closure__)
+)
+
+
 @register_jitable
 def _output(t_out, y, h, k1, k3, k4, k5, k6, k7, s, row_y, G, P, tab_t, tab_v, scratch, row_aux):
     """Dense output at t + s h (ntrp45) into ``row_y`` and its auxiliary quantities into ``row_aux``."""
@@ -410,27 +418,40 @@ def _integrate(
                 done = True
             nofailed = True
             while True:
-                for i in range(N_DYN):
-                    ytmp[i] = y[i] + h * (_A21 * k1[i])
-                _rhs(t + _C2 * h, ytmp, G, P, tab_t, tab_v, k2, aux)
-                for i in range(N_DYN):
-                    ytmp[i] = y[i] + h * (_A31 * k1[i] + _A32 * k2[i])
-                _rhs(t + _C3 * h, ytmp, G, P, tab_t, tab_v, k3, aux)
-                for i in range(N_DYN):
-                    ytmp[i] = y[i] + h * (_A41 * k1[i] + _A42 * k2[i] + _A43 * k3[i])
-                _rhs(t + _C4 * h, ytmp, G, P, tab_t, tab_v, k4, aux)
-                for i in range(N_DYN):
-                    ytmp[i] = y[i] + h * (_A51 * k1[i] + _A52 * k2[i] + _A53 * k3[i] + _A54 * k4[i])
-                _rhs(t + _C5 * h, ytmp, G, P, tab_t, tab_v, k5, aux)
-                for i in range(N_DYN):
-                    ytmp[i] = y[i] + h * (
-                        _A61 * k1[i] + _A62 * k2[i] + _A63 * k3[i] + _A64 * k4[i] + _A65 * k5[i]
-                    )
                 tnew = t_end if done else t + h
-                _rhs(tnew, ytmp, G, P, tab_t, tab_v, k6, aux)
-                for i in range(ny):
-                    ynew[i] = y[i] + h * (_B1 * k1[i] + _B3 * k3[i] + _B4 * k4[i] + _B5 * k5[i] + _B6 * k6[i])
-                _rhs(tnew, ynew, G, P, tab_t, tab_v, k7, aux)
+                # stages 2..7: the stage state (as the tableau's row), then the right side at it; one call
+                # site for the six, so that the right side is compiled inline once
+                for st in range(6):
+                    tgt = ytmp
+                    ts = tnew
+                    if st == 0:
+                        ts = t + _C2 * h
+                        for i in range(N_DYN):
+                            ytmp[i] = y[i] + h * (_A21 * k1[i])
+                    elif st == 1:
+                        ts = t + _C3 * h
+                        for i in range(N_DYN):
+                            ytmp[i] = y[i] + h * (_A31 * k1[i] + _A32 * k2[i])
+                    elif st == 2:
+                        ts = t + _C4 * h
+                        for i in range(N_DYN):
+                            ytmp[i] = y[i] + h * (_A41 * k1[i] + _A42 * k2[i] + _A43 * k3[i])
+                    elif st == 3:
+                        ts = t + _C5 * h
+                        for i in range(N_DYN):
+                            ytmp[i] = y[i] + h * (_A51 * k1[i] + _A52 * k2[i] + _A53 * k3[i] + _A54 * k4[i])
+                    elif st == 4:
+                        for i in range(N_DYN):
+                            ytmp[i] = y[i] + h * (
+                                _A61 * k1[i] + _A62 * k2[i] + _A63 * k3[i] + _A64 * k4[i] + _A65 * k5[i]
+                            )
+                    else:
+                        tgt = ynew
+                        for i in range(ny):
+                            ynew[i] = y[i] + h * (
+                                _B1 * k1[i] + _B3 * k3[i] + _B4 * k4[i] + _B5 * k5[i] + _B6 * k6[i]
+                            )
+                    _rhs_stage(ts, tgt, G, P, tab_t, tab_v, work[4 + st], aux)
                 nfev += 6
                 err = 0.0
                 for i in range(N_ERR):
@@ -503,7 +524,8 @@ def _integrate(
             t = tnew
             for i in range(ny):
                 y[i] = ynew[i]
-            k1, k7 = k7, k1  # FSAL
+            for i in range(ny):  # FSAL
+                k1[i] = k7[i]
             if clamped:
                 _rhs(t, y, G, P, tab_t, tab_v, k1, aux)
                 nfev += 1

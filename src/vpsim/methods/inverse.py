@@ -18,7 +18,8 @@ evaluated at every cycle sample (plus, at each gear change, the instant once mor
 x2 jumps there) and the fuel, distance and energy terms are integrated by the trapezoidal rule: against a
 0.05 s Simpson reference the fuel differs by under 0.05 % on NEDC and FTP-75 (a test keeps it under 0.1 %).
 ``steps`` is the number of evaluation points. The cost counts the smoothing, which on a uniformly sampled
-cycle is three discrete convolutions (:func:`smoothed_on_samples`); the inversion itself is compiled.
+cycle is three discrete convolutions (:func:`smoothed_on_samples`). The grid, the smoothing on it, the
+inversion and the bookkeeping are compiled (``run(..., compiled=False)``: the NumPy reference).
 
 The compiled core borrows the forward method's scalar engine functions; numba's cache of this module is not
 invalidated when forward.py changes (a test compares the core with its Python code, which catches that).
@@ -105,6 +106,103 @@ def _sample_taps(a: float, dt: float):
     return c_v, c_dv, c_ddv
 
 
+@njit(cache=True)
+def _is_uniform_compiled(t):
+    """:func:`_is_uniform` in one pass."""
+    if t.size < 2:
+        return False
+    d0 = t[1] - t[0]
+    for i in range(1, t.size - 1):
+        if not (abs((t[i + 1] - t[i]) - d0) <= 1e-9 * d0):
+            return False
+    return True
+
+
+@njit(cache=True)
+def _grid_and_smoothing(t_s, v_s, sched_t, sched_g, c_v, c_dv, c_ddv):
+    """:func:`evaluation_grid` and :func:`smoothed_on_samples` (indexed by the grid's samples) in one
+    compiled pass, for a uniformly sampled cycle.
+
+    Returns two arrays (few objects to hand back: this is part of a call's fixed cost), ``F`` (6 x points):
+    t, v_d, dv_d/dt, d2v_d/dt2, the cycle speed at the points, the interval lengths (first n - 1 entries);
+    ``I`` (5 x points): gear, left, right (first n - 1), sample, the gear at each cycle sample
+    (``GearSchedule.on_cycle``, first n); t, gear, left, right and sample as :func:`evaluation_grid`
+    gives them.
+    """
+    n_s = t_s.size
+    n = n_s - 1
+    # gear at each sample: right-continuous lookup in the schedule (searchsorted right - 1, clipped)
+    g_s = np.empty(n_s, dtype=sched_g.dtype)
+    j = 0
+    m_sched = sched_t.size
+    for i in range(n_s):
+        while j < m_sched and sched_t[j] <= t_s[i]:
+            j += 1
+        idx = j - 1
+        if idx < 0:
+            idx = 0
+        elif idx > m_sched - 1:
+            idx = m_sched - 1
+        g_s[i] = sched_g[idx]
+    n_ends = 0
+    for e in range(1, n):
+        if g_s[e] != g_s[e - 1]:
+            n_ends += 1
+    n_pts = n_s + n_ends
+    F = np.zeros((6, n_pts))
+    I = np.zeros((5, n_pts), dtype=np.int64)
+    t, v, dv, ddv, v_c, dt = F[0], F[1], F[2], F[3], F[4], F[5]
+    gear, left, right, sample = I[0], I[1], I[2], I[3]
+    I[4, :n_s] = g_s
+    for i in range(n):
+        left[i] = i
+        right[i] = i + 1
+        dt[i] = t_s[i + 1] - t_s[i]
+    for i in range(n_s):
+        t[i] = t_s[i]
+        sample[i] = i
+        gear[i] = g_s[i] if i < n else g_s[n - 1]
+    q = n_s
+    for e in range(1, n):
+        if g_s[e] != g_s[e - 1]:
+            t[q] = t_s[e]
+            gear[q] = g_s[e - 1]
+            sample[q] = e
+            right[e - 1] = q
+            q += 1
+    # smoothing on the samples: slope changes dm convolved with the centred taps
+    step = t_s[1] - t_s[0]
+    m = np.empty(n_s + 1)
+    m[0] = 0.0
+    m[n_s] = 0.0
+    for i in range(1, n_s):
+        m[i] = (v_s[i] - v_s[i - 1]) / step
+    k = (c_v.size - 1) // 2
+    for i in range(n_s):  # the points 0..n_s - 1 are the samples
+        lo = i - k if i - k > 0 else 0
+        hi = i + k if i + k < n_s - 1 else n_s - 1
+        sv = 0.0
+        sdv = 0.0
+        sddv = 0.0
+        for r in range(lo, hi + 1):
+            d = m[r + 1] - m[r]
+            c = k + i - r
+            sv += d * c_v[c]
+            sdv += d * c_dv[c]
+            sddv += d * c_ddv[c]
+        v[i] = v_s[i] + sv
+        dv[i] = 0.5 * (m[i] + m[i + 1]) + sdv
+        ddv[i] = sddv
+        v_c[i] = v_s[i]
+    for p in range(n_s, n_pts):  # the gear changes' second points
+        s = sample[p]
+        v[p] = v[s]
+        dv[p] = dv[s]
+        ddv[p] = ddv[s]
+        v_c[p] = v_s[s]
+    return F, I
+
+
 def _is_uniform(t) -> bool:
     d = np.diff(t)
     return bool(d.size >= 1 and np.all(np.abs(d - d[0]) <= 1e-9 * d[0]))
@@ -176,7 +274,22 @@ def invert(v, dv, ddv, gear, params, mode: str = "paper") -> dict[str, np.ndarra
 def _model_constants(params):
     """(P, coef): the forward kernel's model constants and, per gear, c1..c7 of (21), i / r and the
     rolling-resistance part of c4 (removed at standstill); cached per (immutable) model parameters."""
-    return _constants_of(params.vehicle, params.transmission, params.engine, params.simulation)
+    return _all_constants(params)[:2]
+
+
+_last_constants: list = [None, None]  # the parameter set of the last call and its constants
+
+
+def _all_constants(params):
+    """(P, coef, K) of :func:`_model_constants` and :func:`_accounting_constants`; the parameter set of the
+    previous call is recognised by identity (parameter sets are immutable), others through the caches."""
+    if _last_constants[0] is params:
+        return _last_constants[1]
+    out = _constants_of(params.vehicle, params.transmission, params.engine, params.simulation) + (
+        _accounting_constants_of(params.vehicle, params.transmission, params.engine, params.simulation),
+    )
+    _last_constants[0], _last_constants[1] = params, out
+    return out
 
 
 @functools.lru_cache(maxsize=32)
@@ -356,10 +469,14 @@ N_ACC = 21
 
 
 @njit(cache=True)
-def _invert_rows(v, dv, ddv, gi, coef, P, rows):
-    """The paper-mode inversion into ``rows`` (N_ROWS x n): (33), (31), (32), (30) point by point."""
+def _invert_rows(v, dv, ddv, gear, coef, P, rows):
+    """The paper-mode inversion into ``rows`` (N_ROWS x n): (33), (31), (32), (30) point by point, in gears
+    ``gear`` (1-based); False (nothing computed) if a gear is not one of coef's rows."""
     for k in range(v.size):
-        c1, c2, c3, c4, c5, c6, c7, kin, roll = coef[gi[k]]
+        if not (1 <= gear[k] <= coef.shape[0]):
+            return False
+    for k in range(v.size):
+        c1, c2, c3, c4, c5, c6, c7, kin, roll = coef[gear[k] - 1]
         x1 = v[k] if v[k] > 0.0 else 0.0
         if x1 <= _MOVING:
             c4 = c4 + roll  # rolling resistance only while moving
@@ -387,6 +504,7 @@ def _invert_rows(v, dv, ddv, gi, coef, P, rows):
         rows[_R_BRAKE, k] = 0.0
         rows[_R_COUPLED, k] = 1.0
         rows[_R_MOVING, k] = 1.0 if v[k] > _MOVING else 0.0
+    return True
 
 
 @njit(cache=True)
@@ -469,6 +587,36 @@ def _account(v, dv, vc, rows, left, right, dt, P, K, weight, acc):
         acc[_A_UMAX] = acc[_A_UMIN]
 
 
+@njit(cache=True)
+def _series_extras(rows, K, out):
+    """Engine torque (1), throttle area (u_d clipped to [A_min, A_max]) and fuel flow with the idle floor at
+    the first ``out.shape[1]`` points, into the rows of ``out``."""
+    for k in range(out.shape[1]):
+        t_cr = rows[_R_TCR, k]
+        if rows[_R_COUPLED, k] != 0.0:
+            out[0, k] = t_cr - K[_K_J] * rows[_R_DWENG, k]
+        else:
+            out[0, k] = t_cr if t_cr > 0.0 else 0.0
+        u = rows[_R_U, k]
+        if u < K[_K_AMIN]:
+            u = K[_K_AMIN]
+        elif u > K[_K_AMAX]:
+            u = K[_K_AMAX]
+        out[1, k] = u  # (NaN stays NaN, as with np.clip)
+        mdot = rows[_R_MDOT, k]
+        out[2, k] = mdot if mdot > K[_K_IDLE] else K[_K_IDLE]
+
+
+@njit(cache=True)
+def _paper_pass(v, dv, ddv, gear, coef, P, vc, left, right, dt, K, rows, weight, acc, extra):
+    """:func:`_invert_rows`, :func:`_account` and :func:`_series_extras` in one call (paper mode)."""
+    if not _invert_rows(v, dv, ddv, gear, coef, P, rows):
+        return False
+    _account(v, dv, vc, rows, left, right, dt, P, K, weight, acc)
+    _series_extras(rows, K, extra)
+    return True
+
+
 _warm = False
 
 
@@ -483,8 +631,20 @@ def warm_up() -> None:
         _invert_core(z, z, z, idx, coef, P, np.empty((6, 2)))
         _fuel_and_distance(z, z, 0.0, idx[:1], idx[:1] + 1, np.ones(1))
         rows = np.zeros((N_ROWS, 2))
-        _invert_rows(z, z, z, idx, coef, P, rows)
+        _invert_rows(z, z, z, idx + 1, coef, P, rows)
         _account(z, z, z, rows, idx[:1], idx[:1] + 1, np.ones(1), P, np.ones(9), np.empty(2), np.empty(N_ACC))
+        ts = np.arange(3.0)
+        ts.flags.writeable = False  # as a loaded cycle's arrays are
+        taps = _sample_taps(1.0, 1.0)
+        _is_uniform_compiled(ts)
+        K = np.ones(9)
+        K.flags.writeable = False
+        _series_extras(rows, K, np.empty((3, 2)))
+        one = idx[:1]
+        _paper_pass(
+            z, z, z, idx + 1, coef, P, z, one, one + 1, z[:1], K, rows, z.copy(), np.empty(N_ACC), rows[:3]
+        )
+        _grid_and_smoothing(ts, ts, ts.copy(), np.ones(3, dtype=np.int64), *taps)
         _warm = True
 
 
@@ -561,31 +721,32 @@ def _bookkeeping_reference(
     return energy, trace, series, fuel_kg, distance, below_s, above_s, cpu
 
 
-def _bookkeeping_compiled(
-    cycle, params, schedule, mode, a, t, gear, left, right, sample, v, dv, ddv, keep_series, t_cpu
-):
+def _bookkeeping_compiled(cycle, params, mode, a, grid, v, dv, ddv, keep_series, t_cpu):
     """The inversion and its bookkeeping in compiled passes (paper mode: two kernels, no NumPy temporaries;
-    extended mode: the NumPy clutch/idle/brake logic, then the compiled accounting)."""
-    eng, sim = params.engine, params.simulation
+    extended mode: the NumPy clutch/idle/brake logic, then the compiled accounting).
+
+    ``grid``: (t, gear, left, right, gear at the cycle samples, interval lengths, cycle speed at the points).
+    """
+    eng = params.engine
+    t, gear, left, right, gear_s, dt, v_c = grid
     n_s = cycle.time_s.size
     rows = np.empty((N_ROWS, t.size))
+    P, coef, K = _all_constants(params)
+    acc = np.empty(N_ACC)
+    extra = np.empty((3, n_s if keep_series else 0))
     if mode == "paper":
-        gi = gear - 1
-        if gi.size and not (0 <= gi.min() and gi.max() < params.transmission.n_gears):
+        gear = gear.astype(np.int64, copy=False)
+        if not _paper_pass(
+            v, dv, ddv, gear, coef, P, v_c, left, right, dt, K, rows, np.empty(t.size), acc, extra
+        ):
             raise VpsimError(f"gear numbers must be 1..{params.transmission.n_gears}")
-        P, coef = _model_constants(params)
-        _invert_rows(v, dv, ddv, gi.astype(np.int64, copy=False), coef, P, rows)
     else:
         inv = invert(v, dv, ddv, gear, params, mode)
         for r, key in enumerate(_ROW_KEYS):
             rows[r] = inv[key]
         rows[_R_FMEP] = ph.fmep(inv["intake_pressure_pa"], inv["engine_speed_radps"], eng)
-        P = _model_constants(params)[0]
-    dt = np.diff(cycle.time_s)
-    v_c = cycle.speed_mps[sample]  # the grid's points sit on samples (np.interp there is the sample)
-    K = _accounting_constants(params)
-    acc = np.empty(N_ACC)
-    _account(v, dv, v_c, rows, left, right, dt, P, K, np.empty(t.size), acc)
+        _account(v, dv, v_c, rows, left, right, dt, P, K, np.empty(t.size), acc)
+        _series_extras(rows, K, extra)
     fuel_kg, distance = float(acc[_A_FUEL]), float(acc[_A_DIST])
     cpu = time.process_time() - t_cpu
     energy = EnergyBalance(**{key: float(acc[_A_E0 + i]) for i, key in enumerate(_ENERGY_KEYS)})
@@ -612,25 +773,21 @@ def _bookkeeping_compiled(
         k = slice(0, n_s)
         u = rows[_R_U, k]
         coupled = rows[_R_COUPLED, k] != 0.0
-        t_cr = rows[_R_TCR, k]
-        mdot = rows[_R_MDOT, k]
         series = {
             "time_s": t[k],
             "reference_speed_mps": v_c[k],
             "speed_mps": v[k],
             "accel_mps2": dv[k],
             "jerk_mps3": ddv[k],
-            "gear": schedule.gear_at(t[k]),
+            "gear": gear_s,
             "engine_speed_radps": rows[_R_WENG, k],
-            "crank_torque_nm": t_cr,
-            "engine_torque_nm": np.where(
-                coupled, t_cr - eng.inertia * rows[_R_DWENG, k], np.maximum(t_cr, 0.0)
-            ),
+            "crank_torque_nm": rows[_R_TCR, k],
+            "engine_torque_nm": extra[0],
             "intake_pressure_pa": rows[_R_P, k],
-            "throttle_area_m2": np.clip(u, eng.min_throttle_area, eng.max_throttle_area),
+            "throttle_area_m2": extra[1],
             "throttle_demand_m2": u,
-            "fuel_flow_kgps": mdot,
-            "fuel_flow_used_kgps": np.maximum(mdot, sim.idle_fuel_flow),
+            "fuel_flow_kgps": rows[_R_MDOT, k],
+            "fuel_flow_used_kgps": extra[2],
             "brake_force_n": rows[_R_BRAKE, k],
             "torque_shortfall_nm": np.zeros(n_s),
             "clutch_engaged": coupled,
@@ -653,7 +810,7 @@ _ROW_KEYS = (
 
 
 def _accounting_constants(params):
-    return _accounting_constants_of(params.vehicle, params.transmission, params.engine, params.simulation)
+    return _all_constants(params)[2]
 
 
 @functools.lru_cache(maxsize=32)
@@ -702,14 +859,24 @@ def run(
     warm_up()
 
     t_cpu = time.process_time()
-    t, gear, left, right, sample = evaluation_grid(cycle, schedule)
-    if _is_uniform(cycle.time_s):  # the grid's points all sit on samples: index them
-        v, dv, ddv = (x[sample] for x in smoothed_on_samples(cycle.time_s, cycle.speed_mps, a))
+    if compiled and _is_uniform_compiled(cycle.time_s):  # grid and smoothing in one compiled pass
+        taps = _sample_taps(a, float(cycle.time_s[1] - cycle.time_s[0]))
+        F, I = _grid_and_smoothing(cycle.time_s, cycle.speed_mps, schedule.time_s, schedule.gear, *taps)
+        n = cycle.time_s.size - 1
+        t, v, dv, ddv, gear = F[0], F[1], F[2], F[3], I[0]
+        grid = (t, gear, I[1, :n], I[2, :n], I[4, : n + 1], F[5, :n], F[4])
     else:
-        v, dv, ddv = SmoothingDriver(cycle.time_s, cycle.speed_mps, a).evaluate(t)
+        t, gear, left, right, sample = evaluation_grid(cycle, schedule)
+        if _is_uniform(cycle.time_s):  # the grid's points all sit on samples: index them
+            v, dv, ddv = (x[sample] for x in smoothed_on_samples(cycle.time_s, cycle.speed_mps, a))
+        else:
+            v, dv, ddv = SmoothingDriver(cycle.time_s, cycle.speed_mps, a).evaluate(t)
+        # the grid's points sit on samples (np.interp there is the sample)
+        gear_s = schedule.gear_at(t[: cycle.time_s.size])
+        grid = (t, gear, left, right, gear_s, np.diff(cycle.time_s), cycle.speed_mps[sample])
     if compiled:
         energy, trace, series, fuel_kg, distance, below_s, above_s, cpu = _bookkeeping_compiled(
-            cycle, params, schedule, mode, a, t, gear, left, right, sample, v, dv, ddv, keep_series, t_cpu
+            cycle, params, mode, a, grid, v, dv, ddv, keep_series, t_cpu
         )
     else:
         energy, trace, series, fuel_kg, distance, below_s, above_s, cpu = _bookkeeping_reference(
