@@ -313,30 +313,38 @@ def _constants_of(vehicle, transmission, engine, simulation):
 
 
 @njit(cache=True)
+def _invert_point(v, dv, ddv, c, P):
+    """(33), (31), (32), (30) at one point in the gear whose coefficients are ``c`` (a row of coef):
+    returns p_i, u_d, w_e, dw_e/dt, mdot_ac, T_cr, BMEP and the speed part of FMEP."""
+    c1, c2, c3, c4, c5, c6, c7, kin, roll = c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8]
+    x1 = v if v > 0.0 else 0.0
+    if x1 <= _MOVING:
+        c4 = c4 + roll  # rolling resistance only while moving
+    x108 = x1**0.8
+    x2 = (dv - c1 * x1 * x1 - c2 * x108 * x1 - c4) / c3  # (33)
+    lf2h = (2.0 * c1 * x1 + 1.8 * c2 * x108) * dv + c3 * (c5 * x1 + c6 * x1 * x2)  # (31)
+    gain = c3 * c7 * psi_scalar(x2 * P[_INV_PA], P)  # (32)
+    num = ddv - lf2h
+    if gain > 0.0:
+        u = num / gain  # (30)
+    elif num == 0.0:
+        u = 0.0
+    else:
+        u = math.inf if num > 0.0 else -math.inf  # x2 >= p_a: no flow can raise the pressure further
+    w = kin * x1
+    mdot_ac, t_cr, bmep, fric_speed = engine_scalar(x2, w, P)
+    return x2, u, w, kin * dv, mdot_ac, t_cr, bmep, fric_speed
+
+
+@njit(cache=True)
 def _invert_core(v, dv, ddv, gi, coef, P, out):
     """(33), (31), (32), (30) point by point; out rows: p_i, u_d, w_e, dw_e/dt, T_cr, mdot_f."""
     for k in range(v.size):
-        c1, c2, c3, c4, c5, c6, c7, kin, roll = coef[gi[k]]
-        x1 = v[k] if v[k] > 0.0 else 0.0
-        if x1 <= _MOVING:
-            c4 = c4 + roll  # rolling resistance only while moving
-        x108 = x1**0.8
-        x2 = (dv[k] - c1 * x1 * x1 - c2 * x108 * x1 - c4) / c3  # (33)
-        lf2h = (2.0 * c1 * x1 + 1.8 * c2 * x108) * dv[k] + c3 * (c5 * x1 + c6 * x1 * x2)  # (31)
-        gain = c3 * c7 * psi_scalar(x2 * P[_INV_PA], P)  # (32)
-        num = ddv[k] - lf2h
-        if gain > 0.0:
-            u = num / gain  # (30)
-        elif num == 0.0:
-            u = 0.0
-        else:
-            u = math.inf if num > 0.0 else -math.inf  # x2 >= p_a: no flow can raise the pressure further
-        w = kin * x1
-        mdot_ac, t_cr, _, _ = engine_scalar(x2, w, P)
+        x2, u, w, dw, mdot_ac, t_cr, _, _ = _invert_point(v[k], dv[k], ddv[k], coef[gi[k]], P)
         out[0, k] = x2
         out[1, k] = u
         out[2, k] = w
-        out[3, k] = kin * dv[k]
+        out[3, k] = dw
         out[4, k] = t_cr
         out[5, k] = mdot_ac * P[_INV_AFR]
 
@@ -476,28 +484,13 @@ def _invert_rows(v, dv, ddv, gear, coef, P, rows):
         if not (1 <= gear[k] <= coef.shape[0]):
             return False
     for k in range(v.size):
-        c1, c2, c3, c4, c5, c6, c7, kin, roll = coef[gear[k] - 1]
-        x1 = v[k] if v[k] > 0.0 else 0.0
-        if x1 <= _MOVING:
-            c4 = c4 + roll  # rolling resistance only while moving
-        x108 = x1**0.8
-        x2 = (dv[k] - c1 * x1 * x1 - c2 * x108 * x1 - c4) / c3  # (33)
-        lf2h = (2.0 * c1 * x1 + 1.8 * c2 * x108) * dv[k] + c3 * (c5 * x1 + c6 * x1 * x2)  # (31)
-        gain = c3 * c7 * psi_scalar(x2 * P[_INV_PA], P)  # (32)
-        num = ddv[k] - lf2h
-        if gain > 0.0:
-            u = num / gain  # (30)
-        elif num == 0.0:
-            u = 0.0
-        else:
-            u = math.inf if num > 0.0 else -math.inf  # x2 >= p_a: no flow can raise the pressure further
-        w = kin * x1
-        mdot_ac, t_cr, bmep, fric_speed = engine_scalar(x2, w, P)
+        c = coef[gear[k] - 1]
+        x2, u, w, dw, mdot_ac, t_cr, bmep, fric_speed = _invert_point(v[k], dv[k], ddv[k], c, P)
         rows[_R_FMEP, k] = fric_speed + P[_KF] * 0.0215 * bmep  # FMEP (5)
         rows[_R_P, k] = x2
         rows[_R_U, k] = u
         rows[_R_WENG, k] = w
-        rows[_R_DWENG, k] = kin * dv[k]
+        rows[_R_DWENG, k] = dw
         rows[_R_W, k] = w
         rows[_R_TCR, k] = t_cr
         rows[_R_MDOT, k] = mdot_ac * P[_INV_AFR]
