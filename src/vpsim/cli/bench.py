@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from ..errors import VpsimError
 from .main import cli
 
 
@@ -28,13 +29,18 @@ def bench(quick, json_path, no_peer, tiny):
     from ..bench import format_report, run_benchmarks
 
     profile = "tiny" if tiny else "quick" if quick else "full"
+    if json_path:  # fail before minutes of measuring, not after
+        path = Path(json_path)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with path.open("a"):
+                pass
+        except OSError as exc:
+            raise VpsimError(f"--json {json_path}: cannot write ({exc.strerror})") from None
     report = run_benchmarks(
         profile, peer=not no_peer, progress=lambda line: click.echo(f"  {line}", err=True)
     )
     if json_path:
-        path = Path(json_path)
-        if path.parent and not path.parent.exists():
-            path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(report, indent=2, default=_jsonable) + "\n")
     click.echo(format_report(report))
     if json_path:
