@@ -123,6 +123,41 @@ def test_compiled_batch_and_one_by_one_paths_agree(monkeypatch):
     assert batch["warning"].eq(single["warning"]).all() and batch["error"].isna().all()
 
 
+def test_forward_rows_through_the_batch_equal_one_by_one(monkeypatch):
+    """Forward rows of a chunk go through vpsim.batch (designs on threads): the same rows as one by one."""
+    import vpsim.batch
+
+    calls = []
+    real = vpsim.batch.run_batch
+
+    def counting(*args, **kwargs):
+        calls.append(args[2] if len(args) > 2 else kwargs.get("method"))
+        return real(*args, **kwargs)
+
+    spec = make_spec(
+        parameters={"engine.bore": [0.085, 0.09]},
+        cycles=["nedc"],
+        methods=["forward"],
+        drivers=["2"],
+        acceleration=False,
+    )
+    monkeypatch.setattr(vpsim.batch, "run_batch", counting)
+    batch = run_sweep(spec, workers=1).results
+    assert "forward" in calls
+    monkeypatch.setattr(runner_mod, "batch_available", lambda: False)
+    single = run_sweep(spec, workers=1).results
+    cols = [
+        "point_id",
+        "fuel_kg",
+        "distance_km",
+        "trace_miss_s",
+        "trace_miss_max_torque_shortfall_nm",
+        "max_speed_error_mps",
+    ]
+    pd.testing.assert_frame_equal(batch[cols], single[cols], rtol=1e-12)
+    assert batch["error"].isna().all()
+
+
 def test_a_failing_batch_falls_back_to_one_by_one(monkeypatch):
     import vpsim.batch
 
