@@ -776,9 +776,11 @@ class _DaskExecutor:
 
         queue = list(reversed(chunks))
         owner = {}
+        attempts: dict[int, int] = {}
 
         def submit():
             c = queue.pop()
+            attempts[id(c)] = attempts.get(id(c), 0) + 1
             f = self.client.submit(compute_chunk, c, pure=False)
             owner[f.key] = c
             return f
@@ -793,7 +795,12 @@ class _DaskExecutor:
                 try:
                     df = f.result()
                 except Exception as exc:  # KilledWorker after repeated deaths, or an escaped error
-                    yield c, None, _one_line(exc)
+                    if attempts[id(c)] < _DASK_ATTEMPTS:
+                        # a chunk is idempotent (rows are keyed by point_id): try it again, e.g. after a
+                        # worker died and the client's connection state went astray with it
+                        queue.append(c)
+                    else:
+                        yield c, None, _one_line(exc)
                 else:
                     yield c, df, None
                 f.release()
@@ -804,6 +811,9 @@ class _DaskExecutor:
         finally:
             for f in futures:
                 f.cancel()
+
+
+_DASK_ATTEMPTS = 3  # submissions of one chunk before its failure is reported
 
 
 def batch_available() -> bool:
