@@ -8,8 +8,9 @@ import pytest
 import vpsim
 from vpsim import gears
 from vpsim.cycles import Cycle, load_cycle
-from vpsim.maps import cached_engine_map
 from vpsim.methods import backward
+from vpsim.model import IDLE_SPEED
+from vpsim.model.maps import cached_engine_map
 
 
 @pytest.mark.parametrize(("cycle", "lo", "hi"), [("nedc", 8.0, 10.0), ("ftp75", 8.0, 10.5)])
@@ -69,7 +70,7 @@ def test_extended_mode_brakes_and_idles(params):
     assert r.energy.brake > 0
     s = r.series
     standstill = s["speed_mps"] == 0
-    assert np.all(s["engine_speed_radps"][standstill] == backward.IDLE_SPEED)
+    assert np.all(s["engine_speed_radps"][standstill] == IDLE_SPEED)
     assert np.allclose(s["fuel_flow_used_kgps"][standstill], params.simulation.idle_fuel_flow)
 
 

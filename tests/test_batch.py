@@ -10,8 +10,8 @@ from vpsim.batch import run_batch, variant_parameters
 from vpsim.cycles import Cycle, load_cycle
 from vpsim.errors import ParameterError, VpsimError
 from vpsim.gears import default_schedule
-from vpsim.maps import cached_engine_map, generate_engine_map
 from vpsim.methods import backward
+from vpsim.model.maps import cached_engine_map, generate_engine_map
 
 RTOL = 1e-9
 

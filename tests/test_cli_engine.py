@@ -8,9 +8,9 @@ import json
 import numpy as np
 import pytest
 
-from vpsim import maps
 from vpsim.cli.main import main
 from vpsim.engines import MeasuredEngine, load_engine
+from vpsim.model import maps
 from vpsim.scaling import TABLE4_COLUMNS
 
 

@@ -8,21 +8,22 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from vpsim import maps
-from vpsim import physics as ph
+from vpsim.model import engine as en
+from vpsim.model import maps
+from vpsim.model.record import engine_record
 
 
 def _dynamic_torque(a_eff, w_e, eng, t_end=10.0):
     """Impose constant (A_eff, w_e) on the dynamic engine model: integrate (9) for 10 s, return T_cr."""
     sol = solve_ivp(
-        lambda t, p: [float(ph.manifold_pressure_rate(p[0], a_eff, w_e, eng))],
+        lambda t, p: [en.manifold_pressure_rate(float(p[0]), a_eff, w_e, engine_record(eng))],
         (0.0, t_end),
         [0.5 * eng.ambient_pressure],
         method="LSODA",
         rtol=1e-11,
         atol=1e-6,
     )
-    return float(ph.crank_torque(sol.y[0, -1], w_e, eng))
+    return float(en.crank_torque(sol.y[0, -1], w_e, engine_record(eng)))
 
 
 def test_fqm_matches_dynamic_engine_at_steady_state(params):
@@ -55,7 +56,7 @@ def test_round_trip_fqm_to_bqm(params):
     eng = params.engine
     a, w = np.meshgrid(np.geomspace(2e-5, eng.max_throttle_area, 15), np.linspace(50, 650, 15))
     ss = maps.steady_state(a, w, eng)
-    p_back = ph.intake_pressure_for_torque(ss.crank_torque, w, eng)
+    p_back = en.intake_pressure_for_torque(ss.crank_torque, w, engine_record(eng))
     f_back = maps.bqm_fuel_flow(ss.crank_torque, w, eng)
     np.testing.assert_allclose(p_back, ss.intake_pressure, rtol=1e-9)
     np.testing.assert_allclose(f_back, ss.fuel_flow, rtol=1e-9)
@@ -66,22 +67,23 @@ def test_round_trip_fqm_to_bqm(params):
 def test_bqm_inverts_torque_model(params, t, w):
     """Property: crank_torque(p_i(T, w), w) == T for any torque and speed."""
     eng = params.engine
-    p = ph.intake_pressure_for_torque(t, w, eng)
-    assert abs(float(ph.crank_torque(p, w, eng)) - t) < 1e-9 * max(1.0, abs(t))
+    c = engine_record(eng)
+    p = en.intake_pressure_for_torque(t, w, c)
+    assert abs(float(en.crank_torque(p, w, c)) - t) < 1e-9 * max(1.0, abs(t))
 
 
 @settings(max_examples=60, deadline=None)
 @given(pr=st.floats(0.0, 1.2))
-def test_psi_is_continuous_and_bounded(pr):
-    gamma = 1.26
-    crit = ph.critical_pressure_ratio(gamma)
-    choked = float(ph.psi(0.0, gamma))
-    val = float(ph.psi(pr, gamma))
+def test_psi_is_continuous_and_bounded(params, pr):
+    c = engine_record(params.engine)
+    crit = en.critical_pressure_ratio(c.specific_heat_ratio)
+    choked = float(en.psi(0.0, c))
+    val = float(en.psi(pr, c))
     assert 0.0 <= val <= choked + 1e-15
     if pr <= crit:
         assert val == choked
     # continuity at the critical ratio
-    assert abs(float(ph.psi(crit * (1 + 1e-9), gamma)) - choked) < 1e-6
+    assert abs(float(en.psi(crit * (1 + 1e-9), c)) - choked) < 1e-6
 
 
 def test_torque_monotone_in_throttle_and_max_line_bounds(params):

@@ -8,14 +8,17 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from vpsim import physics as ph
-from vpsim.maps import max_torque, steady_state
+from vpsim.model import engine as en
+from vpsim.model import vehicle as vh
+from vpsim.model.maps import max_torque, steady_state
+from vpsim.model.record import record
 from vpsim.performance import acceleration_time, acceleration_times, max_power_speed
 
 
 def _reference(p, w_launch=250.0, shift_fraction=0.9, target_kmh=100.0):
     """The same model integrated phase by phase with scipy's Radau and exact events (slow, accurate)."""
     eng, veh, tr = p.engine, p.vehicle, p.transmission
+    c = record(p)
     ratios, eta, r = tr.ratios, tr.efficiency, veh.wheel_radius
     w_shift = shift_fraction * max_power_speed(eng)
     a = eng.max_throttle_area
@@ -24,10 +27,10 @@ def _reference(p, w_launch=250.0, shift_fraction=0.9, target_kmh=100.0):
 
     def f_slip(t, y):
         v, p_i = y
-        t_cr = ph.crank_torque(p_i, w_launch, eng)
+        t_cr = en.crank_torque(p_i, w_launch, c)
         return [
-            (ratios[0] * eta * t_cr / r - ph.road_load(v, veh)) / veh.mass,
-            ph.manifold_pressure_rate(p_i, a, w_launch, eng),
+            (ratios[0] * eta * t_cr / r - (vh.aero_force(v, c) + c.rolling_force)) / veh.mass,
+            en.manifold_pressure_rate(p_i, a, w_launch, c),
         ]
 
     def lock(t, y):
@@ -42,10 +45,10 @@ def _reference(p, w_launch=250.0, shift_fraction=0.9, target_kmh=100.0):
         def f(t, y, i=i):
             v, p_i = y
             w = i * v / r
-            t_cr = ph.crank_torque(p_i, w, eng)
+            t_cr = en.crank_torque(p_i, w, c)
             return [
-                (i * eta * t_cr / r - ph.road_load(v, veh)) / ph.equivalent_mass(i, veh, eng, eta),
-                ph.manifold_pressure_rate(p_i, a, w, eng),
+                (i * eta * t_cr / r - (vh.aero_force(v, c) + c.rolling_force)) / vh.equivalent_mass(i, c),
+                en.manifold_pressure_rate(p_i, a, w, c),
             ]
 
         def shift(t, y, i=i):

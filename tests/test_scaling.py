@@ -12,12 +12,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vpsim import maps
-from vpsim import physics as ph
 from vpsim.calibration import calibrate
 from vpsim.engines import MeasuredEngine, load_engine
 from vpsim.engines.measured import MeasuredEngineMap
 from vpsim.errors import EngineFileError, ParameterError, VpsimError
+from vpsim.model import engine as en
+from vpsim.model import maps
+from vpsim.model.record import engine_record
 from vpsim.params import PRESETS, load_parameters
 from vpsim.scaling import (
     PAPER_ENGINES,
@@ -128,7 +129,7 @@ def test_full_load_bmep_depends_on_mean_piston_speed_only(bore, stroke, cylinder
 
     def bmep(eng):
         w = c_m * np.pi / eng.stroke
-        return ph.torque_to_mep(maps.max_torque(w, eng), eng)
+        return maps.max_torque(w, eng) / en.mep_to_torque(1.0, engine_record(eng))
 
     assert bmep(e) == pytest.approx(bmep(base), rel=1e-9)
 

@@ -17,18 +17,18 @@ name or an implausible value raises :class:`~vpsim.errors.ParameterError` naming
 
 Methods:
 
-* ``backward``: compiled over variants (:func:`vpsim._kernels.backward_batch`, parallel over the cores).
+* ``backward``: compiled over variants (:func:`vpsim.methods.backward.run_variants`, parallel over the cores).
   Each variant has its own engine, hence its own fuel map and max-torque line. The fuel flow is the BQM in
-  closed form (:func:`vpsim.maps.bqm_fuel_flow`, linear in p_i, so there is nothing to tabulate); this is
+  closed form (:func:`vpsim.model.maps.bqm_fuel_flow`, linear in p_i, so there is nothing to tabulate); this is
   what :func:`vpsim.methods.backward.run` computes with ``engine_map=generate_engine_map(eng, exact=True)``
   (the default table lookup differs from it by < 1e-5 relative). The max-torque line (the FQM at A_max,
-  a Newton solve per speed, tabulated at 1 rad/s like :func:`vpsim.maps.generate_engine_map` and
+  a Newton solve per speed, tabulated at 1 rad/s like :func:`vpsim.model.maps.generate_engine_map` and
   interpolated) is evaluated lazily: the wide-open-throttle intake pressure p_max(w_e) decreases with w_e,
   so one Newton solve per variant, at a node above the run's top speed, gives a pressure below which no point
-  of the run can reach the line (allowing for the friction rise over one node interval). Only points above
-  it evaluate the line, at the two nodes around them, each node solved once per variant. Per point that
-  leaves about twenty floating-point operations and no transcendental function (the friction term's
-  c_m^1.8 is split into a per-gear factor and a per-point v^1.8 shared by all variants).
+  of the run can reach the line (allowing for the friction rise over two node intervals). Only points above
+  it evaluate the line, at the two nodes around them, each node solved once per variant. Every point goes
+  through the same model functions as a single run (:func:`vpsim.model.rules.operating_point`,
+  :func:`vpsim.model.engine.intake_pressure_for_torque`, :func:`vpsim.model.engine.fuel_flow`).
 * ``forward``: the forward dynamic method's compiled integrator (:mod:`vpsim.methods.forward`) run for each
   variant inside one compiled call, parallel over variants.
 
@@ -320,7 +320,7 @@ def _schedules(cycle, params, names, values, gears):
     """(gear arrays per schedule (n_schedules, n_samples), schedule index per variant)."""
     n = values.shape[0]
     if isinstance(gears, str) and gears == "per_variant":
-        from .maps import generate_engine_map
+        from .model.maps import generate_engine_map
 
         rows = []
         for i in range(n):
@@ -329,7 +329,7 @@ def _schedules(cycle, params, names, values, gears):
             rows.append(default_schedule(cycle, p, em).on_cycle(cycle))
         return np.array(rows), np.arange(n)
     if isinstance(gears, str) and gears == "baseline":
-        from .maps import cached_engine_map
+        from .model.maps import cached_engine_map
 
         schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
     elif isinstance(gears, GearSchedule):
@@ -347,46 +347,25 @@ def _schedules(cycle, params, names, values, gears):
 
 
 def _backward(cycle, params, names, values, schedules, schedule_of_variant, mode):
-    from . import _kernels as kn
+    from .methods import backward
+    from .model.record import records
 
     (veh, tr, eng, sim), ratios = _sections(params, names, values)
-    consts = kn.pack_constants(veh, tr, eng, sim)
+    recs = records(veh, tr, eng, sim)
     n_var = values.shape[0]
-    if consts.shape[0] != n_var:
-        consts = np.ascontiguousarray(np.broadcast_to(consts, (n_var, consts.shape[1])))
-    t, vs = cycle.time_s, cycle.speed_mps
-    dt = np.diff(t)
-    v = 0.5 * (vs[1:] + vs[:-1])
-    a = np.diff(vs) / dt
-    v18 = v**1.8
-    gear_idx = np.ascontiguousarray(schedules[:, :-1] - 1, dtype=np.int64)
-    n_g = ratios.shape[1]
-    vmax_gear = np.zeros((gear_idx.shape[0], n_g))
-    for s in range(gear_idx.shape[0]):
-        np.maximum.at(vmax_gear[s], gear_idx[s], v)
-    out = np.empty((n_var, kn.N_BATCH_OUT))
-    kn.backward_batch(
-        consts,
-        ratios,
-        schedule_of_variant.astype(np.int64),
-        gear_idx,
-        vmax_gear,
-        dt,
-        v,
-        a,
-        v18,
-        mode == "extended",
-        out,
-    )
-    distance = float(np.sum(v * dt))
-    fuel = out[:, kn.B_FUEL]
-    density = consts[:, kn.FUEL_DENSITY]
+    if recs.size != n_var:
+        recs = np.ascontiguousarray(np.broadcast_to(recs, (n_var,))).view(np.recarray)
+    out = backward.run_variants(cycle, recs, ratios, schedules, schedule_of_variant, mode)
+    distance = cycle.distance_m
+    fuel = out[:, backward.B_FUEL]
     return {
-        "fuel_l_per_100km": fuel / density / (distance / 1e5) if distance > 0 else np.full(n_var, np.nan),
+        "fuel_l_per_100km": fuel / recs.fuel_density / (distance / 1e5)
+        if distance > 0
+        else np.full(n_var, np.nan),
         "fuel_kg": fuel,
         "distance_km": np.full(n_var, distance / 1e3),
-        "trace_miss_s": out[:, kn.B_MISS_S],
-        "trace_miss_max_torque_shortfall_nm": out[:, kn.B_MAX_SHORT],
+        "trace_miss_s": out[:, backward.B_MISS_S],
+        "trace_miss_max_torque_shortfall_nm": out[:, backward.B_MAX_SHORT],
     }
 
 

@@ -256,7 +256,7 @@ def _one_line(exc: BaseException) -> str:
 def _vpsim_rows(settings: Settings, progress) -> tuple[list[dict], dict, list[dict], dict]:
     from .cycles import load_cycle
     from .gears import default_schedule
-    from .maps import cached_engine_map, generate_engine_map
+    from .model.maps import cached_engine_map, generate_engine_map
     from .params import load_parameters
     from .simulation import simulate
 
@@ -552,7 +552,7 @@ def _batch(settings: Settings, progress) -> dict:
 def _linearity(settings: Settings, progress) -> dict:
     from .cycles import load_cycle
     from .gears import default_schedule
-    from .maps import cached_engine_map
+    from .model.maps import cached_engine_map
     from .params import load_parameters
     from .simulation import simulate
 
@@ -641,13 +641,13 @@ def _subprocess(code: str, env: dict | None = None) -> tuple[float, dict]:
 
 def cache_locations() -> dict:
     """Where Numba keeps the compiled kernels of vpsim (from the dispatchers' cache objects)."""
-    from . import _kernels
+    from .methods import backward
 
     out = {"NUMBA_CACHE_DIR": os.environ.get("NUMBA_CACHE_DIR")}
     try:
-        out["vpsim._kernels"] = _kernels.backward_single._cache._cache_path
+        out["vpsim.methods.backward"] = backward.operating_points._cache._cache_path
     except AttributeError:
-        out["vpsim._kernels"] = None
+        out["vpsim.methods.backward"] = None
     try:
         from .methods import forward
 
@@ -999,7 +999,7 @@ def format_report(report: dict) -> str:
         )
     cache = cold["cache"]
     lines.append(
-        f"Numba cache: {cache.get('vpsim._kernels')}"
+        f"Numba cache: {cache.get('vpsim.methods.backward')}"
         + (f" (NUMBA_CACHE_DIR={cache['NUMBA_CACHE_DIR']})" if cache.get("NUMBA_CACHE_DIR") else "")
     )
     lines += [

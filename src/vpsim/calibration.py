@@ -14,7 +14,7 @@ Jacobian: covariance = s^2 (J^T J)^-1 with s^2 = sum(r^2) / (n - p).
 
 What can be identified from a fuel map. The BQM fuel flow is
 mdot_f = w_e V_d / (4 pi R T_i (A/F)_s lambda) * [X(T_cr, w_e) - y_i/s_i] / (Q + 1/s_i), with Q proportional
-to eta_th and X = BMEP (1 + 0.0215 k_f) + k_f (0.464 + 0.0072 c_m^1.8) pi_bl 1e5 + p_e. So eta_th, the
+to eta_th and X = BMEP + FMEP + p_e from (2)-(6) (friction (5) by Soltic's law). So eta_th, the
 air-charge slope s_i and intercept y_i enter only through two combinations, Q + 1/s_i and y_i/s_i: the three
 cannot all be fitted (J^T J is singular; the standard errors reported are then infinite). y_i/s_i is a
 constant next to the constant part of the friction, so y_i, even fitted alone with eta_th and xi_aux,
@@ -153,7 +153,7 @@ def calibrate(
     """
     from scipy.optimize import least_squares
 
-    from .maps import bqm_fuel_flow
+    from .model.maps import bqm_fuel_flow
 
     eng = params.engine
     names = tuple(parameters)

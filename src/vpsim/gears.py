@@ -25,9 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import physics as ph
 from .cycles import Cycle
 from .errors import CycleError
+from .model import vehicle as vh
+from .model.record import record
 
 
 @dataclass(frozen=True)
@@ -81,24 +82,22 @@ def interval_demand(cycle: Cycle, ratio, params):
     piecewise linear, so on [t_k, t_{k+1}] the acceleration is constant and the mean speed is the average.
     Rolling resistance acts only while the vehicle moves. Returns (v, a, w_e, dw_e, t_cr, t_e).
     """
-    veh, eng, tr = params.vehicle, params.engine, params.transmission
+    c = record(params)
     t, v_s = cycle.time_s, cycle.speed_mps
     dt = np.diff(t)
     v = 0.5 * (v_s[1:] + v_s[:-1])
     a = np.diff(v_s) / dt
-    moving = v > 0
-    force = veh.mass * a + ph.aero_force(v, veh) + ph.rolling_force(veh) * moving  # (18)
-    t_w = force * veh.wheel_radius  # (16)
-    w_e = ph.engine_speed(v, ratio, veh)  # (14),(17)
-    dw_e = ratio * a / veh.wheel_radius
-    t_e = ph.wheel_to_engine_torque(t_w, ratio, tr.efficiency)  # (15)
-    t_cr = t_e + eng.inertia * dw_e  # (1)
+    force = vh.wheel_force(v, a, c)  # (18)
+    w_e = vh.engine_speed(v, ratio, c)  # (14),(17)
+    dw_e = vh.engine_speed(a, ratio, c)
+    t_e = vh.wheel_to_engine_torque(force, ratio, c)  # (15),(16)
+    t_cr = vh.crank_torque_demand(force, ratio, dw_e, c)  # (1)
     return v, a, w_e, dw_e, t_cr, t_e
 
 
 def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | None = None) -> GearSchedule:
     """Derive the gear schedule of ``cycle`` once, by the documented rule (module docstring)."""
-    from .maps import max_torque
+    from .model.maps import max_torque
 
     rule = rule or GearRule()
     ratios = np.asarray(params.transmission.ratios)

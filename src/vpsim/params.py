@@ -81,8 +81,10 @@ class Engine:
 
     @property
     def displacement(self) -> float:
-        """Swept volume V_d = z pi/4 B^2 S (m^3)."""
-        return self.cylinders * math.pi / 4.0 * self.bore**2 * self.stroke
+        """Swept volume V_d (m^3), :func:`vpsim.model.engine.displacement`."""
+        from .model.engine import displacement
+
+        return displacement(self)
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ The figure a designer trades against fuel consumption. The model is the forward 
 * the intake manifold (9): dp_i/dt = (R T_i / V_i) [mdot_at(A_max, p_i) - w_e m_ac(p_i) / (2 pi n_r)],
 * the vehicle (18) with the engine inertia (1),(14)-(17): m_eq dv/dt = i eta_tm T_cr(p_i, w_e) / r - F_road,
 
-with the functions of :mod:`vpsim.physics`. Gears and launch:
+with the functions of :mod:`vpsim.model`. Gears and launch:
 
 * **Launch** (``launch_speed``, default :data:`LAUNCH_SPEED` = 250 rad/s, about 2400 rpm). The paper's stiff
   driveline cannot start from standstill (w_e = 0 at v = 0, as in the ``paper`` mode of the backward method),
@@ -32,7 +32,7 @@ with the functions of :mod:`vpsim.physics`. Gears and launch:
 The manifold is stiff at full throttle (dPsi/dp_r -> -inf as p_i -> p_a, time constant of some 10 ms against
 the vehicle's seconds), so the integrator is the L-stable linearly implicit Rosenbrock method ROS2 (Verwer,
 Spee, Blom & Hundsdorfer 1999) with a fixed step ``dt`` (default 50 ms), run on many designs at once (the
-physics functions broadcast over arrays of parameters). Every event is a speed threshold (clutch lock-up,
+model's equations broadcast over an array of parameter records). Every event is a speed threshold (clutch lock-up,
 upshift, rev limit, target), so a step that would pass one is shortened to land on it. The time agrees
 with an adaptive implicit solver with event location (scipy Radau, rtol 1e-8) to about 1 ms (see the tests).
 """
@@ -40,12 +40,12 @@ with an adaptive implicit solver with event location (scipy Radau, rtol 1e-8) to
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 
 import numpy as np
 
-from . import physics as ph
-from .maps import steady_state
+from .model import engine as en
+from .model import vehicle as vh
+from .model.record import record_array
 
 LAUNCH_SPEED = 250.0  # rad/s, engine speed held while the clutch slips at launch
 SHIFT_FRACTION = 0.9  # default upshift speed as a fraction of the max-power speed
@@ -79,7 +79,7 @@ def max_power_speed(eng, *, n: int = 301) -> float:
     """Engine speed (rad/s) of the largest power on the max-torque line within ``eng.map_speed_range``."""
     lo, hi = eng.map_speed_range
     w = np.linspace(lo, hi, n)
-    from .maps import max_torque
+    from .model.maps import max_torque
 
     return float(w[np.argmax(max_torque(w, eng) * w)])
 
@@ -108,12 +108,6 @@ def acceleration_time(
         min_acceleration=min_acceleration,
         keep_series=keep_series,
     )[0]
-
-
-def _stack(objs) -> SimpleNamespace:
-    """Parameter dataclasses -> one namespace whose numeric attributes are arrays over the designs."""
-    names = [k for k, v in vars(objs[0]).items() if isinstance(v, int | float)]
-    return SimpleNamespace(**{k: np.array([getattr(o, k) for o in objs], dtype=float) for k in names})
 
 
 def acceleration_times(
@@ -155,9 +149,7 @@ def acceleration_times(
     for k, p in enumerate(params_list):
         ratios[k, : n_g[k]] = p.transmission.ratios
     full = _Designs(
-        eng=_stack([p.engine for p in params_list]),
-        veh=_stack([p.vehicle for p in params_list]),
-        eta=np.array([p.transmission.efficiency for p in params_list]),
+        rec=np.concatenate([record_array(p) for p in params_list]).view(np.recarray),
         ratios=ratios,
         n_g=n_g,
         rev_limit=rev_limit,
@@ -217,28 +209,18 @@ def acceleration_times(
 
 @dataclass
 class _Designs:
-    """Per-design constants as arrays (one entry per design) and the model's right-hand side."""
+    """Per-design parameter records and settings (one entry per design) and the model's right-hand side."""
 
-    eng: SimpleNamespace
-    veh: SimpleNamespace
-    eta: np.ndarray
+    rec: np.ndarray  # vpsim.model.record records, one per design
     ratios: np.ndarray  # (designs, gears) total ratios, NaN beyond a design's gears
     n_g: np.ndarray
     rev_limit: np.ndarray
     w_shift: np.ndarray
     w_launch: np.ndarray
 
-    def __post_init__(self):
-        eng = self.eng
-        rt = eng.gas_constant * eng.intake_temperature / eng.intake_manifold_volume
-        self.k_thr = rt * eng.max_throttle_area / np.sqrt(eng.gas_constant * eng.ambient_temperature)
-        self.k_cyl = eng.air_charge_slope * ph.displacement(eng) / eng.intake_manifold_volume
-
     def subset(self, sel) -> _Designs:
         return _Designs(
-            SimpleNamespace(**{k: v[sel] for k, v in vars(self.eng).items()}),
-            SimpleNamespace(**{k: v[sel] for k, v in vars(self.veh).items()}),
-            self.eta[sel],
+            self.rec[sel],
             self.ratios[sel],
             self.n_g[sel],
             self.rev_limit[sel],
@@ -246,14 +228,22 @@ class _Designs:
             self.w_launch[sel],
         )
 
+    def _engine_speed(self, v, i, slip):
+        return np.where(
+            slip, self.w_launch, vh.engine_speed(v, i, self.rec)
+        )  # (14),(17); launch: clutch slips
+
     def deriv(self, v, p, i, slip):
         """(dv/dt, dp_i/dt) at full throttle: (18) with (1),(14)-(17), and (9)."""
-        eng, veh = self.eng, self.veh
-        w_e = np.where(slip, self.w_launch, ph.engine_speed(v, i, veh))
-        t_cr = ph.crank_torque(p, w_e, eng)  # (2)-(8)
-        m_eff = np.where(slip, veh.mass, ph.equivalent_mass(i, veh, eng, self.eta))
-        dv = (i * self.eta * t_cr / veh.wheel_radius - ph.road_load(v, veh)) / m_eff
-        dp = ph.manifold_pressure_rate(p, eng.max_throttle_area, w_e, eng)
+        c = self.rec
+        w_e = self._engine_speed(v, i, slip)
+        t_cr = en.crank_torque(p, w_e, c)  # (2)-(8)
+        m_eff = np.where(slip, c.mass, vh.equivalent_mass(i, c))
+        # launching forward: rolling resistance acts from the start (as static friction it holds a car whose
+        # drive force is smaller: see the ``stuck`` check)
+        road = vh.aero_force(v, c) + c.rolling_force
+        dv = (vh.engine_to_wheel_force(t_cr, i, c) - road) / m_eff
+        dp, _ = en.manifold_pressure_rate_array(p, c.max_throttle_area, w_e, c)
         return dv, dp
 
     def step(self, v, p, i, slip, h, f1):
@@ -264,12 +254,9 @@ class _Designs:
         fvv, fvp = self.deriv(v + dv_, p, i, slip)
         fpv, _ = self.deriv(v, p + 1.0, i, slip)  # dv/dt is affine in p_i
         j11, j21, j12 = (fvv - f1v) / dv_, (fvp - f1p) / dv_, fpv - f1v
-        w_e = np.where(slip, self.w_launch, ph.engine_speed(v, i, self.veh))
         # d(dp_i/dt)/dp_i, analytic: the throttle term is singular as p_i -> p_a (9),(10),(13)
-        eng = self.eng
-        j22 = self.k_thr * ph.dpsi_dpr(p / eng.ambient_pressure, eng.specific_heat_ratio) - (
-            self.k_cyl * ph.cycles_per_second(w_e, eng)
-        )
+        w_e = self._engine_speed(v, i, slip)
+        _, j22 = en.manifold_pressure_rate_array(p, self.rec.max_throttle_area, w_e, self.rec)
         m11, m12, m21, m22 = 1.0 - _G * h * j11, -_G * h * j12, -_G * h * j21, 1.0 - _G * h * j22
         det = m11 * m22 - m12 * m21
         k1v, k1p = (m22 * f1v - m12 * f1p) / det, (m11 * f1p - m21 * f1v) / det
@@ -291,8 +278,8 @@ class _State:
 
     @classmethod
     def start(cls, d: _Designs) -> _State:
-        n = d.eta.size
-        p0 = steady_state(d.eng.max_throttle_area, d.w_launch, d.eng).intake_pressure.astype(float)
+        n = d.rec.size
+        p0, _ = en.steady_pressure_array(d.rec.max_throttle_area, d.w_launch, d.rec)
         return cls(
             np.zeros(n),
             p0,
@@ -320,7 +307,7 @@ def _integrate(d: _Designs, st: _State, settings, *, reason_out, shifts, rows, c
     shift_lists, sel_s = shifts
     n = st.v.size
     idx = np.arange(n)
-    r_w = d.veh.wheel_radius
+    r_w = d.rec.wheel_radius
     i = d.ratios[idx, st.gear - 1]
     f = d.deriv(st.v, st.p, i, st.slip)
     while not st.done.all():
@@ -332,7 +319,7 @@ def _integrate(d: _Designs, st: _State, settings, *, reason_out, shifts, rows, c
                     st.t.copy(),
                     st.v.copy(),
                     st.gear.copy(),
-                    np.where(st.slip, d.w_launch, i * st.v / r_w),
+                    d._engine_speed(st.v, i, st.slip),
                     st.p.copy(),
                 )
             )

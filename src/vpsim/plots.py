@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import maps
+from .model import maps
 
 
 def plot_torque_lines(eng, ax=None):

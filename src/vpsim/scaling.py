@@ -150,8 +150,8 @@ class TractionOnlyMap:
 
 
 def generated_map(engine) -> TractionOnlyMap:
-    """The BQM map of ``engine`` (:func:`vpsim.maps.generate_engine_map`) with the zero-torque rule."""
-    from .maps import generate_engine_map
+    """The BQM map of ``engine`` (:func:`vpsim.model.maps.generate_engine_map`) with the zero-torque rule."""
+    from .model.maps import generate_engine_map
 
     return TractionOnlyMap(generate_engine_map(engine))
 
@@ -201,7 +201,7 @@ class MapComparison:
 
 def compare_maps(measured, engine, name: str | None = None) -> MapComparison:
     """The BQM of ``engine`` at the nodes of ``measured`` (a :class:`vpsim.engines.MeasuredEngine`)."""
-    from .maps import bqm_fuel_flow, max_torque
+    from .model.maps import bqm_fuel_flow, max_torque
 
     t_node, w_node = np.meshgrid(measured.torque_grid, measured.speed_grid)
     gen = bqm_fuel_flow(t_node, w_node, engine)
@@ -300,15 +300,14 @@ def compare_on_cycle(
     """
     from .cycles import load_cycle
     from .gears import default_schedule
-    from .maps import bqm_fuel_flow
     from .methods import backward
+    from .model.maps import bqm_fuel_flow
 
     cyc = load_cycle(cycle) if isinstance(cycle, str) else cycle
     schedule = default_schedule(cyc, params, measured_map)
 
     def run(engine_map, p=params):
-        # the NumPy reference path for every map kind (no compilation for the one raw generated-map run)
-        return backward.run(cyc, p, engine_map=engine_map, schedule=schedule, compiled=False)
+        return backward.run(cyc, p, engine_map=engine_map, schedule=schedule)
 
     r_meas = run(measured_map)
     r_gen = run(generated_map(params.engine))
@@ -372,7 +371,7 @@ def compare_on_cycle(
                     )
                 )
             )
-        from .maps import generate_engine_map
+        from .model.maps import generate_engine_map
 
         sens["generated burns its own fuel at T_cr<=0"] = err(r_meas, run(generate_engine_map(params.engine)))
     return CycleCell(
@@ -554,7 +553,7 @@ def coverage_rows(cells) -> list[dict[str, Any]]:
 
 def stats_rows(result: Table4) -> list[dict[str, Any]]:
     """Figure 7 statistics: per engine and map (generated/calibrated), nodes and cycle-time weighted."""
-    from .maps import bqm_fuel_flow
+    from .model.maps import bqm_fuel_flow
 
     rows = []
     for label, cmp in result.maps.items():

@@ -34,7 +34,7 @@ def resolve_inputs(cycle, params, gears=None):
     else:
         schedule = load_schedule(Path(gears), params.transmission.n_gears)
     if schedule is None:
-        from .maps import cached_engine_map
+        from .model.maps import cached_engine_map
 
         schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
     return cycle, params, schedule

@@ -31,6 +31,7 @@ import numpy as np
 
 from .drivers.smoothing import SmoothingDriver
 from .errors import VpsimError
+from .model.record import record
 
 CYCLES = ("nedc", "ftp75")
 DRIVERS = ("1", "2")
@@ -155,7 +156,7 @@ def inversion_check(
     if feasible_only:
         ok &= (u >= params.engine.min_throttle_area) & (u <= params.engine.max_throttle_area)
     run_id = np.cumsum(np.r_[True, (ok[1:] != ok[:-1]) | (gear[1:] != gear[:-1])])
-    P = forward.constants(params)
+    c, settings = record(params), forward.settings(params)
     ratios = np.asarray(params.transmission.ratios)
     worst, checked, windows = 0.0, 0.0, 0
     trace = []
@@ -171,7 +172,8 @@ def inversion_check(
             np.array([t[i0], t[i1]]),
             ratios[gear[i0] - 1 : gear[i0]],
             y0,
-            P,
+            c,
+            settings,
             t[sl],
             u[sl],
             open_loop=True,
@@ -242,8 +244,8 @@ def run_study(
     ``advisor_dir``: also run the engine-scaling section (:func:`vpsim.scaling.paper_section`) and append
     it to the report; raises :class:`VpsimError` up front if that function is not available.
     """
-    from .maps import cached_engine_map
     from .methods import backward, forward, inverse
+    from .model.maps import cached_engine_map
     from .params import Parameters, load_parameters
     from .simulation import resolve_inputs
 
@@ -666,7 +668,7 @@ def _md_table(rows, columns) -> list[str]:
 
 def _beyond_engine_braking(result, params):
     """Seconds and energy (J) by which the BQM's demanded crank torque lies below the closed-throttle line."""
-    from .maps import cached_engine_map
+    from .model.maps import cached_engine_map
 
     s = result.series
     w = np.asarray(s["engine_speed_radps"])

@@ -31,10 +31,6 @@ from numba.extending import register_jitable
 
 from ..errors import VpsimError
 
-# NOTE: the forward kernel (methods/forward.py) is cached by numba, and numba invalidates that cache only when
-# forward.py itself changes. After editing the two functions below, touch forward.py (the test comparing the
-# compiled kernel with its pure-Python reference catches a stale cache).
-
 
 @register_jitable
 def pi_law(e, z, kp, ki, u_lo, u_hi, antiwindup_gain):

@@ -3,281 +3,305 @@
 The cycle is tracked exactly by construction: from the cycle's speed and acceleration on each interval
 (piecewise-linear cycle, so constant acceleration and mean speed per interval) follow the wheel force (18),
 wheel torque and speed (16),(17), engine torque and speed through the prescribed gear (14),(15) and the
-crank torque with the engine inertia (1). The crank torque is limited by the max-torque line; what is cut
-off is reported as a trace miss, never clipped silently. The fuel flow is looked up in the engine's fuel map
-(generated from the physics by :mod:`vpsim.maps`, or measured) and floored at the idle flow (section 5).
+crank torque with the engine inertia (1) — :func:`vpsim.model.rules.operating_point`, which also applies
+the realistic car's clutch and brakes in ``extended`` mode. The crank torque is limited by the max-torque
+line; what is cut off is reported as a trace miss, never clipped silently. The fuel flow is looked up in the
+engine's fuel map (generated from the physics by :mod:`vpsim.model.maps`, or measured) and floored at the
+idle flow (section 5).
+
+Two compiled passes over the intervals: :func:`operating_points` (and, for a generated map, its fuel), then
+:func:`account` (fuel, distance, the energy balance from :func:`vpsim.model.rules.powers`, trace miss).
+For a measured map the fuel flow between the two passes comes from the map itself.
+:func:`run_variants` is the same method for many design variants at once (:mod:`vpsim.batch`).
 
 Modes:
 * ``paper``: no clutch, no brakes; the engine stays coupled at standstill (w_e = 0, idle fuel).
-* ``extended``: below idle speed the clutch slips (engine held at idle speed, transmitting the torque asked
-  for) or opens when no traction is needed; friction brakes take what engine braking (the closed-throttle
-  line) cannot.
+* ``extended``: the rules of :mod:`vpsim.model.rules` (clutch slips or opens below idle speed, brakes).
 """
 
 from __future__ import annotations
 
-import functools
+import math
 import time
-import weakref
 
 import numpy as np
+from numba import prange
 
-from .. import _kernels as kn
-from .. import physics as ph
 from ..gears import GearSchedule, default_schedule
-from ..maps import GeneratedEngineMap, cached_engine_map
+from ..model import engine as en
+from ..model import rules
+from ..model import tables as tb
+from ..model import vehicle as vh
+from ..model._compile import kernel
+from ..model.engine import equation
+from ..model.maps import EngineMap, GeneratedEngineMap, cached_engine_map
+from ..model.record import ratios as total_ratios
+from ..model.record import record_array
 from ..result import EnergyBalance, Result, TraceMiss
 
-IDLE_SPEED = 80.0  # rad/s, the engine speed held in extended mode below which the clutch slips or opens
+MODES = ("paper", "extended")
+
+# how the fuel flow of an operating point is found
+FUEL_EXACT, FUEL_TABLE, FUEL_GIVEN = 0, 1, 2
+
+# rows of the per-interval array
+(R_TIME, R_V, R_A, R_W, R_DW, R_WWHEEL, R_TCR, R_SHORT, R_BRAKE, R_CLUTCH, R_P, R_MDOT) = range(12)
+N_ROWS = 12
+# results of account(): the energy terms (rules.ENERGY_TERMS order), then these
+A_FUEL = rules.N_TERMS
+A_DIST, A_MISS_S, A_MAX_SHORT, A_DEFICIT = A_FUEL + 1, A_FUEL + 2, A_FUEL + 3, A_FUEL + 4
+N_ACC = A_FUEL + 5
+MISS_TOLERANCE_NM = 1e-9  # a shortfall below this is rounding, not a trace miss
+
+
+@equation
+def gear_index(time_s, k, sched_t, sched_gear, j):
+    """Index (0-based) of the gear engaged on interval k (the schedule held right-continuously), and the
+    schedule position to start the next search from."""
+    m = sched_t.size
+    while j < m and sched_t[j] <= time_s[k]:
+        j += 1
+    idx = min(max(j - 1, 0), m - 1)
+    return sched_gear[idx] - 1, j
+
+
+@kernel
+def operating_points(
+    time_s,
+    speed,
+    sched_t,
+    sched_gear,
+    ratios,
+    c,
+    extended,
+    fuel_kind,
+    map_speed,
+    map_torque,
+    table,
+    line_speed,
+    line_max,
+    line_min,
+    gear,
+    rows,
+):
+    """Per interval: the operating point the cycle imposes, limited by the max-torque line, its intake
+    pressure and (``fuel_kind`` exact or table) its fuel flow. Fills ``gear`` (1-based) and ``rows``."""
+    j = 0
+    for k in range(gear.size):
+        g, j = gear_index(time_s, k, sched_t, sched_gear, j)
+        gear[k] = g + 1
+        i = ratios[g]
+        dt = time_s[k + 1] - time_s[k]
+        v = 0.5 * (speed[k + 1] + speed[k])
+        a = (speed[k + 1] - speed[k]) / dt
+        t_closed = 0.0
+        if extended:
+            t_closed = tb.interp_at(i * v / c.wheel_radius, line_speed, line_min)
+        w, dw, w_wheel, t_req, brake, clutch, _ = rules.operating_point(v, a, i, t_closed, extended, c)
+        t_max = tb.interp_at(w, line_speed, line_max)
+        short = t_req - t_max if t_req > t_max else 0.0
+        t_cr = t_req - short
+        p = en.intake_pressure_for_torque(t_cr, w, c)
+        if fuel_kind == FUEL_EXACT:
+            mdot = en.fuel_flow(p, w, c)
+        elif fuel_kind == FUEL_TABLE:
+            mdot = tb.bilinear_at(map_speed, map_torque, table, w, t_cr)
+        else:
+            mdot = math.nan
+        if clutch == rules.CLUTCH_OPEN:
+            mdot = c.idle_fuel_flow
+        rows[R_TIME, k] = 0.5 * (time_s[k + 1] + time_s[k])
+        rows[R_V, k] = v
+        rows[R_A, k] = a
+        rows[R_W, k] = w
+        rows[R_DW, k] = dw
+        rows[R_WWHEEL, k] = w_wheel
+        rows[R_TCR, k] = t_cr
+        rows[R_SHORT, k] = short
+        rows[R_BRAKE, k] = brake
+        rows[R_CLUTCH, k] = clutch
+        rows[R_P, k] = p
+        rows[R_MDOT, k] = mdot
+
+
+@equation
+def _kahan(acc, comp, q, x):
+    """acc[q] += x with Kahan's compensation in comp[q]."""
+    y = x - comp[q]
+    t = acc[q] + y
+    comp[q] = (t - acc[q]) - y
+    acc[q] = t
+
+
+@kernel
+def account(time_s, rows, ratios, gear, c, with_engine, acc):
+    """Fuel, distance, the energy terms (compensated sums over the intervals) and the trace miss: seconds
+    beyond the max-torque line, the largest shortfall and the largest speed deficit accumulated over a
+    contiguous miss. Engine energy terms only ``with_engine`` (a map from the model's physics)."""
+    comp = np.zeros(N_ACC)
+    for q in range(N_ACC):
+        acc[q] = 0.0
+    cur = 0.0
+    for k in range(gear.size):
+        dt = time_s[k + 1] - time_s[k]
+        v = rows[R_V, k]
+        mdot = rows[R_MDOT, k]
+        short = rows[R_SHORT, k]
+        clutch = int(rows[R_CLUTCH, k])
+        _kahan(acc, comp, A_FUEL, rules.fuel_with_idle_floor(mdot, c) * dt)
+        _kahan(acc, comp, A_DIST, v * dt)
+        pw = rules.powers(
+            rows[R_P, k],
+            rows[R_W, k],
+            rows[R_DW, k],
+            rows[R_TCR, k],
+            short,
+            rows[R_WWHEEL, k],
+            v,
+            rows[R_A, k],
+            rows[R_BRAKE, k],
+            clutch,
+            c,
+        )
+        for q in range(rules.N_TERMS):
+            if with_engine or q >= 5 and q <= 8:
+                _kahan(acc, comp, q, pw[q] * dt)
+        if short > acc[A_MAX_SHORT]:
+            acc[A_MAX_SHORT] = short
+        if short > MISS_TOLERANCE_NM:  # the speed the engine could not give accumulates over the miss
+            _kahan(acc, comp, A_MISS_S, dt)
+            i = ratios[gear[k] - 1]
+            cur += vh.engine_to_wheel_force(short, i, c) / vh.equivalent_mass(i, c) * dt
+            if cur > acc[A_DEFICIT]:
+                acc[A_DEFICIT] = cur
+        else:
+            cur = 0.0
+
+
+def _map_arrays(engine_map, params):
+    """(fuel kind, table speed, table torque, table, line speeds, max line, min line) for the kernels."""
+    if isinstance(engine_map, GeneratedEngineMap):
+        kind = FUEL_EXACT if engine_map.exact else FUEL_TABLE
+        return (
+            kind,
+            engine_map.speed,
+            engine_map.torque,
+            engine_map.table,
+            engine_map.max_torque_speed,
+            engine_map.max_torque_values,
+            engine_map.min_torque_values,
+        )
+    # any other map: its lines tabulated at 1 rad/s over its speed range, its fuel flow asked for directly
+    w_top = 1.25 * params.engine.map_speed_range[1]
+    w = np.linspace(0.0, w_top, int(round(w_top)) + 1)
+    none = np.zeros(2)
+    return (
+        FUEL_GIVEN,
+        none,
+        none,
+        np.zeros((2, 2)),
+        w,
+        np.asarray(engine_map.max_torque(w), float),
+        np.asarray(engine_map.min_torque(w), float),
+    )
 
 
 def run(
     cycle,
     params,
     *,
-    engine_map=None,
+    engine_map: EngineMap | None = None,
     schedule: GearSchedule | None = None,
     mode: str = "paper",
     keep_series: bool = True,
-    compiled: bool = True,
 ) -> Result:
-    """Run the BQM on ``cycle``. ``engine_map`` defaults to the map generated from ``params.engine``.
-
-    With a generated map (:class:`vpsim.maps.GeneratedEngineMap`) the per-interval loop runs compiled
-    (:func:`vpsim._kernels.backward_single`, cached on disk by Numba); ``compiled=False``, or a map of another
-    kind, runs the NumPy reference. Both give the same result to rounding (checked by tests/test_kernels.py).
-    """
-    if mode not in ("paper", "extended"):
+    """Run the BQM on ``cycle``. ``engine_map`` defaults to the map generated from ``params.engine``."""
+    if mode not in MODES:
         raise ValueError(f"mode must be 'paper' or 'extended', got {mode!r}")
     if engine_map is None:
         engine_map = cached_engine_map(params.engine)
+    elif not isinstance(engine_map, EngineMap):
+        raise TypeError(
+            f"engine_map must implement vpsim.model.maps.EngineMap, got {type(engine_map).__name__}"
+        )
     if schedule is None:
         schedule = default_schedule(cycle, params, engine_map)
-    if compiled and isinstance(engine_map, GeneratedEngineMap):
-        return _run_compiled(cycle, params, engine_map, schedule, mode, keep_series)
-    return _run_numpy(cycle, params, engine_map, schedule, mode, keep_series)
-
-
-def _run_numpy(cycle, params, engine_map, schedule: GearSchedule, mode: str, keep_series: bool) -> Result:
-    """The reference implementation: the BQM as vectorised NumPy over the cycle's intervals."""
-    t0 = time.process_time()
-    veh, tr, sim = params.vehicle, params.transmission, params.simulation
-    ratios = np.asarray(tr.ratios)
-    gear = schedule.on_cycle(cycle)[:-1]
-    i = ratios[gear - 1]
-    t = cycle.time_s
-    dt = np.diff(t)
-    v = 0.5 * (cycle.speed_mps[1:] + cycle.speed_mps[:-1])
-    a = np.diff(cycle.speed_mps) / dt
-    moving = v > 0
-    r = veh.wheel_radius
-    eta = tr.efficiency
-    j_e = engine_map.inertia
-    aero = ph.aero_force(v, veh)
-    roll = ph.rolling_force(veh) * moving
-    f_req = veh.mass * a + aero + roll  # (18): the wheel force the cycle asks for
-    w_e = i * v / r  # (14),(17)
-    dw_e = i * a / r
-    t_cr_req = f_req * r / (i * eta) + j_e * dw_e  # (15),(16),(1)
-    brake_force = np.zeros_like(v)
-    coupled = np.ones(v.shape, bool)
-    if mode == "extended":
-        # engine braking limit: the closed-throttle line; brakes take the rest
-        t_min = engine_map.min_torque(w_e) if hasattr(engine_map, "min_torque") else np.zeros_like(w_e)
-        excess = np.minimum(t_cr_req - t_min, 0.0)
-        brake_force = -excess * i * eta / r
-        t_cr_req = np.maximum(t_cr_req, t_min)
-        # below idle speed: clutch slips at idle speed under traction, opens otherwise
-        low = w_e < IDLE_SPEED
-        slip = low & (f_req > 0)
-        openc = low & ~slip
-        t_cr_req = np.where(slip, f_req * r / (i * eta), t_cr_req)  # slipping clutch: no inertia change
-        w_e = np.where(low, IDLE_SPEED, w_e)
-        dw_e = np.where(low, 0.0, dw_e)
-        brake_force = np.where(openc, np.maximum(-f_req, 0.0), np.where(slip, 0.0, brake_force))
-        t_cr_req = np.where(openc, 0.0, t_cr_req)
-        coupled = ~openc
-    t_max = engine_map.max_torque(w_e)
-    shortfall = np.maximum(t_cr_req - t_max, 0.0)
-    t_cr = t_cr_req - shortfall
-    mdot = engine_map.fuel_flow(t_cr, w_e)
-    if mode == "extended":
-        mdot = np.where(coupled, mdot, sim.idle_fuel_flow)
-    mdot_used = ph.fuel_with_idle_floor(mdot, sim.idle_fuel_flow)
-    fuel_kg = float(np.sum(mdot_used * dt))
-    distance = float(np.sum(v * dt))
-    cpu = time.process_time() - t0
-
-    missed = shortfall > 1e-9
-    m_eq = veh.mass + j_e * i**2 * eta / r**2
-    dv_deficit = shortfall * i * eta / (r * m_eq)  # acceleration the engine could not give
-    trace = TraceMiss(
-        seconds=float(np.sum(dt[missed])),
-        max_torque_shortfall_nm=float(shortfall.max(initial=0.0)),
-        details={"speed_deficit_mps": float(_max_run_sum(dv_deficit * dt, missed))},
-    )
-    energy = None
-    intake = None
-    if hasattr(engine_map, "intake_pressure"):
-        eng = engine_map.engine
-        p_i = engine_map.intake_pressure(t_cr, w_e)
-        intake = np.where(coupled, p_i, np.nan)
-        cps = ph.cycles_per_second(w_e, eng) * ph.displacement(eng)  # MEP x this = power
-        c = coupled
-        energy = EnergyBalance(
-            indicated=float(np.sum((mdot * eng.fuel_heating_value * eng.thermal_efficiency * dt)[c])),
-            friction=float(np.sum((ph.fmep(p_i, w_e, eng) * cps * dt)[c])),
-            pumping=float(np.sum((ph.pmep(p_i, eng) * cps * dt)[c])),
-            engine_kinetic=float(np.sum((j_e * w_e * dw_e * dt)[c])),
-            driveline_loss=float(np.sum(((1 - eta) * (t_cr + shortfall - j_e * dw_e) * w_e * dt)[c])),
-            vehicle_kinetic=float(np.sum(veh.mass * v * a * dt)),
-            aero=float(np.sum(aero * v * dt)),
-            rolling=float(np.sum(roll * v * dt)),
-            brake=float(np.sum(brake_force * v * dt)),
-            trace_miss=float(np.sum((shortfall * w_e * dt)[c])),
-        )
-        if mode == "extended":
-            # a slipping clutch dissipates T_e (w_idle - w_wheel-side); count it with the driveline
-            slip_loss = np.where(slip, (f_req * r / (i * eta)) * (IDLE_SPEED - i * v / r), 0.0)
-            energy = _replace(energy, driveline_loss=energy.driveline_loss + float(np.sum(slip_loss * dt)))
-    series = {}
-    if keep_series:
-        series = {
-            "time_s": 0.5 * (t[1:] + t[:-1]),
-            "reference_speed_mps": v,
-            "speed_mps": v,
-            "accel_mps2": a,
-            "gear": gear,
-            "engine_speed_radps": w_e,
-            "crank_torque_nm": t_cr,
-            "engine_torque_nm": t_cr - j_e * dw_e,
-            "intake_pressure_pa": intake if intake is not None else np.full_like(v, np.nan),
-            "fuel_flow_kgps": mdot,
-            "fuel_flow_used_kgps": mdot_used,
-            "brake_force_n": brake_force,
-            "torque_shortfall_nm": shortfall,
-        }
-    return _result(cycle, params, mode, series, fuel_kg, distance, cpu, int(dt.size), trace, energy)
-
-
-_warm = False
-
-
-def _run_compiled(cycle, params, engine_map, schedule: GearSchedule, mode: str, keep_series: bool) -> Result:
-    """The same computation as :func:`_run_numpy`, its per-interval loop compiled (vpsim._kernels)."""
-    global _warm
-    if not _warm:  # load (or compile) the kernel once per process, so cpu_time_s measures the run only
-        _warm = True
-        tiny = cycle.__class__(cycle.name, cycle.time_s[:2], cycle.speed_mps[:2])
-        _run_compiled(tiny, params, engine_map, schedule, mode, keep_series)
-    t0 = time.process_time()
-    eng = engine_map.engine
-    c, ratios = _kernel_inputs(params, eng)
-    n = cycle.time_s.size - 1
-    gear = np.empty(n, dtype=np.int64)
-    s = np.empty((kn.N_SERIES, n))
-    res = np.empty(kn.N_RESULTS)
     extended = mode == "extended"
-    kn.backward_single(
-        cycle.time_s,
-        cycle.speed_mps,
-        schedule.time_s,
-        schedule.gear,
-        ratios,
-        c,
-        extended,
-        bool(engine_map.exact),
-        engine_map.speed,
-        engine_map.torque,
-        engine_map.table,
-        engine_map.max_torque_speed,
-        engine_map.max_torque_values,
-        engine_map.min_torque_values,
-        gear,
-        s,
-        res,
-    )
+    kind, m_speed, m_torque, table, l_speed, l_max, l_min = _map_arrays(engine_map, params)
+    generated = isinstance(engine_map, GeneratedEngineMap)
+    c = record_array(params)[0]
+    ratios = total_ratios(params.transmission)
+    n = cycle.time_s.size - 1
+
+    def passes(time_s, speed):
+        gear = np.empty(time_s.size - 1, dtype=np.int64)
+        rows = np.empty((N_ROWS, time_s.size - 1))
+        operating_points(
+            time_s,
+            speed,
+            schedule.time_s,
+            schedule.gear,
+            ratios,
+            c,
+            extended,
+            kind,
+            m_speed,
+            m_torque,
+            table,
+            l_speed,
+            l_max,
+            l_min,
+            gear,
+            rows,
+        )
+        if kind == FUEL_GIVEN:
+            flow = np.asarray(engine_map.fuel_flow(rows[R_TCR], rows[R_W]), dtype=float)
+            rows[R_MDOT] = np.where(
+                rows[R_CLUTCH] == rules.CLUTCH_OPEN, params.simulation.idle_fuel_flow, flow
+            )
+        acc = np.empty(N_ACC)
+        account(time_s, rows, ratios, gear, c, generated, acc)
+        return gear, rows, acc
+
+    if not (operating_points.overloads and account.overloads):  # compile (or load) outside the timing
+        passes(cycle.time_s[:2], cycle.speed_mps[:2])
+    t0 = time.process_time()
+    gear, rows, acc = passes(cycle.time_s, cycle.speed_mps)
     cpu = time.process_time() - t0
-    sums = res.tolist()
+    sums = acc.tolist()
     trace = TraceMiss(
-        seconds=sums[kn.R_MISS_S],
-        max_torque_shortfall_nm=sums[kn.R_MAX_SHORT],
-        details={"speed_deficit_mps": sums[kn.R_DEFICIT]},
+        seconds=sums[A_MISS_S],
+        max_torque_shortfall_nm=sums[A_MAX_SHORT],
+        details={"speed_deficit_mps": sums[A_DEFICIT]},
     )
-    energy = EnergyBalance(
-        indicated=sums[kn.I_INDICATED],
-        friction=sums[kn.I_FRICTION],
-        pumping=sums[kn.I_PUMPING],
-        engine_kinetic=sums[kn.I_ENGINE_KIN],
-        driveline_loss=sums[kn.I_DRIVELINE] + sums[kn.I_SLIP] if extended else sums[kn.I_DRIVELINE],
-        vehicle_kinetic=sums[kn.I_VEHICLE_KIN],
-        aero=sums[kn.I_AERO],
-        rolling=sums[kn.I_ROLLING],
-        brake=sums[kn.I_BRAKE],
-        trace_miss=sums[kn.I_TRACE],
+    energy = (
+        EnergyBalance(**dict(zip(rules.ENERGY_TERMS, sums[: rules.N_TERMS], strict=True)))
+        if generated
+        else None
     )
     series = {}
     if keep_series:
-        v = s[kn.S_V]
-        p_i = np.where(s[kn.S_COUPLED] > 0, s[kn.S_P], np.nan) if extended else s[kn.S_P]
+        engaged = rows[R_CLUTCH] != rules.CLUTCH_OPEN
+        mdot = rows[R_MDOT]
         series = {
-            "time_s": s[kn.S_TIME],
-            "reference_speed_mps": v,
-            "speed_mps": v,
-            "accel_mps2": s[kn.S_A],
+            "time_s": rows[R_TIME],
+            "reference_speed_mps": rows[R_V],
+            "speed_mps": rows[R_V],
+            "accel_mps2": rows[R_A],
             "gear": gear,
-            "engine_speed_radps": s[kn.S_W],
-            "crank_torque_nm": s[kn.S_TCR],
-            "engine_torque_nm": s[kn.S_TE],
-            "intake_pressure_pa": p_i,
-            "fuel_flow_kgps": s[kn.S_MDOT],
-            "fuel_flow_used_kgps": s[kn.S_MDOT_USED],
-            "brake_force_n": s[kn.S_BRAKE],
-            "torque_shortfall_nm": s[kn.S_SHORT],
+            "engine_speed_radps": rows[R_W],
+            "crank_torque_nm": rows[R_TCR],
+            "engine_torque_nm": rows[R_TCR] - params.engine.inertia * rows[R_DW],
+            "intake_pressure_pa": np.where(engaged, rows[R_P], np.nan) if generated else np.full(n, np.nan),
+            "fuel_flow_kgps": mdot,
+            "fuel_flow_used_kgps": np.maximum(mdot, params.simulation.idle_fuel_flow),
+            "brake_force_n": rows[R_BRAKE],
+            "torque_shortfall_nm": rows[R_SHORT],
         }
-    return _result(cycle, params, mode, series, sums[kn.I_FUEL], sums[kn.I_DIST], cpu, n, trace, energy)
-
-
-_INPUTS: dict = {}  # (id(params), id(engine)) -> (weak refs to both, constants, ratios): see _kernel_inputs
-
-
-def _kernel_inputs(params, engine) -> tuple[np.ndarray, np.ndarray]:
-    """(constants, total ratios) of the kernel for this parameter set and engine, memoised by identity.
-
-    Hashing the frozen parameter sections for an lru_cache costs about a microsecond per run, a tenth of the
-    Python around a compiled run; an identity look-up (checked through weak references, so a recycled id
-    never returns another set's values) is nearly free. Values are rebuilt from scratch after 64 entries.
-    """
-    key = (id(params), id(engine))
-    hit = _INPUTS.get(key)
-    if hit is not None and hit[0]() is params and hit[1]() is engine:
-        return hit[2], hit[3]
-    c = _constants(params.vehicle, params.transmission, engine, params.simulation)
-    r = _ratios(params.transmission)
-    if len(_INPUTS) >= 64:
-        _INPUTS.clear()
-    _INPUTS[key] = (weakref.ref(params), weakref.ref(engine), c, r)
-    return c, r
-
-
-@functools.lru_cache(maxsize=128)
-def _ratios(transmission) -> np.ndarray:
-    """Total ratio per gear as an array (read-only), cached per transmission."""
-    r = np.asarray(transmission.ratios, dtype=float)
-    r.setflags(write=False)
-    return r
-
-
-@functools.lru_cache(maxsize=128)
-def _constants(vehicle, transmission, engine, simulation) -> np.ndarray:
-    """The compiled kernel's constants for one parameter set (vpsim._kernels.pack_constants), cached."""
-    c = kn.pack_constants(vehicle, transmission, engine, simulation)[0]
-    c.setflags(write=False)
-    return c
+    return _result(cycle, params, mode, series, sums[A_FUEL], sums[A_DIST], cpu, n, trace, energy)
 
 
 def _result(cycle, params, mode, series, fuel_kg, distance, cpu, steps, trace, energy) -> Result:
-    sim = params.simulation
     notes = []
     if trace.seconds:
         notes.append(
@@ -292,7 +316,7 @@ def _result(cycle, params, mode, series, fuel_kg, distance, cpu, steps, trace, e
         series=series,
         fuel_kg=fuel_kg,
         distance_m=distance,
-        fuel_density_kg_per_l=sim.fuel_density,
+        fuel_density_kg_per_l=params.simulation.fuel_density,
         cpu_time_s=cpu,
         steps=steps,
         trace_miss=trace,
@@ -302,18 +326,146 @@ def _result(cycle, params, mode, series, fuel_kg, distance, cpu, steps, trace, e
     )
 
 
-def _replace(obj, **kw):
-    from dataclasses import replace
+# --- many design variants at once ----------------------------------------------------------------------------
 
-    return replace(obj, **kw)
+# columns of run_variants' output
+B_FUEL, B_MISS_S, B_MAX_SHORT, B_DEFICIT = range(4)
+N_BATCH_OUT = 4
 
 
-def _max_run_sum(x, mask):
-    """Largest sum of ``x`` over a contiguous run where ``mask`` holds."""
-    if not np.any(mask):
-        return 0.0
-    best = cur = 0.0
-    for xi, m in zip(x, mask, strict=True):
-        cur = cur + xi if m else 0.0
-        best = max(best, cur)
-    return best
+@equation
+def _line_node(j, n_line, w_end):
+    """Node j of numpy.linspace(0, w_end, n_line) (the last node is w_end exactly)."""
+    if j >= n_line - 1:
+        return w_end
+    return j * (w_end / (n_line - 1))
+
+
+@equation
+def _line_value(j, a_eff, cache, n_line, w_end, c):
+    """FQM crank torque at line node j for throttle area a_eff, computed on first use and cached."""
+    val = cache[j]
+    if val != val:  # NaN: not yet computed
+        val = en.steady_torque(a_eff, _line_node(j, n_line, w_end), c)
+        cache[j] = val
+    return val
+
+
+@equation
+def _lazy_line(w, a_eff, cache, n_line, w_end, c):
+    """numpy.interp(w, line speeds, line torques) with the line's nodes computed lazily."""
+    if w <= 0.0:
+        return _line_value(0, a_eff, cache, n_line, w_end, c)
+    if w >= w_end:
+        return _line_value(n_line - 1, a_eff, cache, n_line, w_end, c)
+    j = min(int(w / (w_end / (n_line - 1))), n_line - 2)
+    while j > 0 and _line_node(j, n_line, w_end) > w:
+        j -= 1
+    while _line_node(j + 1, n_line, w_end) <= w:
+        j += 1
+    x0 = _line_node(j, n_line, w_end)
+    f0 = _line_value(j, a_eff, cache, n_line, w_end, c)
+    if x0 == w:
+        return f0
+    x1 = _line_node(j + 1, n_line, w_end)
+    f1 = _line_value(j + 1, a_eff, cache, n_line, w_end, c)
+    return (f1 - f0) / (x1 - x0) * (w - x0) + f0
+
+
+@equation
+def _variant(c, rat, gear, dt, v, a, v_top_gear, extended, out):
+    """One variant: the operating points of :func:`operating_points` with the exact BQM, each line of the
+    variant's own engine evaluated lazily (a Newton solve per node actually needed).
+
+    The max-torque line matters only where the demanded intake pressure comes near the wide-open-throttle
+    pressure p_max(w_e), which decreases with w_e: below p_max at a node above every speed of the run, less
+    the largest friction rise over two node intervals, no point can reach the (interpolated) line, so it is
+    not evaluated there.
+    """
+    w_end = 1.25 * c.map_speed_high  # as model.maps.generate_engine_map
+    w_top = c.idle_speed if extended else 0.0
+    for g in range(rat.size):
+        w_top = max(w_top, rat[g] * v_top_gear[g] / c.wheel_radius)
+    n_line = int(round(w_end / 1.0)) + 1
+    step = w_end / (n_line - 1)
+    j_s = min(int(math.ceil(w_top / step)) + 2, n_line - 1)
+    w_s = _line_node(j_s, n_line, w_end)
+    p_floor, _ = en.steady_pressure(c.max_throttle_area, w_s, c)
+    # the rise of the demanded pressure over two node intervals (friction grows with speed)
+    d_p = en.intake_pressure_for_torque(0.0, w_s, c) - en.intake_pressure_for_torque(
+        0.0, max(w_s - 2.0 * step, 0.0), c
+    )
+    p_screen = p_floor - d_p - 1e-7 * c.ambient_pressure
+    cache_max = np.full(n_line, np.nan)
+    cache_min = np.full(n_line if extended else 1, np.nan)
+    fuel = 0.0
+    miss_s = 0.0
+    max_short = 0.0
+    best = 0.0
+    cur = 0.0
+    for k in range(gear.size):
+        i = rat[gear[k]]
+        t_closed = 0.0
+        if extended:
+            t_closed = _lazy_line(i * v[k] / c.wheel_radius, c.min_throttle_area, cache_min, n_line, w_end, c)
+        w, dw, w_wheel, t_req, brake, clutch, _ = rules.operating_point(v[k], a[k], i, t_closed, extended, c)
+        p = en.intake_pressure_for_torque(t_req, w, c)
+        short = 0.0
+        if not (w <= w_end and p <= p_screen):
+            t_max = _lazy_line(w, c.max_throttle_area, cache_max, n_line, w_end, c)
+            if t_req > t_max:
+                short = t_req - t_max
+                p = en.intake_pressure_for_torque(t_max, w, c)
+        if short > MISS_TOLERANCE_NM:
+            miss_s += dt[k]
+            max_short = max(max_short, short)
+            cur += vh.engine_to_wheel_force(short, i, c) / vh.equivalent_mass(i, c) * dt[k]
+            best = max(best, cur)
+        else:
+            max_short = max(max_short, short)
+            cur = 0.0
+        mdot = en.fuel_flow(p, w, c) if clutch != rules.CLUTCH_OPEN else c.idle_fuel_flow
+        fuel += rules.fuel_with_idle_floor(mdot, c) * dt[k]
+    out[B_FUEL] = fuel
+    out[B_MISS_S] = miss_s
+    out[B_MAX_SHORT] = max_short
+    out[B_DEFICIT] = best
+
+
+@kernel(parallel=True)
+def _variants(recs, ratios, schedule_of_variant, gears, v_top_gear, dt, v, a, extended, out):
+    for m in prange(recs.size):
+        s = schedule_of_variant[m]
+        _variant(recs[m], ratios[m], gears[s], dt, v, a, v_top_gear[s], extended, out[m])
+
+
+def run_variants(cycle, recs, ratios, gears, schedule_of_variant, mode: str) -> np.ndarray:
+    """The backward method for many variants (parallel over them), exact BQM; no series.
+
+    ``recs``: record array (n_var,) (:func:`vpsim.model.record.records`); ``ratios``: (n_var, n_gears) total
+    ratios; ``gears``: (n_schedules, n_samples) 1-based gear per cycle sample; ``schedule_of_variant``: row of
+    ``gears`` each variant follows. Returns (n_var, N_BATCH_OUT): fuel (kg), trace-miss seconds, largest
+    shortfall (N m), largest speed deficit (m/s).
+    """
+    t, vs = cycle.time_s, cycle.speed_mps
+    dt = np.diff(t)
+    v = 0.5 * (vs[1:] + vs[:-1])
+    a = np.diff(vs) / dt
+    gear_idx = np.ascontiguousarray(gears[:, :-1] - 1, dtype=np.int64)
+    v_top_gear = np.zeros((gear_idx.shape[0], ratios.shape[1]))  # fastest interval driven in each gear
+    for s in range(gear_idx.shape[0]):
+        np.maximum.at(v_top_gear[s], gear_idx[s], v)
+    out = np.empty((recs.size, N_BATCH_OUT))
+    _variants(
+        np.asarray(recs).view(np.ndarray),
+        np.ascontiguousarray(ratios, dtype=float),
+        np.asarray(schedule_of_variant, dtype=np.int64),
+        gear_idx,
+        v_top_gear,
+        dt,
+        v,
+        a,
+        mode == "extended",
+        out,
+    )
+    return out

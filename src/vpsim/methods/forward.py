@@ -20,8 +20,9 @@ continuous extension (ode45's ``ntrp45``) for output at the requested times. Gea
 prescribed instants: the integration stops exactly there and restarts in the new gear (new initial step).
 The default maximum step is Simulink's "auto", a fiftieth of the cycle's duration. The quadrature states do
 not enter the error norm (as in CVODES' default), their integrands are smooth where the dynamic states are.
-The kernel is plain scalar loops compiled with ``numba.njit(cache=True)``; ``_integrate.py_func`` runs the
-very same code in Python (the reference the tests compare against).
+The kernel is plain scalar loops compiled with Numba (cached on disk); the right side calls the model's
+equations (:mod:`vpsim.model`) and nothing else. Tests check it against independent references (SciPy's
+LSODA/Radau on the model's equations, the FQM at steady state).
 
 Modes (one switch for every method):
 
@@ -32,7 +33,7 @@ Modes (one switch for every method):
   meaningless standstill behaviour. The car does not roll backwards: at v = 0 rolling resistance is static
   friction (it holds up to m g c_r) and v >= 0 is kept (a step that ends below zero is set to zero and the
   FSAL derivative is re-evaluated).
-* ``extended``: below the idle speed (:data:`vpsim.methods.backward.IDLE_SPEED`) the clutch slips: the engine
+* ``extended``: below the idle speed (``c.idle_speed``, :mod:`vpsim.model.rules`) the clutch slips: the engine
   is held at idle speed with the throttle max(A_driver, A_idle) (A_idle: the steady throttle of zero crank
   torque at idle), and the clutch passes max(T_cr, 0) to the gearbox; the engine inertia is then not coupled.
   Above it the driveline is stiff as in ``paper``. The PI's command continues below zero into the friction
@@ -47,52 +48,27 @@ import time
 import types
 
 import numpy as np
-from numba import njit
 from numba.extending import register_jitable
 
-from .. import physics as ph
 from ..drivers.pi import PIDriver, pedal_split, pi_law
 from ..errors import VpsimError
 from ..gears import GearSchedule, default_schedule
+from ..model import engine as en
+from ..model import rules
+from ..model import tables as tb
+from ..model import vehicle as vh
+from ..model._compile import kernel
+from ..model.record import record
 from ..result import EnergyBalance, Result, TraceMiss
-from .backward import IDLE_SPEED
 
 BAND_KMH = 2.0  # the regulation's speed tolerance (UN ECE R83 / EPA: +-2 km/h resp. +-2 mph)
 
-# --- layout of the constants vector P (reciprocals and products precomputed: the right side is latency bound)
-(
-    _M,
-    _INV_M,
-    _R,
-    _ETA,
-    _J,
-    _AERO,
-    _ROLL,
-    _INV_PA,
-    _KTHR,
-    _GAMMA,
-    _PRCRIT,
-    _PSICH,
-    _KMAN,
-    _KCYL,
-    _SI,
-    _YI,
-    _INV_AFR,
-    _Q,
-    _KF,
-    _FS0,
-    _FS1,
-    _CM,
-    _BM,
-    _PE,
-    _KMEP,
-    _QHV,
-) = range(26)
-_KP, _KI, _ULO, _UHI, _AWG, _AMIN, _KB = range(26, 33)
-_EXT, _WIDLE, _AIDLE, _MIDLE, _TAB_INVDT, _OPEN, _BAND = range(33, 40)
-N_CONST = 40
-# per-gear constants G: i, i / r, i eta_tm / r, 1 / m_eq, J_e i / r
-_G_I, _G_KIN, _G_FORCE, _G_INV_MEQ, _G_JW = range(5)
+# --- the driver's and the mode's settings D (the model's constants are the record c, vpsim.model.record) ---
+_KP, _KI, _ULO, _UHI, _AWG, _AMIN, _KB = range(7)  # PIDriver.as_array()
+_EXT, _AIDLE, _OPEN, _BAND = range(7, 11)
+N_SETTINGS = 11
+# per-gear constants G: i, 1 / m_eq, i / r
+_G_I, _G_INV_MEQ, _G_KIN = range(3)
 
 # --- states ---------------------------------------------------------------------------------------------
 _V, _P, _Z = 0, 1, 2
@@ -147,141 +123,82 @@ STATUS_OK, STATUS_STEP_TOO_SMALL, STATUS_TOO_MANY_STEPS = 0, 1, 2
 
 
 @register_jitable
-def _interp(xs, ys, x, inv_dt):
-    """Piecewise-linear interpolation, held constant outside [xs[0], xs[-1]].
-
-    ``inv_dt`` > 0 declares the grid uniform with that inverse spacing (the interval is then found by one
-    multiplication instead of a binary search).
-    """
-    n = xs.size
-    if x <= xs[0]:
-        return ys[0]
-    if x >= xs[n - 1]:
-        return ys[n - 1]
-    if inv_dt > 0.0:
-        k = int((x - xs[0]) * inv_dt)
-        if k > n - 2:
-            k = n - 2
-        return ys[k] + (ys[k + 1] - ys[k]) * ((x - xs[k]) * inv_dt)
-    k = np.searchsorted(xs, x, "right") - 1
-    return ys[k] + (ys[k + 1] - ys[k]) * (x - xs[k]) / (xs[k + 1] - xs[k])
-
-
-@register_jitable
-def psi_scalar(pr, P):
-    """Flow function Psi (12),(13) of one pressure ratio; zero at and above p_r = 1 (no reverse flow)."""
-    if pr <= P[_PRCRIT]:
-        return P[_PSICH]
-    if pr >= 1.0:
-        return 0.0
-    g = P[_GAMMA]
-    lp = math.log(pr)
-    f = 2.0 * g / (g - 1.0) * (math.exp(2.0 / g * lp) - math.exp((g + 1.0) / g * lp))
-    return math.sqrt(f) if f > 0.0 else 0.0
-
-
-@register_jitable
-def engine_scalar(p, w, P):
-    """Engine at (p_i, w_e): cylinder air flow (8), crank torque (2)-(6) solved for BMEP, fuel flow (7).
-
-    Returns (mdot_ac, T_cr, BMEP, speed part of FMEP); scalar form of :mod:`vpsim.physics` for the kernels.
-    """
-    charge = P[_SI] * p - P[_YI]  # s_i p_i - y_i, proportional to the air charge
-    mdot_ac = P[_KCYL] * w * charge
-    fric_speed = P[_FS0] + P[_FS1] * (P[_CM] * w) ** 1.8
-    bmep = (P[_Q] * charge - fric_speed - (P[_PE] - p)) * P[_BM]
-    return mdot_ac, bmep * P[_KMEP], bmep, fric_speed
-
-
-@register_jitable
-def _gear(ratio, P, G):
+def _gear(ratio, c, G):
     """Fill the per-gear constants G for total ratio i."""
     G[_G_I] = ratio
-    G[_G_KIN] = ratio / P[_R]
-    G[_G_FORCE] = ratio * P[_ETA] / P[_R]
-    G[_G_INV_MEQ] = 1.0 / (P[_M] + P[_J] * G[_G_KIN] * G[_G_FORCE])
-    G[_G_JW] = P[_J] * G[_G_KIN]
+    G[_G_INV_MEQ] = 1.0 / vh.equivalent_mass(ratio, c)
+    G[_G_KIN] = vh.engine_speed(1.0, ratio, c)  # w_e per unit v
 
 
 @register_jitable
-def _rhs(t, y, G, P, tab_t, tab_v, dy, aux):
+def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     """Right side of model + driver + quadratures at (t, y) with gear constants G; fills ``dy`` and ``aux``.
 
-    The table (tab_t, tab_v) is the cycle speed for the PI driver or, with P[_OPEN] = 1, the throttle area
+    The table (tab_t, tab_v) is the cycle speed for the PI driver or, with D[_OPEN] = 1, the throttle area
     fed open loop (not clipped).
     """
     v = y[_V]
     p = y[_P]
     vv = v if v > 0.0 else 0.0
     # driver
-    if P[_OPEN] != 0.0:
-        cmd = _interp(tab_t, tab_v, t, P[_TAB_INVDT])
+    if D[_OPEN] != 0.0:
+        cmd = tb.interp_at(t, tab_t, tab_v)
         v_ref = vv
         throttle = cmd
         brake = 0.0
         dz = 0.0
     else:
-        v_ref = _interp(tab_t, tab_v, t, P[_TAB_INVDT])
-        cmd, dz = pi_law(v_ref - vv, y[_Z], P[_KP], P[_KI], P[_ULO], P[_UHI], P[_AWG])
-        throttle, brake = pedal_split(cmd, P[_AMIN], P[_KB])
+        v_ref = tb.interp_at(t, tab_t, tab_v)
+        cmd, dz = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], D[_ULO], D[_UHI], D[_AWG])
+        throttle, brake = pedal_split(cmd, D[_AMIN], D[_KB])
     # driveline kinematics: stiff, or slipping clutch with the engine held at idle (extended mode)
-    w_wheel = G[_G_KIN] * vv
-    coupled = P[_EXT] == 0.0 or w_wheel >= P[_WIDLE]
+    ratio = G[_G_I]
+    w_wheel = vh.engine_speed(vv, ratio, c)  # (14),(17)
+    coupled = D[_EXT] == 0.0 or rules.clutch_engaged(w_wheel, c)
     if coupled:
         w = w_wheel
         a_eng = throttle
     else:
-        w = P[_WIDLE]
-        a_eng = throttle if throttle > P[_AIDLE] else P[_AIDLE]
-    # engine: manifold (9),(10), air and fuel charge (7),(8), torque (2)-(6) solved for BMEP
-    mdot_ac, t_cr, bmep, fric_speed = engine_scalar(p, w, P)
-    dp = P[_KMAN] * (P[_KTHR] * a_eng * psi_scalar(p * P[_INV_PA], P) - mdot_ac)
-    mdot_f = mdot_ac * P[_INV_AFR]
+        w = c.idle_speed
+        a_eng = throttle if throttle > D[_AIDLE] else D[_AIDLE]
+    # engine: manifold (9),(10), torque (2)-(8), fuel (7)
+    t_cr = en.crank_torque(p, w, c)
+    dp = en.manifold_pressure_rate(p, a_eng, w, c)
+    mdot_f = en.fuel_flow(p, w, c)
     # vehicle (18) with the engine inertia (1),(14)-(17)
     if coupled:
-        inv_m = G[_G_INV_MEQ]
         t_clutch = t_cr
+        acc = vh.acceleration(vh.engine_to_wheel_force(t_cr, ratio, c), v, brake, 1.0 / G[_G_INV_MEQ], c)
+        dw = G[_G_KIN] * acc
+        clutch = rules.CLUTCH_ENGAGED
+        t_e = t_cr - c.inertia * dw  # (1): T_e = T_cr - J_e dw_e/dt
     else:
-        inv_m = P[_INV_M]
-        t_clutch = t_cr if t_cr > 0.0 else 0.0
-    f_drive = t_clutch * G[_G_FORCE]
-    aero = P[_AERO] * vv * vv
-    roll = P[_ROLL]
-    if v > 0.0:
-        acc = (f_drive - aero - roll - brake) * inv_m
-    else:  # standstill: rolling resistance and brakes hold as static friction; no rolling backwards
-        hold = roll + brake
-        acc = (f_drive - hold) * inv_m if f_drive > hold else 0.0
-        roll = 0.0
+        t_clutch = rules.slipping_clutch_torque(t_cr)
+        acc = vh.acceleration(vh.engine_to_wheel_force(t_clutch, ratio, c), v, brake, c.mass, c)
+        dw = 0.0
+        clutch = rules.CLUTCH_SLIPPING
+        t_e = t_clutch
     dy[_V] = acc
     dy[_P] = dp
     dy[_Z] = dz
     # quadratures: fuel, distance, energy terms (powers, W)
-    used = mdot_f if mdot_f > P[_MIDLE] else P[_MIDLE]
-    cyc = P[_KMEP] * w  # MEP x this = power
-    eta = P[_ETA]
+    used = rules.fuel_with_idle_floor(mdot_f, c)
     dy[_FUEL] = used
     dy[_DIST] = vv
-    dy[_E_IND] = mdot_f * P[_QHV]
-    dy[_E_FRIC] = (fric_speed + P[_KF] * 0.0215 * bmep) * cyc  # FMEP (5)
-    dy[_E_PUMP] = (P[_PE] - p) * cyc  # PMEP (6)
-    if coupled:
-        t_e = t_cr - G[_G_JW] * acc  # (1): T_e = T_cr - J_e dw_e/dt
-        dy[_E_ENG] = G[_G_JW] * acc * w
-        dy[_E_DRV] = (1.0 - eta) * t_e * w
-        dy[_E_IDLE] = 0.0
-    else:  # slipping clutch: slip loss T_c (w_idle - w_wheel) counted with the driveline
-        t_e = t_clutch
-        dy[_E_ENG] = 0.0
-        dy[_E_DRV] = (1.0 - eta) * t_clutch * w_wheel + t_clutch * (w - w_wheel)
-        dy[_E_IDLE] = (t_cr - t_clutch) * w
-    dy[_E_VEH] = P[_M] * vv * acc
-    dy[_E_AERO] = aero * vv
-    dy[_E_ROLL] = roll * vv
-    dy[_E_BRAKE] = brake * vv
+    pw = rules.powers(p, w, dw, t_cr, 0.0, w_wheel, vv, acc, brake, clutch, c)
+    dy[_E_IND] = pw[0]
+    dy[_E_FRIC] = pw[1]
+    dy[_E_PUMP] = pw[2]
+    dy[_E_ENG] = pw[3]
+    dy[_E_DRV] = pw[4]
+    dy[_E_VEH] = pw[5]
+    dy[_E_AERO] = pw[6]
+    dy[_E_ROLL] = pw[7]
+    dy[_E_BRAKE] = pw[8]
+    dy[_E_IDLE] = pw[10]
     err = v_ref - vv
     dy[_ERR2] = err * err
-    dy[_OUTSIDE] = 1.0 if abs(err) > P[_BAND] else 0.0
+    dy[_OUTSIDE] = 1.0 if abs(err) > D[_BAND] else 0.0
     aux[_X_THR] = a_eng
     aux[_X_W] = w
     aux[_X_TCR] = t_cr
@@ -303,7 +220,7 @@ _rhs_stage = register_jitable(inline="always")(
 
 
 @register_jitable
-def _output(t_out, y, h, k1, k3, k4, k5, k6, k7, s, row_y, G, P, tab_t, tab_v, scratch, row_aux):
+def _output(t_out, y, h, k1, k3, k4, k5, k6, k7, s, row_y, G, c, D, tab_t, tab_v, scratch, row_aux):
     """Dense output at t + s h (ntrp45) into ``row_y`` and its auxiliary quantities into ``row_aux``."""
     s2 = s * s
     s3 = s2 * s
@@ -318,20 +235,21 @@ def _output(t_out, y, h, k1, k3, k4, k5, k6, k7, s, row_y, G, P, tab_t, tab_v, s
         row_y[i] = y[i] + h * (w1 * k1[i] + w3 * k3[i] + w4 * k4[i] + w5 * k5[i] + w6 * k6[i] + w7 * k7[i])
     if row_y[_V] < 0.0:  # v >= 0, as at the step ends
         row_y[_V] = 0.0
-    _rhs(t_out, row_y, G, P, tab_t, tab_v, scratch, row_aux)
+    _rhs(t_out, row_y, G, c, D, tab_t, tab_v, scratch, row_aux)
 
 
 # _nrt=False: no reference counting of arrays (every call of the right side would otherwise pay for atomic
 # increments and decrements of its array arguments, which cost more than the arithmetic); the kernel
 # therefore allocates nothing, its scratch space comes in ``work``.
-@njit(cache=True, nogil=True, _nrt=False)  # nogil: vpsim.batch runs variants on threads
+@kernel(_nrt=False)  # nogil: vpsim.batch runs variants on threads
 def _integrate(
     seg_t,
     seg_ratio,
     y0,
     tab_t,
     tab_v,
-    P,
+    c,
+    D,
     rtol,
     h_max,
     thr,
@@ -350,7 +268,7 @@ def _integrate(
     Fills out_y/out_aux at out_t (sorted, within [seg_t[0], seg_t[-1]]); a time equal to a restart instant
     gets the state there with the new gear. stats: [accepted, rejected, rhs evaluations, status];
     fstats: [largest |v_cycle - v| at the step ends].
-    ``work`` (11 x len(y0)), ``aux`` (N_AUX) and ``G`` (5) are scratch space; the state reached is left in
+    ``work`` (11 x len(y0)), ``aux`` (N_AUX) and ``G`` (3) are scratch space; the state reached is left in
     ``work[0]``.
     """
     ny = y0.size
@@ -377,9 +295,9 @@ def _integrate(
     for sgi in range(n_seg):
         t = seg_t[sgi]
         t_end = seg_t[sgi + 1]
-        _gear(seg_ratio[sgi], P, G)
+        _gear(seg_ratio[sgi], c, G)
         last = sgi == n_seg - 1
-        _rhs(t, y, G, P, tab_t, tab_v, k1, aux)
+        _rhs(t, y, G, c, D, tab_t, tab_v, k1, aux)
         nfev += 1
         while j_out < n_out and out_t[j_out] <= t:
             for i in range(ny):
@@ -451,7 +369,7 @@ def _integrate(
                             ynew[i] = y[i] + h * (
                                 _B1 * k1[i] + _B3 * k3[i] + _B4 * k4[i] + _B5 * k5[i] + _B6 * k6[i]
                             )
-                    _rhs_stage(ts, tgt, G, P, tab_t, tab_v, work[4 + st], aux)
+                    _rhs_stage(ts, tgt, G, c, D, tab_t, tab_v, work[4 + st], aux)
                 nfev += 6
                 err = 0.0
                 for i in range(N_ERR):
@@ -499,7 +417,7 @@ def _integrate(
                 if out_t[j_out] == tnew:
                     for i in range(ny):
                         out_y[j_out, i] = ynew[i]
-                    _rhs(tnew, out_y[j_out], G, P, tab_t, tab_v, scratch, out_aux[j_out])
+                    _rhs(tnew, out_y[j_out], G, c, D, tab_t, tab_v, scratch, out_aux[j_out])
                 else:
                     _output(
                         out_t[j_out],
@@ -514,7 +432,8 @@ def _integrate(
                         (out_t[j_out] - t) / h,
                         out_y[j_out],
                         G,
-                        P,
+                        c,
+                        D,
                         tab_t,
                         tab_v,
                         scratch,
@@ -527,7 +446,7 @@ def _integrate(
             for i in range(ny):  # FSAL
                 k1[i] = k7[i]
             if clamped:
-                _rhs(t, y, G, P, tab_t, tab_v, k1, aux)
+                _rhs(t, y, G, c, D, tab_t, tab_v, k1, aux)
                 nfev += 1
             if done:
                 break
@@ -544,60 +463,16 @@ def _integrate(
 # --- the method -------------------------------------------------------------------------------------------
 
 
-def constants(params, pi: PIDriver | None = None, mode: str = "paper") -> np.ndarray:
-    """The constants vector P of the compiled kernels (model, driver and mode) from a parameter set.
-
-    Without a driver ``pi`` its entries stay zero (the inverse method uses the model's constants only).
-    """
-    veh, eng, tr, sim = params.vehicle, params.engine, params.transmission, params.simulation
-    g = eng.specific_heat_ratio
-    vd = ph.displacement(eng)
-    rt_i = eng.gas_constant * eng.intake_temperature
-    n_r = eng.revolutions_per_cycle
-    k_f = float(ph.friction_factor(eng))
-    P = np.zeros(N_CONST)
-    P[_M] = veh.mass
-    P[_INV_M] = 1.0 / veh.mass
-    P[_R] = veh.wheel_radius
-    P[_ETA] = tr.efficiency
-    P[_J] = eng.inertia
-    P[_AERO] = 0.5 * veh.drag_coefficient * veh.air_density * veh.frontal_area
-    P[_ROLL] = ph.rolling_force(veh)
-    P[_INV_PA] = 1.0 / eng.ambient_pressure
-    P[_KTHR] = eng.ambient_pressure / math.sqrt(eng.gas_constant * eng.ambient_temperature)  # (10)
-    P[_GAMMA] = g
-    P[_PRCRIT] = ph.critical_pressure_ratio(g)  # (11)
-    P[_PSICH] = math.sqrt(g * (2.0 / (g + 1.0)) ** ((g + 1.0) / (g - 1.0)))  # (12)
-    P[_KMAN] = rt_i / eng.intake_manifold_volume  # (9)
-    P[_KCYL] = vd / (ph.TWO_PI * n_r * rt_i)  # (8)/(2 pi n_r)
-    P[_SI] = eng.air_charge_slope
-    P[_YI] = eng.air_charge_intercept
-    P[_INV_AFR] = 1.0 / (eng.stoich_air_fuel_ratio * eng.lambda_)  # (7)
-    P[_Q] = ph._q(eng)
-    P[_KF] = k_f
-    P[_FS0] = k_f * 0.464 * eng.boost_layout * 1e5  # (5)
-    P[_FS1] = k_f * 0.0072 * eng.boost_layout * 1e5
-    P[_CM] = eng.stroke / math.pi
-    P[_BM] = 1.0 / (1.0 + 0.0215 * k_f)
-    P[_PE] = eng.exhaust_pressure
-    P[_KMEP] = vd / (ph.TWO_PI * n_r)  # (3)
-    P[_QHV] = eng.fuel_heating_value * eng.thermal_efficiency
+def settings(params, pi: PIDriver | None = None, mode: str = "paper") -> np.ndarray:
+    """The driver's and the mode's settings D of the compiled integrator (the model's constants are the
+    parameter record, :func:`vpsim.model.record.record`). Without a driver ``pi`` its entries stay zero."""
+    D = np.zeros(N_SETTINGS)
     if pi is not None:
-        P[_KP : _KB + 1] = pi.as_array()
-    P[_EXT] = 1.0 if mode == "extended" else 0.0
-    P[_WIDLE] = IDLE_SPEED
-    P[_AIDLE] = idle_throttle(eng)
-    P[_MIDLE] = sim.idle_fuel_flow
-    P[_BAND] = BAND_KMH / 3.6
-    return P
-
-
-def idle_throttle(eng, w_idle: float = IDLE_SPEED) -> float:
-    """Steady throttle area holding the engine at ``w_idle`` with zero crank torque (FQM inverted), m²."""
-    p = float(ph.intake_pressure_for_torque(0.0, w_idle, eng))
-    flow = float(ph.cylinder_air_flow(p, w_idle, eng))
-    unit = float(ph.throttle_mass_flow(1.0, p, eng))  # flow per m² at this pressure
-    return flow / unit
+        D[_KP : _KB + 1] = pi.as_array()
+    D[_EXT] = 1.0 if mode == "extended" else 0.0
+    D[_AIDLE] = en.idle_throttle(record(params)) if mode == "extended" else 0.0
+    D[_BAND] = BAND_KMH / 3.6
+    return D
 
 
 def initial_state(cycle, params, ratio: float, pi: PIDriver, mode: str) -> np.ndarray:
@@ -606,25 +481,24 @@ def initial_state(cycle, params, ratio: float, pi: PIDriver, mode: str) -> np.nd
     At standstill: ``paper`` starts with the manifold at the pressure of zero crank torque at w_e = 0 and the
     throttle closed; ``extended`` at the idle steady state with a zero pedal command.
     """
-    veh, eng, tr = params.vehicle, params.engine, params.transmission
+    c = record(params)
     y = np.zeros(NY)
     v0 = float(cycle.speed_mps[0])
     y[_V] = v0
     if v0 > 0.0:
         a0 = float((cycle.speed_mps[1] - cycle.speed_mps[0]) / (cycle.time_s[1] - cycle.time_s[0]))
-        m_eq = ph.equivalent_mass(ratio, veh, eng, tr.efficiency)
-        t_cr = (m_eq * a0 + ph.road_load(v0, veh)) * veh.wheel_radius / (ratio * tr.efficiency)
-        w = ratio * v0 / veh.wheel_radius
-        p = float(ph.intake_pressure_for_torque(t_cr, w, eng))
-        p = min(p, 0.99 * eng.ambient_pressure)
-        u = float(ph.cylinder_air_flow(p, w, eng) / ph.throttle_mass_flow(1.0, p, eng))
+        f = vh.equivalent_mass(ratio, c) * a0 + vh.road_load(v0, c)
+        w = vh.engine_speed(v0, ratio, c)
+        p = float(en.intake_pressure_for_torque(vh.wheel_to_engine_torque(f, ratio, c), w, c))
+        p = min(p, 0.99 * c.ambient_pressure)
+        u = float(en.throttle_for_flow(p, en.cylinder_air_flow(p, w, c), c))
         y[_P] = p
         y[_Z] = float(np.clip(u, pi.u_lo, pi.u_hi))
     elif mode == "paper":
-        y[_P] = float(ph.intake_pressure_for_torque(0.0, 0.0, eng))
+        y[_P] = float(en.intake_pressure_for_torque(0.0, 0.0, c))
         y[_Z] = pi.u_lo
     else:
-        y[_P] = float(ph.intake_pressure_for_torque(0.0, IDLE_SPEED, eng))
+        y[_P] = float(en.intake_pressure_for_torque(0.0, c.idle_speed, c))
         y[_Z] = 0.0
     return y
 
@@ -636,7 +510,8 @@ def integrate(
     seg_t,
     seg_ratio,
     y0,
-    P,
+    c,
+    D,
     table_t,
     table_v,
     *,
@@ -645,7 +520,6 @@ def integrate(
     max_step=np.inf,
     out_t=None,
     max_steps=2_000_000,
-    compiled=True,
 ):
     """Run the kernel from seg_t[0] to seg_t[-1], restarting at each seg_t[k] with ratio seg_ratio[k].
 
@@ -657,19 +531,18 @@ def integrate(
     out_aux = np.full((out_t.size, N_AUX), np.nan)
     stats = np.zeros(4, dtype=np.int64)
     fstats = np.zeros(1)
-    P = np.array(P, dtype=float)
-    P[_TAB_INVDT] = _uniform_inverse_spacing(table_t)
-    P[_OPEN] = 1.0 if open_loop else 0.0
-    fn = _integrate if compiled else _integrate.py_func
+    D = np.array(D, dtype=float)
+    D[_OPEN] = 1.0 if open_loop else 0.0
     # np.array copies: one compiled signature for all calls (read-only inputs would compile another)
     work = np.zeros((11, NY))
-    fn(
+    _integrate(
         np.array(seg_t, dtype=float),
         np.array(seg_ratio, dtype=float),
         np.array(y0, dtype=float),
         np.array(table_t, dtype=float),
         np.array(table_v, dtype=float),
-        P,
+        c,
+        D,
         float(rtol),
         float(max_step),
         ERROR_THRESHOLDS,
@@ -681,7 +554,7 @@ def integrate(
         fstats,
         work,
         np.empty(N_AUX),
-        np.empty(5),
+        np.empty(3),
     )
     y_end = work[0].copy()
     if stats[3] == STATUS_STEP_TOO_SMALL:
@@ -697,14 +570,6 @@ def integrate(
     return y_end, out_y, out_aux, info
 
 
-def _uniform_inverse_spacing(t) -> float:
-    """1/dt if the grid ``t`` is uniform (to 1e-9 relative), else 0 (binary search in the kernel)."""
-    d = np.diff(np.asarray(t, float))
-    if d.size and np.all(np.abs(d - d[0]) <= 1e-9 * d[0]):
-        return 1.0 / float(d[0])
-    return 0.0
-
-
 def segments(cycle, schedule: GearSchedule, ratios) -> tuple[np.ndarray, np.ndarray]:
     """Restart instants (cycle start, every gear change, cycle end) and the ratio engaged after each."""
     t0, t1 = float(cycle.time_s[0]), float(cycle.time_s[-1])
@@ -715,17 +580,23 @@ def segments(cycle, schedule: GearSchedule, ratios) -> tuple[np.ndarray, np.ndar
     return seg_t, np.asarray(ratios, float)[gears - 1]
 
 
-_warm = False
-
-
 def warm_up() -> None:
-    """Load (or compile) the kernel once per process, so run times measure the simulation only."""
-    global _warm
-    if not _warm:
-        P = np.zeros(N_CONST)
-        P[[_M, _INV_M, _R, _ETA, _INV_PA, _GAMMA, _PRCRIT, _PSICH, _BM, _KP, _KI, _UHI, _AWG]] = 1.0
-        integrate(np.array([0.0, 1.0]), np.array([1.0]), np.zeros(NY), P, np.array([0.0, 1.0]), np.zeros(2))
-        _warm = True
+    """Load (or compile) the kernel, so that run times measure the simulation only."""
+    if _integrate.overloads:
+        return
+    from ..params import load_parameters
+
+    p = load_parameters("hofman2011")
+    integrate(
+        np.array([0.0, 1.0]),
+        np.array([10.0]),
+        np.zeros(NY),
+        record(p),
+        np.zeros(N_SETTINGS),
+        np.array([0.0, 1.0]),
+        np.zeros(2),
+        out_t=np.array([0.0, 1.0]),
+    )
 
 
 def run(
@@ -739,7 +610,6 @@ def run(
     max_step: float | None = None,
     keep_series: bool = True,
     output_times=None,
-    compiled: bool = True,
     kp: float | None = None,
     ki: float | None = None,
     tracking_time_s: float | None = None,
@@ -751,7 +621,6 @@ def run(
     anti-windup ``tracking_time_s``) override the driver's gains, as the driver tuning does;
     ``keep_series=False`` skips the time series (dense output at the cycle's samples, or at the sorted
     ``output_times`` within the cycle);
-    ``compiled=False`` runs the pure-Python reference of the same kernel (slow).
 
     The tracking figures (max and RMS speed error, seconds outside the +-2 km/h band) are integrated along
     the solution: the RMS and the seconds as quadrature states, the maximum over the step ends and the
@@ -775,20 +644,20 @@ def run(
         params = replace(params, drivers={**params.drivers, driver: d})
     pi = PIDriver.from_params(params, driver, mode, tracking_time_s)
     if schedule is None:
-        from ..maps import cached_engine_map
+        from ..model.maps import cached_engine_map
 
         schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
     duration = float(cycle.time_s[-1] - cycle.time_s[0])
     h_max = duration / 50.0 if max_step is None else float(max_step)
     if not h_max > 0:
         raise VpsimError(f"max_step = {max_step!r} must be positive")
-    if compiled:
-        warm_up()
+    warm_up()
 
     t_cpu = time.process_time()
     ratios = np.asarray(params.transmission.ratios)
     seg_t, seg_ratio = segments(cycle, schedule, ratios)
-    P = constants(params, pi, mode)
+    c = record(params)
+    D = settings(params, pi, mode)
     y0 = initial_state(cycle, params, seg_ratio[0], pi, mode)
     if not keep_series:
         out_t = np.zeros(0)
@@ -806,13 +675,13 @@ def run(
         seg_t,
         seg_ratio,
         y0,
-        P,
+        c,
+        D,
         cycle.time_s,
         cycle.speed_mps,
         rtol=rtol,
         max_step=h_max,
         out_t=out_t,
-        compiled=compiled,
     )
     fuel_kg = float(y_end[_FUEL])
     distance = float(y_end[_DIST])

@@ -163,7 +163,7 @@ def plan(spec: SweepSpec) -> Plan:
     """All rows of ``spec`` with their point ids (cheap: no simulation but the base's gear schedules)."""
     from ..cycles import load_cycle
     from ..gears import default_schedule
-    from ..maps import cached_engine_map
+    from ..model.maps import cached_engine_map
 
     base = spec.parameters()
     cycles = tuple(load_cycle(c) for c in spec.cycles)
@@ -491,7 +491,7 @@ def _one_row(cycle, schedule, method: str, driver: str, params, mode: str) -> di
 
 
 def _simulate_row(cycle, method: str, driver: str, params, mode: str, schedule=None) -> dict:
-    from ..maps import generate_engine_map
+    from ..model.maps import generate_engine_map
     from ..simulation import simulate
 
     if method == "backward":

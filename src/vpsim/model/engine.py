@@ -1,0 +1,396 @@
+"""The mean-value spark-ignition engine, equations (1)-(13) and (19) of Hofman et al. (2011), written once.
+
+Every function here is the one definition of its equation. Each is a plain function of scalars and the
+parameter record ``c`` (:mod:`vpsim.model.record`), marked :func:`equation`: compiled kernels (the three
+methods, the batch runs, the maps) inline it, and Python calls it as it is, which for the branch-free
+equations works on NumPy arrays too (broadcasting, also over a record array of design variants). The few
+equations with branches (the flow function Psi, the FQM solve) have array views made from the same scalar
+function by a compiled loop (:func:`psi_array`, :func:`steady_pressure_array`).
+
+Symbols follow the paper: p_i intake manifold pressure, w_e engine speed, A_eff effective throttle area,
+T_cr crank (combustion) torque, m_ac / m_f air / fuel charge per cycle. SI units throughout.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba.extending import register_jitable
+
+from ._compile import kernel
+
+equation = register_jitable  # a model equation: compiled inline into every kernel, plain Python otherwise
+
+TWO_PI = 2.0 * math.pi
+
+
+# --- derived constants (evaluated once per parameter set by vpsim.model.record) -------------------------
+
+
+@equation
+def displacement(c):
+    """V_d = z (pi/4) B^2 S."""
+    return c.cylinders * math.pi / 4.0 * c.bore**2 * c.stroke
+
+
+@equation
+def friction_factor(c):
+    """k_f = xi_aux (0.075 / B)^0.5, the bore scaling of Soltic's friction law (5)."""
+    return c.friction_coefficient * np.sqrt(0.075 / c.bore)
+
+
+@equation
+def bmep_divisor(c):
+    """1 + 0.0215 k_f: FMEP (5) contains BMEP, so solving (2)-(6) for BMEP divides by this."""
+    return 1.0 + 0.0215 * friction_factor(c)
+
+
+@equation
+def heat_factor(c):
+    """Q = q_hv eta_th / ((A/F)_s lambda R T_i): IMEP (4) per unit of (s_i p_i - y_i) via (7),(8)."""
+    return (
+        c.fuel_heating_value
+        * c.thermal_efficiency
+        / (c.stoich_air_fuel_ratio * c.lambda_ * c.gas_constant * c.intake_temperature)
+    )
+
+
+@equation
+def mep_to_torque(mep, c):
+    """Torque of a mean effective pressure: T = MEP V_d / (2 pi n_r)   (3)."""
+    return mep * displacement(c) / (TWO_PI * c.revolutions_per_cycle)
+
+
+@equation
+def critical_pressure_ratio(gamma):
+    """p_r* = (2/(gamma+1))^(gamma/(gamma-1))   (11)."""
+    return (2.0 / (gamma + 1.0)) ** (gamma / (gamma - 1.0))
+
+
+@equation
+def psi_choked(gamma):
+    """Psi in the choked region, sqrt(gamma (2/(gamma+1))^((gamma+1)/(gamma-1)))   (12)."""
+    return np.sqrt(gamma * (2.0 / (gamma + 1.0)) ** ((gamma + 1.0) / (gamma - 1.0)))
+
+
+# --- cylinder air and fuel charge --------------------------------------------------------------------------
+
+
+@equation
+def charge_pressure(p_i, c):
+    """s_i p_i - y_i: eta_vol p_i, the pressure that fills the cylinders (8)."""
+    return c.air_charge_slope * p_i - c.air_charge_intercept
+
+
+@equation
+def air_charge(p_i, c):
+    """m_ac = eta_vol p_i V_d / (R T_i) = (s_i p_i - y_i) V_d / (R T_i)   (8)."""
+    return charge_pressure(p_i, c) * c.air_per_charge
+
+
+@equation
+def cycles_per_second(w_e, c):
+    """Engine cycles per second, w_e / (2 pi n_r)."""
+    return w_e / (TWO_PI * c.revolutions_per_cycle)
+
+
+@equation
+def cylinder_air_flow(p_i, w_e, c):
+    """Air mass flow into the cylinders, w_e m_ac / (2 pi n_r) (the outflow term of (9))."""
+    return cycles_per_second(w_e, c) * air_charge(p_i, c)
+
+
+@equation
+def fuel_flow(p_i, w_e, c):
+    """Fuel mass flow mdot_f = m_f w_e / (2 pi n_r), m_f = m_ac / ((A/F)_s lambda)   (7). Negative where
+    p_i < y_i / s_i (no air charge): the caller decides what that means."""
+    return cylinder_air_flow(p_i, w_e, c) / c.afr
+
+
+# --- mean effective pressures and torque (2)-(6) -----------------------------------------------------------
+
+
+@equation
+def imep(p_i, c):
+    """Gross indicated mean effective pressure IMEP_g = m_f q_hv eta_th / V_d   (4)."""
+    return c.heat_factor * charge_pressure(p_i, c)
+
+
+@equation
+def pmep(p_i, c):
+    """Pumping mean effective pressure PMEP = p_e - p_i   (6)."""
+    return c.exhaust_pressure - p_i
+
+
+@equation
+def speed_friction(w_e, c):
+    """The speed-dependent part of FMEP (5): k_f (0.464 + 0.0072 c_m^1.8) pi_bl 1e5, c_m = S |w_e| / pi."""
+    c_m = abs(c.stroke * w_e / math.pi)
+    return c.friction_factor * (0.464 + 0.0072 * c_m**1.8) * c.boost_layout * 1e5
+
+
+@equation
+def bmep_from_pressure(p_i, w_e, c):
+    """BMEP from (2)-(6): IMEP - FMEP - PMEP with FMEP = speed part + 0.0215 k_f BMEP."""
+    return (imep(p_i, c) - speed_friction(w_e, c) - pmep(p_i, c)) / c.one_plus_kf
+
+
+@equation
+def fmep(p_i, w_e, c):
+    """Friction mean effective pressure FMEP (5), Soltic's law with the auxiliary factor xi_aux."""
+    return speed_friction(w_e, c) + c.friction_factor * 0.0215 * bmep_from_pressure(p_i, w_e, c)
+
+
+@equation
+def crank_torque(p_i, w_e, c):
+    """T_cr = BMEP V_d / (2 pi n_r)   (2),(3)."""
+    return bmep_from_pressure(p_i, w_e, c) * c.mep_to_torque
+
+
+@equation
+def torque_per_pressure(w_e, c):
+    """dT_cr/dp_i at fixed w_e. T_cr is affine in p_i by (2)-(8), so two evaluations of :func:`crank_torque`
+    give the slope exactly (to rounding): every inversion below follows the torque definition above."""
+    return (crank_torque(c.ambient_pressure, w_e, c) - crank_torque(0.0, w_e, c)) / c.ambient_pressure
+
+
+@equation
+def intake_pressure_for_torque(t_cr, w_e, c):
+    """p_i with delta(p_i) = 0 for imposed (T_cr, w_e): the BQM's inversion of (2)-(8).
+
+    delta(p_i) = T_cr(p_i, w_e) - T_cr is linear in p_i, so the root is closed-form (the paper iterates; both
+    agree): p_i = (T_cr - T_cr(0, w_e)) / (dT_cr/dp_i).
+    """
+    return (t_cr - crank_torque(0.0, w_e, c)) / torque_per_pressure(w_e, c)
+
+
+@equation
+def bqm_fuel_flow(t_cr, w_e, c):
+    """BQM: fuel mass flow (kg/s) for imposed crank torque and engine speed."""
+    return fuel_flow(intake_pressure_for_torque(t_cr, w_e, c), w_e, c)
+
+
+# --- throttle and intake manifold (9)-(13) -----------------------------------------------------------------
+
+
+@equation
+def psi(p_r, c):
+    """Flow function Psi(p_r): choked (12) for p_r <= p_r*, subcritical (13) above; 0 for p_r >= 1.
+
+    Reverse flow (p_r > 1) cannot occur in a naturally aspirated engine with these equations; the flow is
+    taken as zero there, which is also what the manifold equation needs at w_e = 0 (p_i settles at p_a).
+    """
+    if p_r <= c.critical_ratio:
+        return c.psi_choked
+    if p_r >= 1.0:
+        return 0.0
+    g = c.specific_heat_ratio
+    f = 2.0 * g / (g - 1.0) * (p_r ** (2.0 / g) - p_r ** ((g + 1.0) / g))
+    return math.sqrt(f) if f > 0.0 else 0.0
+
+
+@equation
+def dpsi_dpr(p_r, c):
+    """dPsi/dp_r (0 in the choked region; -> -inf as p_r -> 1; 0 above 1, where Psi = 0)."""
+    if p_r <= c.critical_ratio or p_r >= 1.0:
+        return 0.0
+    g = c.specific_heat_ratio
+    f = 2.0 * g / (g - 1.0) * (p_r ** (2.0 / g) - p_r ** ((g + 1.0) / g))
+    df = 2.0 * g / (g - 1.0) * ((2.0 / g) * p_r ** (2.0 / g - 1.0) - ((g + 1.0) / g) * p_r ** (1.0 / g))
+    return df / (2.0 * math.sqrt(f if f > 1e-300 else 1e-300))
+
+
+@equation
+def throttle_flow_per_area(p_i, c):
+    """mdot_at / A_eff = p_a Psi(p_i/p_a) / sqrt(R T_a)   (10)."""
+    return c.ambient_pressure * psi(p_i / c.ambient_pressure, c) / c.sqrt_rt_ambient
+
+
+@equation
+def throttle_mass_flow(a_eff, p_i, c):
+    """mdot_at = p_a A_eff Psi(p_i/p_a) / sqrt(R T_a)   (10)."""
+    return a_eff * throttle_flow_per_area(p_i, c)
+
+
+@equation
+def manifold_pressure_rate(p_i, a_eff, w_e, c):
+    """dp_i/dt = (R T_i / V_i) [mdot_at - w_e m_ac / (2 pi n_r)]   (9)."""
+    return (c.rt_intake / c.intake_manifold_volume) * (
+        throttle_mass_flow(a_eff, p_i, c) - cylinder_air_flow(p_i, w_e, c)
+    )
+
+
+@equation
+def throttle_for_flow(p_i, air_flow, c):
+    """A_eff that passes ``air_flow`` at manifold pressure p_i: (10) solved for A_eff (inf where Psi = 0)."""
+    per_area = throttle_flow_per_area(p_i, c)
+    if per_area > 0.0:
+        return air_flow / per_area
+    return math.inf if air_flow > 0.0 else 0.0
+
+
+# --- the forward quasi-static model (FQM): steady state of (9) -------------------------------------------
+
+NEWTON_MAX_ITERATIONS = (
+    30  # defaults tighter than the paper's 10, so maps agree with the dynamics to rounding
+)
+NEWTON_RELATIVE_TOLERANCE = 1e-12
+
+
+@equation
+def steady_pressure(a_eff, w_e, c):
+    """FQM: p_i with dp_i/dt = 0 in (9) for imposed throttle area and engine speed; (p_i, Newton iterations).
+
+    Choked flow is tried first ((10),(12) with (8),(9) solved for p_i); where the resulting pressure ratio is
+    above the critical one (11) the flow is subcritical and theta(p_i) = 0 (19) is solved by Newton's method.
+    theta is concave and decreasing in p_i, so Newton started to the right of the root (the choked estimate,
+    or just below p_a) converges monotonically. At w_e = 0 nothing leaves the manifold and p_i = p_a.
+    Iterations: -1 where the solve did not converge.
+    """
+    p_a = c.ambient_pressure
+    if not w_e > 0.0:
+        return p_a, 0
+    k_thr = a_eff * c.ambient_pressure * c.psi_choked / c.sqrt_rt_ambient  # choked throttle flow
+    k_cyl = cycles_per_second(w_e, c) * c.air_per_charge  # cylinder flow per unit (s_i p_i - y_i)
+    p_choked = (k_thr / k_cyl + c.air_charge_intercept) / c.air_charge_slope
+    if p_choked / p_a <= c.critical_ratio:
+        return p_choked, 0
+    x = min(p_choked, p_a * (1.0 - 1e-9))
+    lo = c.critical_ratio * p_a
+    hi = p_a * (1.0 - 1e-15)
+    for k in range(NEWTON_MAX_ITERATIONS):
+        pr = x / p_a
+        theta = a_eff * throttle_flow_per_area(x, c) - k_cyl * charge_pressure(x, c)  # (19)
+        dtheta = (
+            a_eff * c.ambient_pressure * dpsi_dpr(pr, c) / c.sqrt_rt_ambient / p_a
+            - k_cyl * c.air_charge_slope
+        )
+        x_new = min(max(x - theta / dtheta, lo), hi)
+        done = abs(x_new - x) <= NEWTON_RELATIVE_TOLERANCE * abs(x_new)
+        x = x_new
+        if done:
+            return x, k + 1
+    return x, -1
+
+
+@equation
+def steady_torque(a_eff, w_e, c):
+    """FQM crank torque at (A_eff, w_e): T_cr(p_i steady, w_e)."""
+    p, _ = steady_pressure(a_eff, w_e, c)
+    return crank_torque(p, w_e, c)
+
+
+@equation
+def idle_throttle(c):
+    """Steady throttle area holding the engine at idle speed with zero crank torque (FQM inverted), m²."""
+    p = intake_pressure_for_torque(0.0, c.idle_speed, c)
+    return throttle_for_flow(p, cylinder_air_flow(p, c.idle_speed, c), c)
+
+
+# --- array views of the equations with branches -------------------------------------------------------------
+
+
+@kernel
+def _psi_loop(p_r, recs, out):
+    one = recs.size == 1
+    for k in range(p_r.size):
+        out[k] = psi(p_r[k], recs[0 if one else k])
+
+
+@kernel
+def _dpsi_loop(p_r, recs, out):
+    one = recs.size == 1
+    for k in range(p_r.size):
+        out[k] = dpsi_dpr(p_r[k], recs[0 if one else k])
+
+
+@kernel
+def _steady_loop(a_eff, w_e, recs, p_out, it_out):
+    one = recs.size == 1
+    for k in range(a_eff.size):
+        p, it = steady_pressure(a_eff[k], w_e[k], recs[0 if one else k])
+        p_out[k] = p
+        it_out[k] = it
+
+
+def _flat(*arrays, recs):
+    """Broadcast the arguments (and a record array of variants) to one shape; flattened contiguous copies."""
+    recs = np.asarray(recs)
+    if recs.ndim == 0:
+        recs = recs.reshape(1)
+    shape = np.broadcast_shapes(*(np.shape(a) for a in arrays), recs.shape if recs.size > 1 else ())
+    flat = [np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype=float), shape)).ravel() for a in arrays]
+    if recs.size > 1:
+        recs = np.ascontiguousarray(np.broadcast_to(recs, shape)).ravel()
+    return shape, flat, np.asarray(recs).view(np.ndarray)
+
+
+def psi_array(p_r, c):
+    """:func:`psi` over arrays (``c``: a record, or an array of records broadcast with ``p_r``)."""
+    shape, (x,), recs = _flat(p_r, recs=c)
+    out = np.empty(x.size)
+    _psi_loop(x, recs, out)
+    return out.reshape(shape)
+
+
+def dpsi_dpr_array(p_r, c):
+    """:func:`dpsi_dpr` over arrays."""
+    shape, (x,), recs = _flat(p_r, recs=c)
+    out = np.empty(x.size)
+    _dpsi_loop(x, recs, out)
+    return out.reshape(shape)
+
+
+def steady_pressure_array(a_eff, w_e, c):
+    """:func:`steady_pressure` over arrays: (p_i, Newton iterations, -1 where not converged)."""
+    shape, (a, w), recs = _flat(a_eff, w_e, recs=c)
+    p = np.empty(a.size)
+    it = np.empty(a.size, dtype=np.int64)
+    _steady_loop(a, w, recs, p, it)
+    return p.reshape(shape), it.reshape(shape)
+
+
+@equation
+def throttle_for_pressure_rate(p_i, dp_dt, w_e, c):
+    """A_eff that gives the manifold pressure rate ``dp_dt`` at (p_i, w_e): (9) solved for A_eff.
+
+    dp_i/dt is affine in A_eff, so the slope and offset come from :func:`manifold_pressure_rate` itself.
+    Where no flow can raise the pressure (p_i >= p_a, Psi = 0) the demand is +-inf (0 if none is asked).
+    """
+    rate_0 = manifold_pressure_rate(p_i, 0.0, w_e, c)
+    per_area = manifold_pressure_rate(p_i, 1.0, w_e, c) - rate_0
+    need = dp_dt - rate_0
+    if per_area > 0.0:
+        return need / per_area
+    if need == 0.0:
+        return 0.0
+    return math.inf if need > 0.0 else -math.inf
+
+
+@equation
+def manifold_rate_dp(p_i, a_eff, w_e, c):
+    """d(dp_i/dt)/dp_i of (9) at fixed A_eff and w_e: the manifold's own (stiff) eigenvalue."""
+    k = c.rt_intake / c.intake_manifold_volume
+    throttle = a_eff * c.ambient_pressure * dpsi_dpr(p_i / c.ambient_pressure, c) / c.sqrt_rt_ambient
+    return k * (
+        throttle / c.ambient_pressure - cycles_per_second(w_e, c) * c.air_per_charge * c.air_charge_slope
+    )
+
+
+@kernel
+def _rate_loop(p_i, a_eff, w_e, recs, out, jac):
+    one = recs.size == 1
+    for k in range(p_i.size):
+        c = recs[0 if one else k]
+        out[k] = manifold_pressure_rate(p_i[k], a_eff[k], w_e[k], c)
+        jac[k] = manifold_rate_dp(p_i[k], a_eff[k], w_e[k], c)
+
+
+def manifold_pressure_rate_array(p_i, a_eff, w_e, c):
+    """:func:`manifold_pressure_rate` and :func:`manifold_rate_dp` over arrays (records broadcast)."""
+    shape, (p, a, w), recs = _flat(p_i, a_eff, w_e, recs=c)
+    out = np.empty(p.size)
+    jac = np.empty(p.size)
+    _rate_loop(p, a, w, recs, out, jac)
+    return out.reshape(shape), jac.reshape(shape)

@@ -1,0 +1,174 @@
+"""The one parameter record of compiled code, built from :class:`vpsim.params.Parameters` in one place.
+
+Compiled kernels and NumPy callers read the model's constants from a NumPy structured record whose fields
+are named as in ``Parameters`` (``rec.mass``, ``rec.bore``, ``rec.lambda_`` ...), plus a few *derived*
+fields (displacement, friction factor, ...) that :func:`pack` fills by calling the model's own equations
+(:mod:`vpsim.model.engine`, :mod:`vpsim.model.vehicle`), so no formula is written here.
+
+* :func:`record` gives the record of one parameter set (a ``numpy.record``: attribute access in Python, a
+  Numba ``Record`` in compiled code).
+* :func:`records` gives an array of records, one per design variant, from sections whose fields may be arrays
+  (how :mod:`vpsim.batch` evaluates thousands of variants in one call).
+
+Records are read-only and cached per (immutable) parameter set.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+# Fields of the record: (name, section of Parameters or None for derived values). Parameters keep their
+# names; engine.map_speed_range becomes map_speed_low / map_speed_high.
+_PARAMETER_FIELDS = {
+    "vehicle": (
+        "mass",
+        "frontal_area",
+        "drag_coefficient",
+        "rolling_resistance",
+        "air_density",
+        "gravity",
+        "wheel_radius",
+    ),
+    "transmission": ("efficiency", "final_drive"),
+    "engine": (
+        "bore",
+        "stroke",
+        "cylinders",
+        "inertia",
+        "revolutions_per_cycle",
+        "intake_manifold_volume",
+        "ambient_pressure",
+        "ambient_temperature",
+        "intake_temperature",
+        "exhaust_pressure",
+        "gas_constant",
+        "specific_heat_ratio",
+        "fuel_heating_value",
+        "thermal_efficiency",
+        "stoich_air_fuel_ratio",
+        "lambda_",
+        "air_charge_slope",
+        "air_charge_intercept",
+        "friction_coefficient",
+        "boost_layout",
+        "max_throttle_area",
+        "min_throttle_area",
+    ),
+    "simulation": ("idle_fuel_flow", "fuel_density"),
+}
+# model constants that are not (yet) parameters, and values derived from the parameters by the model
+MODEL_FIELDS = ("idle_speed",)
+DERIVED_FIELDS = (
+    "displacement",  # V_d
+    "friction_factor",  # k_f of (5)
+    "one_plus_kf",  # the divisor of (5) solved for BMEP (engine.bmep_divisor)
+    "heat_factor",  # Q = q_hv eta_th / ((A/F)_s lambda R T_i): IMEP per unit (s_i p_i - y_i)
+    "mep_to_torque",  # V_d / (2 pi n_r) of (3)
+    "air_per_charge",  # V_d / (R T_i): air charge per unit (s_i p_i - y_i) of (8)
+    "afr",  # (A/F)_s lambda of (7)
+    "rt_intake",  # R T_i of (8),(9)
+    "sqrt_rt_ambient",  # sqrt(R T_a) of (10)
+    "critical_ratio",  # p_r* of (11)
+    "psi_choked",  # Psi in the choked region (12)
+    "rolling_force",  # m g c_r of (18)
+    "aero_coefficient",  # 1/2 c_d rho A of (18)
+)
+FIELDS = tuple(f for fs in _PARAMETER_FIELDS.values() for f in fs) + (
+    "map_speed_low",
+    "map_speed_high",
+    *MODEL_FIELDS,
+    *DERIVED_FIELDS,
+)
+DTYPE = np.dtype([(name, np.float64) for name in FIELDS], align=True)
+
+IDLE_SPEED = 80.0  # rad/s: the engine speed held below which the clutch slips or opens (extended mode)
+
+
+def _fill(rec, vehicle, transmission, engine, simulation, n: int) -> None:
+    from . import engine as eq_engine
+    from . import vehicle as eq_vehicle
+
+    sections = {"vehicle": vehicle, "transmission": transmission, "engine": engine, "simulation": simulation}
+    for sec, names in _PARAMETER_FIELDS.items():
+        obj = sections[sec]
+        for name in names:
+            rec[name] = np.broadcast_to(np.asarray(getattr(obj, name), dtype=float), (n,))
+    lo, hi = engine.map_speed_range
+    rec["map_speed_low"] = lo
+    rec["map_speed_high"] = hi
+    rec["idle_speed"] = IDLE_SPEED
+    r = rec.view(np.recarray)
+    # derived values, each computed by the model's own equation (in dependency order)
+    rec["displacement"] = eq_engine.displacement(r)
+    rec["friction_factor"] = eq_engine.friction_factor(r)
+    rec["one_plus_kf"] = eq_engine.bmep_divisor(r)
+    rec["rt_intake"] = r.gas_constant * r.intake_temperature
+    rec["afr"] = r.stoich_air_fuel_ratio * r.lambda_
+    rec["heat_factor"] = eq_engine.heat_factor(r)
+    rec["mep_to_torque"] = eq_engine.mep_to_torque(1.0, r)
+    rec["air_per_charge"] = r.displacement / r.rt_intake
+    rec["sqrt_rt_ambient"] = np.sqrt(r.gas_constant * r.ambient_temperature)
+    rec["critical_ratio"] = eq_engine.critical_pressure_ratio(r.specific_heat_ratio)
+    rec["psi_choked"] = eq_engine.psi_choked(r.specific_heat_ratio)
+    rec["rolling_force"] = eq_vehicle.rolling_force_moving(r)
+    rec["aero_coefficient"] = eq_vehicle.aero_coefficient(r)
+
+
+def _sections_len(*sections) -> int:
+    n = 1
+    for obj in sections:
+        for v in vars(obj).values() if hasattr(obj, "__dict__") else ():
+            if isinstance(v, np.ndarray) and v.ndim == 1:
+                n = max(n, v.size)
+    return n
+
+
+def records(vehicle, transmission, engine, simulation) -> np.ndarray:
+    """An array of records, one per variant; section attributes may be scalars or 1-D arrays (broadcast)."""
+    n = _sections_len(vehicle, transmission, engine, simulation)
+    rec = np.zeros(n, dtype=DTYPE)
+    _fill(rec, vehicle, transmission, engine, simulation, n)
+    return rec.view(np.recarray)
+
+
+@functools.lru_cache(maxsize=256)
+def _record_of(vehicle, transmission, engine, simulation) -> np.ndarray:
+    rec = records(vehicle, transmission, engine, simulation)
+    rec.flags.writeable = False
+    return rec
+
+
+def record_array(params) -> np.ndarray:
+    """The read-only record array (shape (1,)) of one parameter set, cached per parameter set."""
+    return _record_of(params.vehicle, params.transmission, params.engine, params.simulation)
+
+
+def record(params):
+    """The record of one parameter set (``rec.mass``, ``rec.displacement``, ...), cached."""
+    return record_array(params)[0]
+
+
+def engine_record(engine, vehicle=None, transmission=None, simulation=None):
+    """The record of an engine alone (for maps): the other sections default to the baseline preset's."""
+    if vehicle is None or transmission is None or simulation is None:
+        from ..params import load_parameters
+
+        base = load_parameters("hofman2011")
+        vehicle = vehicle or base.vehicle
+        transmission = transmission or base.transmission
+        simulation = simulation or base.simulation
+    return _record_of(vehicle, transmission, engine, simulation)[0]
+
+
+def ratios(transmission) -> np.ndarray:
+    """Total ratio per gear (gearbox x final drive), read-only, cached per transmission."""
+    return _ratios(transmission)
+
+
+@functools.lru_cache(maxsize=256)
+def _ratios(transmission) -> np.ndarray:
+    r = np.asarray(transmission.ratios, dtype=float)
+    r.flags.writeable = False
+    return r

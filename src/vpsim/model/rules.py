@@ -1,0 +1,138 @@
+"""The rules of the realistic car (``extended`` mode) and the fuel and energy bookkeeping, written once.
+
+The paper's model is a stiff driveline without brakes; its fuel is the model's flow floored at the idle
+flow (section 5). The ``extended`` mode adds what a real car has, and every method applies the same rules:
+
+* **clutch**: below the idle speed (``c.idle_speed``) the engine cannot follow the wheels. With traction
+  demanded the clutch slips: the engine is held at idle speed and the clutch passes the engine's torque if it
+  is positive (a slipping clutch transmits no engine braking); without traction it opens and the engine
+  idles. The slip dissipates T_clutch (w_e - w_wheel).
+* **brakes**: friction brakes take what engine braking (the closed-throttle line, the FQM at A_min) cannot.
+* **idle floor**: the fuel booked is max(mdot_f, mdot_idle); a declutched engine burns the idle flow.
+
+Quasi-static methods (backward) impose the operating point (:func:`operating_point`); the dynamic methods
+integrate or invert the same physics with the same clutch test (:func:`clutch_engaged`) and clutch torque
+(:func:`slipping_clutch_torque`). The power of every energy term is :func:`powers`, so all methods book the
+energy balance of :class:`vpsim.result.EnergyBalance` from one definition.
+"""
+
+from __future__ import annotations
+
+from . import engine as en
+from . import vehicle as vh
+from .engine import equation
+
+CLUTCH_OPEN, CLUTCH_ENGAGED, CLUTCH_SLIPPING = 0, 1, 2
+
+
+@equation
+def fuel_with_idle_floor(mdot_f, c):
+    """Fuel booked: max(mdot_f, mdot_idle) (section 5: braking and idling burn the idle flow)."""
+    return mdot_f if mdot_f > c.idle_fuel_flow else c.idle_fuel_flow
+
+
+@equation
+def clutch_engaged(w_wheel, c):
+    """The driveline is stiff at and above the idle speed (wheel-side engine speed i v / r)."""
+    return w_wheel >= c.idle_speed
+
+
+@equation
+def slipping_clutch_torque(t_cr):
+    """A slipping clutch passes the engine's torque if it drives, nothing if it would brake."""
+    return t_cr if t_cr > 0.0 else 0.0
+
+
+@equation
+def brake_force(t_demand, t_closed, ratio, c):
+    """Friction-brake force taking what engine braking cannot: (T_closed - T_demand)+ i eta / r  (15),(16)."""
+    excess = t_closed - t_demand
+    return vh.engine_to_wheel_force(excess, ratio, c) if excess > 0.0 else 0.0
+
+
+@equation
+def operating_point(v, a, ratio, t_closed, extended, c):
+    """Engine operating point that speed v and acceleration a impose through gear ratio ``ratio``.
+
+    Paper mode: the stiff driveline (1),(14)-(18). Extended mode: brakes below the closed-throttle torque
+    ``t_closed`` (the FQM at A_min at the wheel-side speed), and the clutch below idle speed.
+    Returns (w_e, dw_e/dt, w_wheel, T_cr demanded, brake force, clutch state, wheel force); the clutch state is
+    CLUTCH_ENGAGED, CLUTCH_SLIPPING or CLUTCH_OPEN.
+    """
+    f_wheel = vh.wheel_force(v, a, c)  # (18)
+    w_wheel = vh.engine_speed(v, ratio, c)  # (14),(17)
+    dw = vh.engine_speed(a, ratio, c)
+    t_cr = vh.crank_torque_demand(f_wheel, ratio, dw, c)  # (1),(15),(16)
+    if not extended:
+        return w_wheel, dw, w_wheel, t_cr, 0.0, CLUTCH_ENGAGED, f_wheel
+    brake = brake_force(t_cr, t_closed, ratio, c)
+    if t_cr < t_closed:
+        t_cr = t_closed
+    if clutch_engaged(w_wheel, c):
+        return w_wheel, dw, w_wheel, t_cr, brake, CLUTCH_ENGAGED, f_wheel
+    if f_wheel > 0.0:  # slipping: the engine at idle passes the wheel torque, its inertia decoupled
+        t_clutch = vh.wheel_to_engine_torque(f_wheel, ratio, c)
+        return c.idle_speed, 0.0, w_wheel, t_clutch, 0.0, CLUTCH_SLIPPING, f_wheel
+    # open: the engine idles, the brakes hold what the road load does not
+    return c.idle_speed, 0.0, w_wheel, 0.0, (-f_wheel if f_wheel < 0.0 else 0.0), CLUTCH_OPEN, f_wheel
+
+
+# indices of the energy terms returned by powers(), in EnergyBalance's order
+ENERGY_TERMS = (
+    "indicated",
+    "friction",
+    "pumping",
+    "engine_kinetic",
+    "driveline_loss",
+    "vehicle_kinetic",
+    "aero",
+    "rolling",
+    "brake",
+    "trace_miss",
+    "idle_control",
+)
+N_TERMS = len(ENERGY_TERMS)
+
+
+@equation
+def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, c):
+    """Power (W) of every energy term at one instant, in the order of :data:`ENERGY_TERMS`.
+
+    ``t_cr`` is the crank torque the engine makes and ``t_missing`` what the demand asked beyond it (trace
+    miss of a quasi-static method; 0 otherwise). With the clutch engaged the gearbox takes the flywheel
+    torque T_e = T_cr + missing - J_e dw_e (1) at w_e; while it slips, the clutch torque (the engine's, if
+    positive) at the wheel-side speed, and the slip dissipates T_clutch (w_e - w_wheel); an idealised idle
+    governor supplies what a negative crank torque of the declutched engine would take (``idle_control``).
+    With the clutch open (quasi-static methods at rest) the idling engine is outside the balance.
+    """
+    vv = v if v > 0.0 else 0.0
+    road = (c.mass * vv * a, vh.aero_force(vv, c) * vv, vh.rolling_force(vv, c) * vv, brake * vv)
+    if clutch == CLUTCH_OPEN:
+        return (0.0, 0.0, 0.0, 0.0, 0.0, road[0], road[1], road[2], road[3], 0.0, 0.0)
+    cyc = en.cycles_per_second(w_e, c) * c.displacement  # MEP x this = power
+    indicated = en.fuel_flow(p_i, w_e, c) * c.fuel_heating_value * c.thermal_efficiency
+    friction = en.fmep(p_i, w_e, c) * cyc
+    pumping = en.pmep(p_i, c) * cyc
+    t_asked = t_cr + t_missing
+    if clutch == CLUTCH_ENGAGED:
+        engine_kinetic = c.inertia * w_e * dw_e
+        driveline = (1.0 - c.efficiency) * (t_asked - c.inertia * dw_e) * w_e  # (1),(15)
+        idle = 0.0
+    else:
+        engine_kinetic = 0.0
+        t_clutch = slipping_clutch_torque(t_asked)
+        driveline = (1.0 - c.efficiency) * t_clutch * w_wheel + t_clutch * (w_e - w_wheel)
+        idle = (t_asked - t_clutch) * w_e
+    return (
+        indicated,
+        friction,
+        pumping,
+        engine_kinetic,
+        driveline,
+        road[0],
+        road[1],
+        road[2],
+        road[3],
+        t_missing * w_e,
+        idle,
+    )

@@ -1,0 +1,101 @@
+"""Table look-ups used by the maps and the kernels, written once (compiled; Python gets array views).
+
+* :func:`interp_at`: ``numpy.interp`` for one point (end values held outside the grid),
+* :func:`bilinear_at`: bilinear interpolation on a rectilinear grid, linear extrapolation outside.
+
+Grids are increasing; a uniform grid is found in one multiplication, any other by a short walk from there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._compile import kernel
+from .engine import equation
+
+
+@equation
+def _guess(xg, x):
+    """Interval index a uniform grid would give for x, clipped to 0..len(xg) - 2 (a start for the walks)."""
+    n = xg.size
+    g = (x - xg[0]) * ((n - 1) / (xg[n - 1] - xg[0]))
+    if not g > 0.0:  # also NaN
+        return 0
+    return min(int(g), n - 2)
+
+
+@equation
+def interp_at(x, xp, fp):
+    """numpy.interp(x, xp, fp) for one x: end values held outside, exact at the nodes."""
+    n = xp.size
+    if x <= xp[0]:
+        return fp[0]
+    if x >= xp[n - 1]:
+        return fp[n - 1]
+    j = _guess(xp, x)
+    while j > 0 and xp[j] > x:
+        j -= 1
+    while xp[j + 1] <= x:
+        j += 1
+    if xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    return slope * (x - xp[j]) + fp[j]
+
+
+@equation
+def _cell(xg, x):
+    """Cell of x: the j in 0..len(xg) - 2 with xg[j] < x <= xg[j+1] (the end cells extend outward)."""
+    last = xg.size - 2
+    j = _guess(xg, x)
+    while j > 0 and xg[j] >= x:
+        j -= 1
+    while j < last and xg[j + 1] < x:
+        j += 1
+    return j
+
+
+@equation
+def bilinear_at(xg, yg, table, x, y):
+    """Bilinear interpolation of ``table[i, j]`` at (xg[i], yg[j]) for one point; linear outside."""
+    i = _cell(xg, x)
+    j = _cell(yg, y)
+    tx = (x - xg[i]) / (xg[i + 1] - xg[i])
+    ty = (y - yg[j]) / (yg[j + 1] - yg[j])
+    f00 = table[i, j]
+    f01 = table[i, j + 1]
+    f10 = table[i + 1, j]
+    f11 = table[i + 1, j + 1]
+    return (1 - tx) * ((1 - ty) * f00 + ty * f01) + tx * ((1 - ty) * f10 + ty * f11)
+
+
+@kernel
+def _interp_loop(x, xp, fp, out):
+    for k in range(x.size):
+        out[k] = interp_at(x[k], xp, fp)
+
+
+@kernel
+def _bilinear_loop(xg, yg, table, x, y, out):
+    for k in range(x.size):
+        out[k] = bilinear_at(xg, yg, table, x[k], y[k])
+
+
+def interp(x, xp, fp):
+    """:func:`interp_at` over an array ``x``."""
+    x = np.asarray(x, dtype=float)
+    flat = np.ascontiguousarray(x).ravel()
+    out = np.empty(flat.size)
+    _interp_loop(flat, np.asarray(xp, float), np.asarray(fp, float), out)
+    return out.reshape(x.shape) if x.ndim else float(out[0])
+
+
+def bilinear(xg, yg, table, x, y):
+    """:func:`bilinear_at` over arrays ``x``, ``y`` (broadcast)."""
+    x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    xs, ys = np.ascontiguousarray(x).ravel(), np.ascontiguousarray(y).ravel()
+    out = np.empty(xs.size)
+    _bilinear_loop(
+        np.asarray(xg, float), np.asarray(yg, float), np.ascontiguousarray(table, dtype=float), xs, ys, out
+    )
+    return out.reshape(x.shape) if x.ndim else float(out[0])
