@@ -48,7 +48,7 @@ def test_choked_and_subcritical_regions_both_covered(params):
     eng = params.engine
     ss = maps.steady_state(np.array([2e-5, eng.max_throttle_area]), 300.0, eng)
     assert ss.choked.tolist() == [True, False]
-    assert ss.iterations[1] <= params.simulation.newton_max_iterations
+    assert ss.iterations[1] <= 10  # the paper's iteration limit
 
 
 def test_round_trip_fqm_to_bqm(params):

@@ -645,7 +645,7 @@ def cache_locations() -> dict:
 
     out = {"NUMBA_CACHE_DIR": os.environ.get("NUMBA_CACHE_DIR")}
     try:
-        out["vpsim.methods.backward"] = backward.operating_points._cache._cache_path
+        out["vpsim.methods.backward"] = backward.run_kernel._cache._cache_path
     except AttributeError:
         out["vpsim.methods.backward"] = None
     try:

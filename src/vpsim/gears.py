@@ -65,6 +65,9 @@ class GearSchedule:
         return self.time_s[1:][np.diff(self.gear) != 0]
 
 
+RULE_STEP_S = 1.0  # longest interval the gear rule looks at (longer ones are subdivided)
+
+
 @dataclass(frozen=True)
 class GearRule:
     """Parameters of the default schedule rule (engine speeds in rad/s)."""
@@ -96,9 +99,17 @@ def interval_demand(cycle: Cycle, ratio, params):
 
 
 def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | None = None) -> GearSchedule:
-    """Derive the gear schedule of ``cycle`` once, by the documented rule (module docstring)."""
+    """Derive the gear schedule of ``cycle`` once, by the documented rule (module docstring).
+
+    The rule looks at every interval's demand; a coarse or gappy trace is first subdivided to 1 s steps
+    (its piecewise-linear speed unchanged), so its schedule is the one of the same trace sampled at 1 Hz.
+    """
+    from .cycles.resample import subdivide
     from .model.maps import max_torque
 
+    t_fine, v_fine, original = subdivide(cycle.time_s, cycle.speed_mps, RULE_STEP_S)
+    if original is not None:
+        cycle = Cycle(cycle.name, t_fine, v_fine, source=cycle.source)
     rule = rule or GearRule()
     ratios = np.asarray(params.transmission.ratios)
     n_g = len(ratios)

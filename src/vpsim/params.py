@@ -91,8 +91,6 @@ class Engine:
 class Simulation:
     idle_fuel_flow: float  # kg/s
     fuel_density: float  # kg/L
-    newton_max_iterations: int
-    newton_relative_tolerance: float
     ode_relative_tolerance: float
     inverse_max_step: float  # s
 
@@ -194,12 +192,16 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "engine.min_throttle_area": (0.0, 0.1, True),
     "simulation.idle_fuel_flow": (0.0, 0.1, True),
     "simulation.fuel_density": (0.3, 2.0, False),
-    "simulation.newton_relative_tolerance": (0.0, 0.1, False),
     "simulation.ode_relative_tolerance": (0.0, 0.5, False),
     "simulation.inverse_max_step": (0.0, 100.0, False),
 }
 _EFFICIENCIES = ("transmission.efficiency", "engine.thermal_efficiency")
-_POSITIVE_INTS = ("engine.cylinders", "engine.revolutions_per_cycle", "simulation.newton_max_iterations")
+_POSITIVE_INTS = ("engine.cylinders", "engine.revolutions_per_cycle")
+# fields of earlier versions that no longer exist: read and ignored, with the reason
+_RETIRED = {
+    "simulation.newton_max_iterations": "the FQM's Newton solve always converges to 1e-12 (at most 30 iterations)",
+    "simulation.newton_relative_tolerance": "the FQM's Newton solve always converges to 1e-12 (at most 30 iterations)",
+}
 
 
 def _fmt_range(key: str) -> str:
@@ -311,6 +313,11 @@ def _from_mapping(data: dict[str, Any], where: str, base: Parameters | None) -> 
         attrs = {f.name for f in fields(cls)}
         kw: dict[str, Any] = {}
         for name, entry in given.items():
+            if f"{sec}.{name}" in _RETIRED:
+                import warnings
+
+                warnings.warn(f"{where}: {sec}.{name} is ignored: {_RETIRED[f'{sec}.{name}']}", stacklevel=2)
+                continue
             attr = _ATTR_ALIASES.get(name, name)
             if attr not in attrs or name == "lambda_":
                 raise ParameterError(

@@ -9,9 +9,9 @@ line; what is cut off is reported as a trace miss, never clipped silently. The f
 engine's fuel map (generated from the physics by :mod:`vpsim.model.maps`, or measured) and floored at the
 idle flow (section 5).
 
-Two compiled passes over the intervals: :func:`operating_points` (and, for a generated map, its fuel), then
-:func:`account` (fuel, distance, the energy balance from :func:`vpsim.model.rules.powers`, trace miss).
-For a measured map the fuel flow between the two passes comes from the map itself.
+One compiled pass over the intervals (:func:`run_kernel`): the operating point and its fuel flow, then the
+sums (fuel, distance, the energy balance from :func:`vpsim.model.rules.powers`, trace miss). For a measured
+map the fuel flow comes from the map itself between that pass and the sums (:func:`account`).
 :func:`run_variants` is the same method for many design variants at once (:mod:`vpsim.batch`).
 
 Modes:
@@ -33,7 +33,7 @@ from ..model import rules
 from ..model import tables as tb
 from ..model import vehicle as vh
 from ..model._compile import kernel
-from ..model.engine import equation
+from ..model.engine import equation, inline
 from ..model.maps import EngineMap, GeneratedEngineMap, cached_engine_map
 from ..model.record import ratios as total_ratios
 from ..model.record import record_array
@@ -54,7 +54,7 @@ N_ACC = A_FUEL + 5
 MISS_TOLERANCE_NM = 1e-9  # a shortfall below this is rounding, not a trace miss
 
 
-@equation
+@inline
 def gear_index(time_s, k, sched_t, sched_gear, j):
     """Index (0-based) of the gear engaged on interval k (the schedule held right-continuously), and the
     schedule position to start the next search from."""
@@ -65,8 +65,110 @@ def gear_index(time_s, k, sched_t, sched_gear, j):
     return sched_gear[idx] - 1, j
 
 
-@kernel
-def operating_points(
+@inline
+def _point(
+    time_s,
+    speed,
+    k,
+    g,
+    ratios,
+    c,
+    extended,
+    fuel_kind,
+    map_speed,
+    map_torque,
+    table,
+    line_speed,
+    line_max,
+    line_min,
+    inv_line,
+    inv_ms,
+    inv_mt,
+):
+    """The operating point interval k imposes in gear index g, limited by the max-torque line; its intake
+    pressure and (``fuel_kind`` exact or table) fuel flow. Returns the values of one row (R_V .. R_MDOT)."""
+    i = ratios[g]
+    dt = time_s[k + 1] - time_s[k]
+    v = 0.5 * (speed[k + 1] + speed[k])
+    a = (speed[k + 1] - speed[k]) / dt
+    t_closed = 0.0
+    if extended:
+        t_closed = tb.interp_at(i * v / c.wheel_radius, line_speed, line_min, inv_line)
+    w, dw, w_wheel, t_req, brake, clutch, _ = rules.operating_point(v, a, i, t_closed, extended, c)
+    t_max = tb.interp_at(w, line_speed, line_max, inv_line)
+    short = t_req - t_max if t_req > t_max else 0.0
+    t_cr = t_req - short
+    p = en.intake_pressure_for_torque(t_cr, w, c)
+    if fuel_kind == FUEL_EXACT:
+        mdot = en.fuel_flow(p, w, c)
+    elif fuel_kind == FUEL_TABLE:
+        mdot = tb.bilinear_at(map_speed, map_torque, table, w, t_cr, inv_ms, inv_mt)
+    else:
+        mdot = math.nan
+    if clutch == rules.CLUTCH_OPEN:
+        mdot = c.idle_fuel_flow
+    return v, a, w, dw, w_wheel, t_cr, short, brake, clutch, p, mdot
+
+
+@inline
+def _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, p, mdot):
+    rows[R_TIME, k] = 0.5 * (time_s[k + 1] + time_s[k])
+    rows[R_V, k] = v
+    rows[R_A, k] = a
+    rows[R_W, k] = w
+    rows[R_DW, k] = dw
+    rows[R_WWHEEL, k] = w_wheel
+    rows[R_TCR, k] = t_cr
+    rows[R_SHORT, k] = short
+    rows[R_BRAKE, k] = brake
+    rows[R_CLUTCH, k] = clutch
+    rows[R_P, k] = p
+    rows[R_MDOT, k] = mdot
+
+
+@inline
+def _kahan(acc, comp, q, x):
+    """acc[q] += x with Kahan's compensation in comp[q]."""
+    y = x - comp[q]
+    t = acc[q] + y
+    comp[q] = (t - acc[q]) - y
+    acc[q] = t
+
+
+@inline
+def _book(acc, comp, cur, dt, i, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, p, mdot, c, with_engine):
+    """Add interval's fuel, distance, energy terms and trace miss to the sums; returns the speed deficit of
+    the current contiguous miss (``cur``)."""
+    _kahan(acc, comp, A_FUEL, rules.fuel_with_idle_floor(mdot, c) * dt)
+    _kahan(acc, comp, A_DIST, v * dt)
+    pw = rules.powers(p, w, dw, t_cr, short, w_wheel, v, a, brake, clutch, c)
+    if with_engine:  # the engine's terms need the model's physics at the operating point
+        _kahan(acc, comp, 0, pw[0] * dt)
+        _kahan(acc, comp, 1, pw[1] * dt)
+        _kahan(acc, comp, 2, pw[2] * dt)
+        _kahan(acc, comp, 3, pw[3] * dt)
+        _kahan(acc, comp, 4, pw[4] * dt)
+        _kahan(acc, comp, 9, pw[9] * dt)
+        _kahan(acc, comp, 10, pw[10] * dt)
+    _kahan(acc, comp, 5, pw[5] * dt)
+    _kahan(acc, comp, 6, pw[6] * dt)
+    _kahan(acc, comp, 7, pw[7] * dt)
+    _kahan(acc, comp, 8, pw[8] * dt)
+    if short > acc[A_MAX_SHORT]:
+        acc[A_MAX_SHORT] = short
+    if short > MISS_TOLERANCE_NM:  # the speed the engine could not give accumulates over the miss
+        _kahan(acc, comp, A_MISS_S, dt)
+        cur += vh.engine_to_wheel_force(short, i, c) / vh.equivalent_mass(i, c) * dt
+        if cur > acc[A_DEFICIT]:
+            acc[A_DEFICIT] = cur
+        return cur
+    return 0.0
+
+
+# _nrt=False: no reference counting (each call of an equation with array arguments would otherwise pay for
+# atomic increments and decrements); the kernels allocate nothing, their scratch space ``comp`` comes in
+@kernel(_nrt=False)
+def run_kernel(
     time_s,
     speed,
     sched_t,
@@ -81,101 +183,102 @@ def operating_points(
     line_speed,
     line_max,
     line_min,
+    with_engine,
     gear,
     rows,
+    acc,
+    comp,
 ):
-    """Per interval: the operating point the cycle imposes, limited by the max-torque line, its intake
-    pressure and (``fuel_kind`` exact or table) its fuel flow. Fills ``gear`` (1-based) and ``rows``."""
+    """The BQM over the cycle's intervals: operating points (and their fuel flow, unless ``fuel_kind`` is
+    FUEL_GIVEN: then only ``rows`` are filled, for :func:`account` after the map gave the fuel), and the
+    sums of :func:`account` in the same pass. ``rows`` may have no columns (no series wanted)."""
+    inv_line = tb.inverse_spacing(line_speed)
+    inv_ms = tb.inverse_spacing(map_speed)
+    inv_mt = tb.inverse_spacing(map_torque)
+    for q in range(N_ACC):
+        acc[q] = 0.0
+        comp[q] = 0.0
+    keep = rows.shape[1] == gear.size
+    book = fuel_kind != FUEL_GIVEN
     j = 0
+    cur = 0.0
     for k in range(gear.size):
         g, j = gear_index(time_s, k, sched_t, sched_gear, j)
         gear[k] = g + 1
-        i = ratios[g]
-        dt = time_s[k + 1] - time_s[k]
-        v = 0.5 * (speed[k + 1] + speed[k])
-        a = (speed[k + 1] - speed[k]) / dt
-        t_closed = 0.0
-        if extended:
-            t_closed = tb.interp_at(i * v / c.wheel_radius, line_speed, line_min)
-        w, dw, w_wheel, t_req, brake, clutch, _ = rules.operating_point(v, a, i, t_closed, extended, c)
-        t_max = tb.interp_at(w, line_speed, line_max)
-        short = t_req - t_max if t_req > t_max else 0.0
-        t_cr = t_req - short
-        p = en.intake_pressure_for_torque(t_cr, w, c)
-        if fuel_kind == FUEL_EXACT:
-            mdot = en.fuel_flow(p, w, c)
-        elif fuel_kind == FUEL_TABLE:
-            mdot = tb.bilinear_at(map_speed, map_torque, table, w, t_cr)
-        else:
-            mdot = math.nan
-        if clutch == rules.CLUTCH_OPEN:
-            mdot = c.idle_fuel_flow
-        rows[R_TIME, k] = 0.5 * (time_s[k + 1] + time_s[k])
-        rows[R_V, k] = v
-        rows[R_A, k] = a
-        rows[R_W, k] = w
-        rows[R_DW, k] = dw
-        rows[R_WWHEEL, k] = w_wheel
-        rows[R_TCR, k] = t_cr
-        rows[R_SHORT, k] = short
-        rows[R_BRAKE, k] = brake
-        rows[R_CLUTCH, k] = clutch
-        rows[R_P, k] = p
-        rows[R_MDOT, k] = mdot
+        v, a, w, dw, w_wheel, t_cr, short, brake, clutch, p, mdot = _point(
+            time_s,
+            speed,
+            k,
+            g,
+            ratios,
+            c,
+            extended,
+            fuel_kind,
+            map_speed,
+            map_torque,
+            table,
+            line_speed,
+            line_max,
+            line_min,
+            inv_line,
+            inv_ms,
+            inv_mt,
+        )
+        if keep:
+            _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, p, mdot)
+        if book:
+            cur = _book(
+                acc,
+                comp,
+                cur,
+                time_s[k + 1] - time_s[k],
+                ratios[g],
+                v,
+                a,
+                w,
+                dw,
+                w_wheel,
+                t_cr,
+                short,
+                brake,
+                clutch,
+                p,
+                mdot,
+                c,
+                with_engine,
+            )
 
 
-@equation
-def _kahan(acc, comp, q, x):
-    """acc[q] += x with Kahan's compensation in comp[q]."""
-    y = x - comp[q]
-    t = acc[q] + y
-    comp[q] = (t - acc[q]) - y
-    acc[q] = t
-
-
-@kernel
-def account(time_s, rows, ratios, gear, c, with_engine, acc):
+@kernel(_nrt=False)
+def account(time_s, rows, ratios, gear, c, with_engine, acc, comp):
     """Fuel, distance, the energy terms (compensated sums over the intervals) and the trace miss: seconds
     beyond the max-torque line, the largest shortfall and the largest speed deficit accumulated over a
-    contiguous miss. Engine energy terms only ``with_engine`` (a map from the model's physics)."""
-    comp = np.zeros(N_ACC)
+    contiguous miss, from the rows of :func:`run_kernel` (with the fuel flow of a measured map filled in)."""
     for q in range(N_ACC):
         acc[q] = 0.0
+        comp[q] = 0.0
     cur = 0.0
     for k in range(gear.size):
-        dt = time_s[k + 1] - time_s[k]
-        v = rows[R_V, k]
-        mdot = rows[R_MDOT, k]
-        short = rows[R_SHORT, k]
-        clutch = int(rows[R_CLUTCH, k])
-        _kahan(acc, comp, A_FUEL, rules.fuel_with_idle_floor(mdot, c) * dt)
-        _kahan(acc, comp, A_DIST, v * dt)
-        pw = rules.powers(
-            rows[R_P, k],
+        cur = _book(
+            acc,
+            comp,
+            cur,
+            time_s[k + 1] - time_s[k],
+            ratios[gear[k] - 1],
+            rows[R_V, k],
+            rows[R_A, k],
             rows[R_W, k],
             rows[R_DW, k],
-            rows[R_TCR, k],
-            short,
             rows[R_WWHEEL, k],
-            v,
-            rows[R_A, k],
+            rows[R_TCR, k],
+            rows[R_SHORT, k],
             rows[R_BRAKE, k],
-            clutch,
+            int(rows[R_CLUTCH, k]),
+            rows[R_P, k],
+            rows[R_MDOT, k],
             c,
+            with_engine,
         )
-        for q in range(rules.N_TERMS):
-            if with_engine or q >= 5 and q <= 8:
-                _kahan(acc, comp, q, pw[q] * dt)
-        if short > acc[A_MAX_SHORT]:
-            acc[A_MAX_SHORT] = short
-        if short > MISS_TOLERANCE_NM:  # the speed the engine could not give accumulates over the miss
-            _kahan(acc, comp, A_MISS_S, dt)
-            i = ratios[gear[k] - 1]
-            cur += vh.engine_to_wheel_force(short, i, c) / vh.equivalent_mass(i, c) * dt
-            if cur > acc[A_DEFICIT]:
-                acc[A_DEFICIT] = cur
-        else:
-            cur = 0.0
 
 
 def _map_arrays(engine_map, params):
@@ -220,7 +323,7 @@ def run(
         raise ValueError(f"mode must be 'paper' or 'extended', got {mode!r}")
     if engine_map is None:
         engine_map = cached_engine_map(params.engine)
-    elif not isinstance(engine_map, EngineMap):
+    elif not isinstance(engine_map, GeneratedEngineMap) and not isinstance(engine_map, EngineMap):
         raise TypeError(
             f"engine_map must implement vpsim.model.maps.EngineMap, got {type(engine_map).__name__}"
         )
@@ -233,10 +336,13 @@ def run(
     ratios = total_ratios(params.transmission)
     n = cycle.time_s.size - 1
 
-    def passes(time_s, speed):
-        gear = np.empty(time_s.size - 1, dtype=np.int64)
-        rows = np.empty((N_ROWS, time_s.size - 1))
-        operating_points(
+    def passes(time_s, speed, keep):
+        n_k = time_s.size - 1
+        gear = np.empty(n_k, dtype=np.int64)
+        rows = np.empty((N_ROWS, n_k if keep or kind == FUEL_GIVEN else 0))
+        acc = np.empty(N_ACC)
+        comp = np.empty(N_ACC)
+        run_kernel(
             time_s,
             speed,
             schedule.time_s,
@@ -251,22 +357,24 @@ def run(
             l_speed,
             l_max,
             l_min,
+            generated,
             gear,
             rows,
+            acc,
+            comp,
         )
         if kind == FUEL_GIVEN:
             flow = np.asarray(engine_map.fuel_flow(rows[R_TCR], rows[R_W]), dtype=float)
             rows[R_MDOT] = np.where(
                 rows[R_CLUTCH] == rules.CLUTCH_OPEN, params.simulation.idle_fuel_flow, flow
             )
-        acc = np.empty(N_ACC)
-        account(time_s, rows, ratios, gear, c, generated, acc)
+            account(time_s, rows, ratios, gear, c, generated, acc, np.empty(N_ACC))
         return gear, rows, acc
 
-    if not (operating_points.overloads and account.overloads):  # compile (or load) outside the timing
-        passes(cycle.time_s[:2], cycle.speed_mps[:2])
+    if not run_kernel.overloads:  # compile (or load) outside the timing
+        passes(cycle.time_s[:2], cycle.speed_mps[:2], keep_series)
     t0 = time.process_time()
-    gear, rows, acc = passes(cycle.time_s, cycle.speed_mps)
+    gear, rows, acc = passes(cycle.time_s, cycle.speed_mps, keep_series)
     cpu = time.process_time() - t0
     sums = acc.tolist()
     trace = TraceMiss(
@@ -374,7 +482,7 @@ def _lazy_line(w, a_eff, cache, n_line, w_end, c):
 
 @equation
 def _variant(c, rat, gear, dt, v, a, v_top_gear, extended, out):
-    """One variant: the operating points of :func:`operating_points` with the exact BQM, each line of the
+    """One variant: the operating points of :func:`run_kernel` with the exact BQM, each line of the
     variant's own engine evaluated lazily (a Newton solve per node actually needed).
 
     The max-torque line matters only where the demanded intake pressure comes near the wide-open-throttle

@@ -65,8 +65,8 @@ BAND_KMH = 2.0  # the regulation's speed tolerance (UN ECE R83 / EPA: +-2 km/h r
 
 # --- the driver's and the mode's settings D (the model's constants are the record c, vpsim.model.record) ---
 _KP, _KI, _ULO, _UHI, _AWG, _AMIN, _KB = range(7)  # PIDriver.as_array()
-_EXT, _AIDLE, _OPEN, _BAND = range(7, 11)
-N_SETTINGS = 11
+_EXT, _AIDLE, _OPEN, _BAND, _TAB_INV = range(7, 12)
+N_SETTINGS = 12
 # per-gear constants G: i, 1 / m_eq, i / r
 _G_I, _G_INV_MEQ, _G_KIN = range(3)
 
@@ -142,13 +142,13 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     vv = v if v > 0.0 else 0.0
     # driver
     if D[_OPEN] != 0.0:
-        cmd = tb.interp_at(t, tab_t, tab_v)
+        cmd = tb.interp_at(t, tab_t, tab_v, D[_TAB_INV])
         v_ref = vv
         throttle = cmd
         brake = 0.0
         dz = 0.0
     else:
-        v_ref = tb.interp_at(t, tab_t, tab_v)
+        v_ref = tb.interp_at(t, tab_t, tab_v, D[_TAB_INV])
         cmd, dz = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], D[_ULO], D[_UHI], D[_AWG])
         throttle, brake = pedal_split(cmd, D[_AMIN], D[_KB])
     # driveline kinematics: stiff, or slipping clutch with the engine held at idle (extended mode)
@@ -533,6 +533,8 @@ def integrate(
     fstats = np.zeros(1)
     D = np.array(D, dtype=float)
     D[_OPEN] = 1.0 if open_loop else 0.0
+    table_t = np.asarray(table_t, dtype=float)
+    D[_TAB_INV] = (table_t.size - 1) / (table_t[-1] - table_t[0]) if table_t.size > 1 else 0.0
     # np.array copies: one compiled signature for all calls (read-only inputs would compile another)
     work = np.zeros((11, NY))
     _integrate(

@@ -51,6 +51,7 @@ import time
 import numpy as np
 
 from ..cycles import Cycle
+from ..cycles.resample import subdivide
 from ..drivers.smoothing import SmoothingDriver, bump_kernel, bump_kernel_cdf, bump_kernel_moment
 from ..errors import VpsimError
 from ..gears import GearSchedule, default_schedule
@@ -59,11 +60,12 @@ from ..model import rules
 from ..model import vehicle as vh
 from ..model._compile import kernel
 from ..model.engine import equation
+from ..model.record import memo, record
 from ..model.record import ratios as total_ratios
-from ..model.record import record
 from ..result import EnergyBalance, Result, TraceMiss
 
 BAND_KMH = 2.0  # the regulation's speed tolerance, as for the forward method
+MAX_TAPS = 200_001  # largest discrete smoothing kernel (2a/dt + 1 samples) the uniform-grid path builds
 _MOVING = 1e-9  # m/s: v_d above this counts as moving (v_d is exactly 0 only where the cycle rests +-a)
 
 
@@ -320,12 +322,17 @@ def invert_points(v, dv, ddv, gear, ratios, coef, extended, c, rows):
 
 def gear_coefficients(params) -> np.ndarray:
     """Per gear: c1..c4 of (21) (:func:`vpsim.model.vehicle.statespace_coefficients`) and the rolling part of
-    c4, m g c_r / m_eq (removed at standstill)."""
+    c4, m g c_r / m_eq (removed at standstill); computed once per parameter set."""
+    return memo(params, "inverse_gear_coefficients", _gear_coefficients)
+
+
+def _gear_coefficients(params) -> np.ndarray:
     c = record(params)
     r = total_ratios(params.transmission)
     coef = np.empty((r.size, 5))
     coef[:, :4] = np.column_stack(np.broadcast_arrays(*vh.statespace_coefficients(r, c)[:4]))
     coef[:, 4] = c.rolling_force / vh.equivalent_mass(r, c)
+    coef.flags.writeable = False
     return coef
 
 
@@ -414,8 +421,17 @@ def account(v, dv, vc, rows, left, right, dt, c, band, weight, acc, extra):
             clutch,
             c,
         )
-        for q in range(rules.N_TERMS):
-            acc[q] += wk * pw[q]
+        acc[0] += wk * pw[0]
+        acc[1] += wk * pw[1]
+        acc[2] += wk * pw[2]
+        acc[3] += wk * pw[3]
+        acc[4] += wk * pw[4]
+        acc[5] += wk * pw[5]
+        acc[6] += wk * pw[6]
+        acc[7] += wk * pw[7]
+        acc[8] += wk * pw[8]
+        acc[9] += wk * pw[9]
+        acc[10] += wk * pw[10]
         acc[_A_FUEL] += wk * used
         acc[_A_DIST] += wk * x
         u = rows[R_U, k]
@@ -480,7 +496,9 @@ def run(
     n_s = cycle.time_s.size
 
     def passes(time_s, speed, keep):
-        if _is_uniform_compiled(time_s):  # grid and smoothing in one compiled pass
+        # on a uniform grid the smoothing is a discrete convolution with 2a/dt + 1 taps; past MAX_TAPS (a very
+        # fine grid or a very wide kernel) the window-by-window evaluation keeps the memory bounded
+        if _is_uniform_compiled(time_s) and a / (time_s[1] - time_s[0]) <= MAX_TAPS / 2:
             taps = _sample_taps(a, float(time_s[1] - time_s[0]))
             F, I = _grid_and_smoothing(time_s, speed, schedule.time_s, schedule.gear, *taps)
             n = time_s.size - 1
@@ -502,8 +520,21 @@ def run(
     if not (invert_points.overloads and account.overloads):  # compile (or load) outside the timing
         passes(cycle.time_s[:3], cycle.speed_mps[:3], keep_series)
     t_cpu = time.process_time()
-    t, v, dv, ddv, gear_s, v_c, rows, acc, extra = passes(cycle.time_s, cycle.speed_mps, keep_series)
+    # the paper caps the step at 1 s (simulation.inverse_max_step): longer intervals of a coarse or gappy trace
+    # are subdivided, so the trapezoid follows the smoothed speed and the method drives the trace's distance
+    time_s, speed, samples = subdivide(cycle.time_s, cycle.speed_mps, params.simulation.inverse_max_step)
+    t, v, dv, ddv, gear_s, v_c, rows, acc, extra = passes(time_s, speed, keep_series)
     cpu = time.process_time() - t_cpu
+    if samples is not None:  # series at the cycle's own samples
+        gear_s, extra = gear_s[samples], extra[:, samples] if keep_series else extra
+        t, v, dv, ddv, v_c, rows = (
+            t[samples],
+            v[samples],
+            dv[samples],
+            ddv[samples],
+            v_c[samples],
+            rows[:, samples],
+        )
 
     fuel_kg, distance = float(acc[_A_FUEL]), float(acc[_A_DIST])
     energy = EnergyBalance(**{key: float(acc[q]) for q, key in enumerate(rules.ENERGY_TERMS)})

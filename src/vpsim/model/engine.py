@@ -20,7 +20,17 @@ from numba.extending import register_jitable
 
 from ._compile import kernel
 
-equation = register_jitable  # a model equation: compiled inline into every kernel, plain Python otherwise
+
+def equation(fn):
+    """Mark a model equation: compiled into every kernel that calls it, plain Python otherwise."""
+    return register_jitable(fn)
+
+
+def inline(fn):
+    """Like :func:`equation`, and inlined at Numba IR level into its callers: for the per-step glue of a
+    kernel, whose calls (arrays and long tuples in and out) would otherwise cost more than their work."""
+    return register_jitable(inline="always")(fn)
+
 
 TWO_PI = 2.0 * math.pi
 

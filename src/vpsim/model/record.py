@@ -140,14 +140,31 @@ def _record_of(vehicle, transmission, engine, simulation) -> np.ndarray:
     return rec
 
 
+def memo(obj, key: str, build):
+    """``build(obj)``, computed once per (immutable) object and kept on the object itself.
+
+    Parameter sets are frozen, so what is derived from one never changes; keeping it on the object (not in a
+    module-level table) makes the look-up an attribute access, free of hashing and of shared state. Two
+    threads may both build it the first time; they build the same value.
+    """
+    cache = obj.__dict__.get("_derived")
+    if cache is None:
+        cache = {}
+        object.__setattr__(obj, "_derived", cache)
+    hit = cache.get(key)
+    if hit is None:
+        hit = cache[key] = build(obj)
+    return hit
+
+
 def record_array(params) -> np.ndarray:
     """The read-only record array (shape (1,)) of one parameter set, cached per parameter set."""
-    return _record_of(params.vehicle, params.transmission, params.engine, params.simulation)
+    return memo(params, "record", lambda p: _record_of(p.vehicle, p.transmission, p.engine, p.simulation))
 
 
 def record(params):
     """The record of one parameter set (``rec.mass``, ``rec.displacement``, ...), cached."""
-    return record_array(params)[0]
+    return memo(params, "record_0", lambda p: record_array(p)[0])
 
 
 def engine_record(engine, vehicle=None, transmission=None, simulation=None):
@@ -164,10 +181,9 @@ def engine_record(engine, vehicle=None, transmission=None, simulation=None):
 
 def ratios(transmission) -> np.ndarray:
     """Total ratio per gear (gearbox x final drive), read-only, cached per transmission."""
-    return _ratios(transmission)
+    return memo(transmission, "ratios", _ratios)
 
 
-@functools.lru_cache(maxsize=256)
 def _ratios(transmission) -> np.ndarray:
     r = np.asarray(transmission.ratios, dtype=float)
     r.flags.writeable = False

@@ -3,7 +3,8 @@
 * :func:`interp_at`: ``numpy.interp`` for one point (end values held outside the grid),
 * :func:`bilinear_at`: bilinear interpolation on a rectilinear grid, linear extrapolation outside.
 
-Grids are increasing; a uniform grid is found in one multiplication, any other by a short walk from there.
+Grids are increasing; a uniform grid is found in one multiplication (by the grid's inverse mean spacing,
+:func:`inverse_spacing`, computed once by the caller), any other by a short walk from there.
 """
 
 from __future__ import annotations
@@ -15,24 +16,30 @@ from .engine import equation
 
 
 @equation
-def _guess(xg, x):
+def inverse_spacing(xg):
+    """(len(xg) - 1) / (xg[-1] - xg[0]): intervals per unit of x, for the first guess of a look-up."""
+    return (xg.size - 1) / (xg[xg.size - 1] - xg[0])
+
+
+@equation
+def _guess(xg, x, inv):
     """Interval index a uniform grid would give for x, clipped to 0..len(xg) - 2 (a start for the walks)."""
     n = xg.size
-    g = (x - xg[0]) * ((n - 1) / (xg[n - 1] - xg[0]))
+    g = (x - xg[0]) * inv
     if not g > 0.0:  # also NaN
         return 0
     return min(int(g), n - 2)
 
 
 @equation
-def interp_at(x, xp, fp):
+def interp_at(x, xp, fp, inv):
     """numpy.interp(x, xp, fp) for one x: end values held outside, exact at the nodes."""
     n = xp.size
     if x <= xp[0]:
         return fp[0]
     if x >= xp[n - 1]:
         return fp[n - 1]
-    j = _guess(xp, x)
+    j = _guess(xp, x, inv)
     while j > 0 and xp[j] > x:
         j -= 1
     while xp[j + 1] <= x:
@@ -44,10 +51,10 @@ def interp_at(x, xp, fp):
 
 
 @equation
-def _cell(xg, x):
+def _cell(xg, x, inv):
     """Cell of x: the j in 0..len(xg) - 2 with xg[j] < x <= xg[j+1] (the end cells extend outward)."""
     last = xg.size - 2
-    j = _guess(xg, x)
+    j = _guess(xg, x, inv)
     while j > 0 and xg[j] >= x:
         j -= 1
     while j < last and xg[j + 1] < x:
@@ -56,10 +63,10 @@ def _cell(xg, x):
 
 
 @equation
-def bilinear_at(xg, yg, table, x, y):
+def bilinear_at(xg, yg, table, x, y, inv_x, inv_y):
     """Bilinear interpolation of ``table[i, j]`` at (xg[i], yg[j]) for one point; linear outside."""
-    i = _cell(xg, x)
-    j = _cell(yg, y)
+    i = _cell(xg, x, inv_x)
+    j = _cell(yg, y, inv_y)
     tx = (x - xg[i]) / (xg[i + 1] - xg[i])
     ty = (y - yg[j]) / (yg[j + 1] - yg[j])
     f00 = table[i, j]
@@ -71,14 +78,16 @@ def bilinear_at(xg, yg, table, x, y):
 
 @kernel
 def _interp_loop(x, xp, fp, out):
+    inv = inverse_spacing(xp)
     for k in range(x.size):
-        out[k] = interp_at(x[k], xp, fp)
+        out[k] = interp_at(x[k], xp, fp, inv)
 
 
 @kernel
 def _bilinear_loop(xg, yg, table, x, y, out):
+    inv_x, inv_y = inverse_spacing(xg), inverse_spacing(yg)
     for k in range(x.size):
-        out[k] = bilinear_at(xg, yg, table, x[k], y[k])
+        out[k] = bilinear_at(xg, yg, table, x[k], y[k], inv_x, inv_y)
 
 
 def interp(x, xp, fp):
