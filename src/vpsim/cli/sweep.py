@@ -59,6 +59,34 @@ def _hms(s: float) -> str:
     return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60:02d}:{s % 60:02d}"
 
 
+def _installed(module: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(module) is not None
+
+
+def _check_requirements(out, fmt, resume: bool, *, cluster: bool):
+    """Check the optional packages this sweep needs before anything is computed; return the format to use.
+
+    pyarrow is a dependency of vpsim, so it is normally present; should it be missing (an install with
+    ``--no-deps``, a platform without its wheels) a new sweep writes CSV and says so in one line.
+    """
+    from pathlib import Path
+
+    if cluster and not _installed("dask.distributed"):
+        raise VpsimError("--scheduler and --local-cluster need Dask: pip install 'vpsim[cluster]'")
+    if _installed("pyarrow"):
+        return fmt
+    if resume and (Path(out) / "results.parquet").exists():
+        raise VpsimError(f"{out} holds Parquet results, which need pyarrow: pip install pyarrow")
+    if fmt == "parquet":
+        raise VpsimError("--format parquet needs pyarrow: pip install pyarrow (or use --format csv)")
+    if fmt is None and not resume:
+        click.echo("vpsim: pyarrow is not installed: writing results.csv instead of Parquet", err=True)
+        return "csv"
+    return fmt
+
+
 @cli.command()
 @click.argument("spec", type=click.Path(dir_okay=False))
 @click.option(
@@ -116,6 +144,7 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
     if workers is not None and (scheduler is not None or local_cluster is not None):
         raise VpsimError("--workers applies to local processes; with a Dask cluster its workers do the work")
     sp = load_spec(spec)
+    fmt = _check_requirements(out, fmt, resume, cluster=scheduler is not None or local_cluster is not None)
     bar = _Progress(enabled=not quiet)
     where = (
         f"Dask scheduler {scheduler}"
