@@ -34,12 +34,21 @@ from .main import cli
 def paper(out, vehicle, advisor_dir, repeats):
     """Run every method x driver on NEDC and FTP-75 (paper mode) and write the paper's tables and figures."""
     from ..study import _scaling_function, run_study
+    from .notices import announce_compilation, echo
+
+    announce_compilation()
 
     if advisor_dir is not None:
         _scaling_function()  # fail before the long run if engine scaling is missing
         if not Path(advisor_dir).is_dir():
             raise VpsimError(f"--advisor-dir {advisor_dir}: no such folder")
     start = time.perf_counter()
+    echo(
+        f"vpsim paper: 3 methods x 2 drivers x 2 modes on NEDC and FTP-75, best of {repeats} runs each, "
+        "figures and report"
+        + (", engine scaling" if advisor_dir is not None else "")
+        + " (about a minute on 2 cores once compiled)"
+    )
     with click.progressbar(length=1, label="vpsim paper", file=sys.stderr, show_pos=True) as bar:
         state = {"done": 0}
 

@@ -85,7 +85,9 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
         scaled_parameters,
         write_csv,
     )
+    from .notices import announce_compilation
 
+    announce_compilation()
     cycle_names = _names(cycles, "--cycles")
     cal_cycles = _names(calibration_cycles, "--calibration-cycles")
     eng = load_engine(measured)

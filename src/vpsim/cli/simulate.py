@@ -63,6 +63,9 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
     """Simulate a vehicle on a drive cycle and report its fuel consumption."""
     from ..cycles import load_cycle
     from ..simulation import simulate as run
+    from .notices import announce_compilation
+
+    announce_compilation()
 
     if driver is not None and method == "backward":
         raise VpsimError(

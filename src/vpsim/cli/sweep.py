@@ -87,6 +87,20 @@ def _check_requirements(out, fmt, resume: bool, *, cluster: bool):
     return fmt
 
 
+def _announce_compilation(methods, quiet: bool) -> None:
+    """Say at once if the kernels this sweep needs are not compiled yet (its workers will compile them)."""
+    from .notices import announce_compilation, cold_kernels, echo
+
+    cold = cold_kernels(methods)
+    if cold and not quiet:
+        echo(
+            f"vpsim: compiling the {' and '.join(cold)} on first use (one-time: cached on disk for later "
+            "runs; typically 10-60 s before the first rows)"
+        )
+    elif not quiet:
+        announce_compilation()  # anything compiled in this process after all is announced when it starts
+
+
 @cli.command()
 @click.argument("spec", type=click.Path(dir_okay=False))
 @click.option(
@@ -168,6 +182,7 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
             f"x {len(sp.combos)} cycle/method/driver combinations on {where}{extra}",
             err=True,
         )
+    _announce_compilation(sp.methods, quiet)
     try:
         run = run_sweep(
             sp,
