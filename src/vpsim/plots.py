@@ -76,7 +76,7 @@ def write_map_figures(eng, out: Path) -> list[Path]:
         }
     )
     p = out / "figure2_torque_lines.csv"
-    df.to_csv(p, index=False)
+    df.to_csv(p, index=False, float_format="%.6g")
     written.append(p)
     ax, (w, t, fuel) = plot_fuel_map(eng)
     p = out / "figure3_fuel_map.png"

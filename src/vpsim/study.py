@@ -310,7 +310,7 @@ def run_study(
     table2_ext = _table2(results, names, "extended")
     table3 = _table3(results, names)
     tracking = _tracking(results, names)
-    inversion = [{k: c[k] for k in INVERSION_COLUMNS} for c in checks]
+    inversion = [_rounded_check(c) for c in checks]
     files: list[Path] = []
     if out is not None:
         for fname, rows, cols in (
@@ -357,6 +357,19 @@ def _scaling_function():
     if not callable(fn):
         raise VpsimError("engine scaling is not available")
     return fn
+
+
+def _sig(x: float, digits: int = 3) -> float:
+    """``x`` to ``digits`` significant digits (a small error's magnitude, not its last bits)."""
+    return float(f"{x:.{digits}g}")
+
+
+def _rounded_check(check: dict) -> dict:
+    row = {k: check[k] for k in INVERSION_COLUMNS}
+    row["checked_s"] = round(row["checked_s"], 2)
+    row["moving_s"] = round(row["moving_s"], 2)
+    row["max_speed_error_mps"] = _sig(row["max_speed_error_mps"])
+    return row
 
 
 def _write_csv(path: Path, rows, columns) -> Path:
@@ -658,9 +671,15 @@ def standstill_behaviour(params, cycle_name="nedc", driver="1", dt: float = 0.05
 # --- report -------------------------------------------------------------------------------------------------
 
 
+def _cell(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.6g}"  # the rows are rounded already; no float noise in any case
+    return str(value)
+
+
 def _md_table(rows, columns) -> list[str]:
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-    lines += ["| " + " | ".join(str(r[c]) for c in columns) + " |" for r in rows]
+    lines += ["| " + " | ".join(_cell(r[c]) for c in columns) + " |" for r in rows]
     return lines
 
 

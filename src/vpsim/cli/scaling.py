@@ -147,7 +147,6 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
             click.echo(f"  fitted {n} = {cal.values[k]:.4g} +- {cal.std_errors[k]:.2g}")
         if cal.message:
             click.echo(f"  note: {cal.message}")
-    click.echo(
-        f"  wrote {out}/figure7.png, map_comparison.csv, map_stats.json, fuel.csv"
-        + (", calibration.json" if cal is not None else "")
-    )
+    names = ["figure7.png", "map_comparison.csv", "map_stats.json", "fuel.csv"]
+    names += ["calibration.json"] if cal is not None else []
+    click.echo(f"  wrote {path / names[0]}, " + ", ".join(names[1:]))
