@@ -33,6 +33,10 @@ from .main import cli
 )
 def paper(out, vehicle, advisor_dir, repeats):
     """Run every method x driver on NEDC and FTP-75 (paper mode) and write the paper's tables and figures."""
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only: the command line never opens a window
+
     from ..study import _scaling_function, run_study
     from .notices import announce_compilation, echo
 
@@ -43,11 +47,12 @@ def paper(out, vehicle, advisor_dir, repeats):
         if not Path(advisor_dir).is_dir():
             raise VpsimError(f"--advisor-dir {advisor_dir}: no such folder")
     start = time.perf_counter()
+    before = _files(out)
     echo(
         f"vpsim paper: 3 methods x 2 drivers x 2 modes on NEDC and FTP-75, best of {repeats} runs each, "
         "figures and report"
         + (", engine scaling" if advisor_dir is not None else "")
-        + " (about a minute on 2 cores once compiled)"
+        + " (10-60 s on 2 cores once compiled)"
     )
     with click.progressbar(length=1, label="vpsim paper", file=sys.stderr, show_pos=True) as bar:
         state = {"done": 0}
@@ -64,6 +69,17 @@ def paper(out, vehicle, advisor_dir, repeats):
             f"  {row['method']:<9} driver {row['driver']:<4} {row['cycle']:<6} "
             f"{row['fuel_l_per_100km']:8.3f} L/100 km  {row['diff_vs_bqm_pct']:+7.2f} %"
         )
+    after = _files(out)
+    written = {p for p, stamp in after.items() if before.get(p) != stamp} | {Path(p) for p in result.files}
     click.echo(
-        f"wrote {len(result.files)} files into {out} in {time.perf_counter() - start:.1f} s (see report.md)"
+        f"wrote {len(written)} files into {out} in {time.perf_counter() - start:.1f} s "
+        f"(see {Path(out) / 'report.md'})"
     )
+
+
+def _files(folder) -> dict:
+    """Every file under ``folder`` with its modification stamp: what the study wrote is what changed."""
+    root = Path(folder)
+    if not root.is_dir():
+        return {}
+    return {p: (p.stat().st_mtime_ns, p.stat().st_size) for p in root.rglob("*") if p.is_file()}

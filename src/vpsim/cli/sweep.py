@@ -210,6 +210,10 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
     )
     click.echo(f"wrote {run.path}")
     if plots and not run.results.empty:
+        import matplotlib
+
+        matplotlib.use("Agg")  # files only: the command line never opens a window
+
         from ..sweep.plots import write_sweep_figures
 
         for p in write_sweep_figures(run.results, out):
