@@ -337,6 +337,8 @@ def run_study(
         figures and out is not None,
     )
     if advisor_dir is not None:
+        if progress is not None:  # the longest single step: say what runs while it runs
+            progress(done, steps_total, "engine scaling (Figure 7, Table 4) ...")
         report += "\n" + scaling_section(advisor_dir, out if out is not None else Path(".")).rstrip() + "\n"
         tick("engine scaling")
     if out is not None:

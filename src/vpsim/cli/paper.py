@@ -59,8 +59,11 @@ def paper(out, vehicle, advisor_dir, repeats):
 
         def progress(done, total, label):
             bar.length = total
-            bar.label = f"vpsim paper: {label:<34.34}"
-            bar.update(done - state["done"])
+            bar.label = f"vpsim paper: {label:<40.40}"
+            if done == state["done"]:  # what is running now, before it is done
+                bar.render_progress()
+            else:
+                bar.update(done - state["done"])
             state["done"] = done
 
         result = run_study(out, params=vehicle, repeats=repeats, progress=progress, advisor_dir=advisor_dir)

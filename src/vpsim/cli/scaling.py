@@ -85,11 +85,16 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
         scaled_parameters,
         write_csv,
     )
-    from .notices import announce_compilation
+    from .notices import announce_compilation, echo
 
     announce_compilation()
     cycle_names = _names(cycles, "--cycles")
     cal_cycles = _names(calibration_cycles, "--calibration-cycles")
+    echo(
+        f"vpsim scaling: {Path(measured).name} against the scaled model, fuel on {', '.join(cycle_names)}"
+        + (f", calibrating on {', '.join(cal_cycles)}" if calibrate else "")
+        + " (a few seconds)"
+    )
     eng = load_engine(measured)
     params = scaled_parameters(
         load_parameters(vehicle),
