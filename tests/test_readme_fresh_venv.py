@@ -2,10 +2,10 @@
 
 The package is installed into a new venv exactly as the README says (``pip install .`` in a copy of the
 checkout, with build isolation, so a dependency missing from ``pyproject.toml`` fails here), and every
-command of the README's and docs/'s ``bash`` blocks is run as a user would: in a folder of their own, in a
-new process, with a cold Numba cache at first. Each must exit 0 without a traceback. Commands of ``text``
-blocks run too when the files they name exist (``../shared`` ones when the reference data is there); those
-naming a user's own spec or a cluster address are shown, not run.
+command of the README's and docs/'s ``bash`` blocks, and each ``python`` block, is run as a user would: in
+a folder of their own, in a new process, with a cold Numba cache at first. Each must exit 0 without a
+traceback. Commands of ``text`` blocks run too when the files they name exist (``../shared`` ones when the
+reference data is there); those naming a user's own spec or a cluster address are shown, not run.
 
 It takes a few minutes (the install and the first compilation); deselect it with ``-m "not fresh_venv"``.
 """
@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 
 from conftest import SHARED
-from test_docs import REPO, SKIP_PREFIXES, make_scratch, shell_commands
+from test_docs import REPO, SKIP_PREFIXES, _blocks, make_scratch, shell_commands
 
 pytestmark = pytest.mark.fresh_venv
 
@@ -116,3 +116,22 @@ def test_command_runs_in_fresh_venv(fresh, tmp_path, args, lang):
     output = proc.stdout + proc.stderr
     assert proc.returncode == 0, f"{shlex.join(args)} exited {proc.returncode}:\n{output[-3000:]}"
     assert "Traceback" not in output, output[-3000:]
+
+
+@pytest.mark.parametrize(("doc", "code"), list(_blocks("python")))
+def test_python_example_runs_in_fresh_venv(fresh, tmp_path, doc, code):
+    """The Python examples too, with what the README's install brought (the sweep's Parquet, say)."""
+    venv, env, _ = fresh
+    work = make_scratch(tmp_path)
+    script = work / "example.py"
+    script.write_text(code)
+    proc = subprocess.run(
+        [str(venv / "bin" / "python"), str(script)],
+        cwd=work,
+        env={**env, "MPLBACKEND": "Agg"},  # a script without a display, as on a server
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+    )
+    output = proc.stdout + proc.stderr
+    assert proc.returncode == 0 and "Traceback" not in output, f"{doc.name}:\n{output[-3000:]}"
