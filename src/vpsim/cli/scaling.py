@@ -73,6 +73,7 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
     import matplotlib.pyplot as plt
 
     from ..calibration import calibrate as fit
+    from ..cycles import load_cycle
     from ..engines import load_engine
     from ..params import load_parameters
     from ..scaling import (
@@ -90,11 +91,6 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
     announce_compilation()
     cycle_names = _names(cycles, "--cycles")
     cal_cycles = _names(calibration_cycles, "--calibration-cycles")
-    echo(
-        f"vpsim scaling: {Path(measured).name} against the scaled model, fuel on {', '.join(cycle_names)}"
-        + (f", calibrating on {', '.join(cal_cycles)}" if calibrate else "")
-        + " (a few seconds)"
-    )
     eng = load_engine(measured)
     params = scaled_parameters(
         load_parameters(vehicle),
@@ -102,6 +98,13 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
         stroke=stroke,
         cylinders=cylinders,
         inertia=eng.inertia if inertia is None else inertia,
+    )
+    for c in dict.fromkeys(cycle_names + (cal_cycles if calibrate else [])):
+        load_cycle(c)  # bad input is one line and nothing else, before any announcement
+    echo(
+        f"vpsim scaling: {Path(measured).name} against the scaled model, fuel on {', '.join(cycle_names)}"
+        + (f", calibrating on {', '.join(cal_cycles)}" if calibrate else "")
+        + " (a few seconds)"
     )
     mmap = eng.engine_map()
     cmp = compare_maps(eng, params.engine, name=eng.name)
