@@ -183,3 +183,12 @@ def test_preset_gains_are_the_documented_tuning(params, driver):
     assert achieved == pytest.approx(target, rel=0.02)
     assert kp == pytest.approx(d.forward_kp, rel=0.06)
     assert ki == pytest.approx(d.forward_ki, rel=0.12)
+
+
+def test_paper_bad_vehicle_is_one_line_before_anything_runs(tmp_path, capsys):
+    bad = tmp_path / "car.toml"
+    bad.write_text("[vehicle]\nmass = -1.0\n")
+    assert main(["paper", "--vehicle", str(bad), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("vpsim: error: ") and "vehicle.mass" in err and err.count("\n") == 1
+    assert not (tmp_path / "o").exists()

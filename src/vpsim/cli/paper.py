@@ -46,6 +46,9 @@ def paper(out, vehicle, advisor_dir, repeats):
         _scaling_function()  # fail before the long run if engine scaling is missing
         if not Path(advisor_dir).is_dir():
             raise VpsimError(f"--advisor-dir {advisor_dir}: no such folder")
+    from ..params import load_parameters
+
+    params = load_parameters(vehicle)  # bad input: one line, before anything is announced
     start = time.perf_counter()
     before = _files(out)
     echo(
@@ -66,7 +69,7 @@ def paper(out, vehicle, advisor_dir, repeats):
                 bar.update(done - state["done"])
             state["done"] = done
 
-        result = run_study(out, params=vehicle, repeats=repeats, progress=progress, advisor_dir=advisor_dir)
+        result = run_study(out, params=params, repeats=repeats, progress=progress, advisor_dir=advisor_dir)
     for row in result.table2:
         click.echo(
             f"  {row['method']:<9} driver {row['driver']:<4} {row['cycle']:<6} "
