@@ -1,5 +1,8 @@
 """Every example in the README and docs/ runs: Python blocks are executed, `vpsim ...` lines are invoked.
 
+Here in this process, with whatever is installed; ``test_readme_fresh_venv.py`` runs the same shell commands
+in a fresh virtual environment after the README's install line.
+
 Files the examples name as a user's own (``my_trip.csv``, ``my_car.toml``) are created in a scratch folder
 first: the TOML from the README's own block, the trip as a short speed trace.
 """
@@ -35,20 +38,51 @@ def _blocks(lang):
                 )
 
 
-@pytest.fixture
-def scratch(tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    shutil.copytree(REPO / "examples", tmp_path / "examples")
+def shell_commands(langs=("bash",)):
+    """Every command of the fenced blocks in ``langs``: (doc, line number, command, block language).
+
+    A line is split at ``&&``; comments are dropped. Install and test commands (``SKIP_PREFIXES``) are
+    included: the caller decides what to do with them.
+    """
+    for doc in DOCS:
+        text = doc.read_text()
+        for m in FENCE.finditer(text):
+            if m.group(1) not in langs:
+                continue
+            first = text[: m.start(2)].count("\n") + 1
+            lines = textwrap.dedent(m.group(2)).splitlines()
+            for k, line in enumerate(lines):
+                if k and lines[k - 1].rstrip().endswith("\\"):
+                    continue  # joined to the line it continues
+                j = k
+                while line.rstrip().endswith("\\") and j + 1 < len(lines):
+                    j += 1
+                    line = line.rstrip()[:-1] + " " + lines[j].strip()
+                cmd = line.split("#", 1)[0].strip()
+                for part in (p.strip() for p in cmd.split("&&")):
+                    if part:
+                        yield doc, first + k, part, m.group(1)
+
+
+def make_scratch(path: Path) -> Path:
+    """A user's working folder: the examples, and the files the README names as the user's own."""
+    shutil.copytree(REPO / "examples", path / "examples")
     toml = next(
         textwrap.dedent(m.group(2))
         for m in FENCE.finditer((REPO / "README.md").read_text())
         if m.group(1) == "toml"
     )
-    (tmp_path / "my_car.toml").write_text(toml)
-    (tmp_path / "my_trip.csv").write_text(
+    (path / "my_car.toml").write_text(toml)
+    (path / "my_trip.csv").write_text(
         "time_s,speed_kmh\n" + "".join(f"{t},{min(t, 40 - t, 10) * 5}\n" for t in range(41))
     )
-    return tmp_path
+    return path
+
+
+@pytest.fixture
+def scratch(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    return make_scratch(tmp_path)
 
 
 @pytest.mark.parametrize(("doc", "code"), list(_blocks("python")))

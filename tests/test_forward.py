@@ -285,4 +285,4 @@ def test_cli_forward_json_has_the_backward_keys(capsys):
     assert main(["simulate", "--cycle", "nedc", "--method", "forward", "--driver", "2", "--json"]) == 0
     fwd = json.loads(capsys.readouterr().out)
     assert set(fwd) == set(back)
-    assert fwd["method"] == "forward" and fwd["driver"] == "2" and fwd["steps"] > 1000
+    assert fwd["method"] == "forward" and fwd["driver"] == 2 and fwd["steps"] > 1000

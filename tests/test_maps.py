@@ -110,3 +110,19 @@ def test_idle_flow_is_the_models_zero_torque_flow(params):
     """The reconstructed idle flow (1.3e-4 kg/s) is the model's own zero-torque flow near 80 rad/s."""
     f = float(maps.bqm_fuel_flow(0.0, 80.0, params.engine))
     assert f == pytest.approx(params.simulation.idle_fuel_flow, rel=0.02)
+
+
+def test_figure2_colours_are_distinct_and_figure3_fills_up_to_the_max_torque_line(params):
+    import matplotlib.pyplot as plt
+
+    from vpsim.maps import cached_engine_map
+    from vpsim.plots import plot_fuel_map, plot_torque_lines
+
+    ax, tm = plot_torque_lines(params.engine)
+    colours = [tuple(np.round(plt.matplotlib.colors.to_rgba(line.get_color()), 6)) for line in ax.lines[:-1]]
+    assert len(colours) == len(tm.a_eff) and len(set(colours)) == len(colours)
+    plt.close(ax.figure)
+    ax, (w, t, fuel) = plot_fuel_map(params.engine)
+    em = cached_engine_map(params.engine)
+    assert np.allclose(t[:, -1], em.max_torque(w[:, 0])) and np.isfinite(fuel).all()  # no gap under the line
+    plt.close(ax.figure)

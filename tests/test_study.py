@@ -24,11 +24,25 @@ def _rows(path):
         return list(csv.DictReader(fh))
 
 
+PRINTED = {}
+
+
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
+    import contextlib
+    import io
+
     out = tmp_path_factory.mktemp("paper")
-    assert main(["paper", "--out", str(out), "--repeats", "1"]) == 0
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main(["paper", "--out", str(out), "--repeats", "1"]) == 0
+    PRINTED["stdout"] = buf.getvalue()
     return out
+
+
+def test_the_count_of_files_written_is_the_files_in_the_folder(study):
+    n = sum(1 for p in study.rglob("*") if p.is_file())
+    assert f"wrote {n} files into {study} " in PRINTED["stdout"], PRINTED["stdout"][-300:]
 
 
 def test_files_written(study):
@@ -41,7 +55,9 @@ def test_files_written(study):
         "inversion_check.csv",
         "report.md",
         "figure2_torque_lines.png",
+        "figure2_torque_lines.csv",
         "figure3_fuel_map.png",
+        "figure3_fuel_map.csv",
         "figure4_speed.png",
         "figure5_throttle.png",
         "figure6_fuel_flow.png",
@@ -167,3 +183,12 @@ def test_preset_gains_are_the_documented_tuning(params, driver):
     assert achieved == pytest.approx(target, rel=0.02)
     assert kp == pytest.approx(d.forward_kp, rel=0.06)
     assert ki == pytest.approx(d.forward_ki, rel=0.12)
+
+
+def test_paper_bad_vehicle_is_one_line_before_anything_runs(tmp_path, capsys):
+    bad = tmp_path / "car.toml"
+    bad.write_text("[vehicle]\nmass = -1.0\n")
+    assert main(["paper", "--vehicle", str(bad), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("vpsim: error: ") and "vehicle.mass" in err and err.count("\n") == 1
+    assert not (tmp_path / "o").exists()

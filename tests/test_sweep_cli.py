@@ -98,3 +98,35 @@ def test_figures_mark_the_baseline(tmp_path):
     import matplotlib.pyplot as plt
 
     plt.close("all")
+
+
+def _without(monkeypatch, *modules):
+    import vpsim.cli.sweep as cli_sweep
+
+    real = cli_sweep._installed
+    monkeypatch.setattr(cli_sweep, "_installed", lambda m: m not in modules and real(m))
+
+
+def test_without_pyarrow_a_new_sweep_writes_csv_and_says_so(tmp_path, capsys, monkeypatch):
+    _without(monkeypatch, "pyarrow")
+    out = tmp_path / "s"
+    assert main(["sweep", str(EXAMPLE), "--out", str(out), "--workers", "1", "--no-plots"]) == 0
+    err = capsys.readouterr().err
+    assert "pyarrow is not installed: writing results.csv instead of Parquet" in err
+    assert (out / "results.csv").is_file() and not (out / "results.parquet").exists()
+
+
+@pytest.mark.parametrize(
+    ("missing", "args", "message"),
+    [
+        ("pyarrow", ["--format", "parquet"], "--format parquet needs pyarrow"),
+        ("dask.distributed", ["--local-cluster", "2"], "pip install 'vpsim[cluster]'"),
+    ],
+)
+def test_missing_packages_are_refused_before_computing(tmp_path, capsys, monkeypatch, missing, args, message):
+    _without(monkeypatch, missing)
+    out = tmp_path / "s"
+    assert main(["sweep", str(EXAMPLE), "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not out.exists()  # refused before the output folder was made, let alone anything computed

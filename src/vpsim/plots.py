@@ -15,14 +15,19 @@ def plot_torque_lines(eng, ax=None):
 
     tm = maps.torque_map(eng)
     if ax is None:
-        _, ax = plt.subplots(figsize=(7, 4.5))
+        _, ax = plt.subplots(figsize=(8, 4.5))
+    # one colour per throttle area along a sequential map, so no colour repeats;
+    # the order of the colours is the order of the areas; A_max, the max-torque line, black as in Figure 3
+    shades = plt.get_cmap("viridis")(np.linspace(0.0, 0.9, len(tm.a_eff) - 1))
     for k, a in enumerate(tm.a_eff):
-        lw = 2.0 if k == len(tm.a_eff) - 1 else 1.0
-        ax.plot(tm.speed, tm.torque[k], lw=lw, label=f"{a * 1e6:.0f} mm²")
+        top = k == len(tm.a_eff) - 1
+        color = "k" if top else shades[k]
+        ax.plot(tm.speed, tm.torque[k], lw=2.2 if top else 1.1, color=color, label=f"{a * 1e6:.0f} mm²")
+    ax.axhline(0.0, color="0.4", lw=0.6)
     ax.set_xlabel("engine speed ω_e (rad/s)")
     ax.set_ylabel("crank torque T_cr (N m)")
-    ax.set_title("FQM torque lines (bold: A_max, the max-torque line)", fontsize=9)
-    ax.legend(title="A_eff", fontsize=7, ncol=2)
+    ax.set_title("FQM torque lines (bold black: A_max, the max-torque line)", fontsize=9)
+    ax.legend(title="A_eff", fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     ax.grid(alpha=0.3)
     return ax, tm
 
@@ -34,26 +39,30 @@ def plot_fuel_map(eng, ax=None, engine_map=None):
     em = engine_map or maps.cached_engine_map(eng)
     lo, hi = eng.map_speed_range
     w = np.linspace(lo, hi, 121)
-    t = np.linspace(0.0, float(em.max_torque(w).max()), 101)
-    fuel = maps.bqm_fuel_flow(t[None, :], w[:, None], eng)
-    fuel = np.where(t[None, :] <= em.max_torque(w)[:, None], fuel, np.nan)
+    # a grid that follows the max-torque line (torque from 0 to T_max(w) at every speed), so the filled map
+    # reaches the line with no gap beneath it
+    t = np.linspace(0.0, 1.0, 101)[None, :] * em.max_torque(w)[:, None]
+    ww = np.broadcast_to(w[:, None], t.shape)
+    fuel = maps.bqm_fuel_flow(t, ww, eng)
     if ax is None:
         _, ax = plt.subplots(figsize=(7, 4.5))
-    cs = ax.contourf(w, t, fuel.T * 1e3, levels=20, cmap="viridis")
+    cs = ax.contourf(ww, t, fuel * 1e3, levels=20, cmap="viridis")
     ax.figure.colorbar(cs, ax=ax, label="fuel flow (g/s)")
     ax.plot(w, em.max_torque(w), "k", lw=2, label="max torque")
     ax.set_xlabel("engine speed ω_e (rad/s)")
     ax.set_ylabel("crank torque T_cr (N m)")
     ax.set_title("BQM fuel map", fontsize=9)
-    ax.legend(fontsize=8)
-    return ax, (w, t, fuel)
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(0.0, 1.04 * float(t.max()))
+    ax.legend(fontsize=8, loc="upper right")  # above the line at high speed: no data there
+    return ax, (ww, t, fuel)
 
 
 def write_map_figures(eng, out: Path) -> list[Path]:
-    """Write figure2_torque_lines.{png,csv} and figure3_fuel_map.{png,csv} into ``out``."""
-    import matplotlib
+    """Write figure2_torque_lines.{png,csv} and figure3_fuel_map.{png,csv} into ``out``.
 
-    matplotlib.use("Agg")
+    Draws with pyplot under whatever backend is in use (the command line picks a non-interactive one).
+    """
     import matplotlib.pyplot as plt
     import pandas as pd
 
@@ -61,8 +70,7 @@ def write_map_figures(eng, out: Path) -> list[Path]:
     written = []
     ax, tm = plot_torque_lines(eng)
     p = out / "figure2_torque_lines.png"
-    ax.figure.tight_layout()
-    ax.figure.savefig(p, dpi=120)
+    ax.figure.savefig(p, dpi=120, bbox_inches="tight")
     plt.close(ax.figure)
     written.append(p)
     a, w = np.meshgrid(tm.a_eff, tm.speed, indexing="ij")
@@ -76,7 +84,7 @@ def write_map_figures(eng, out: Path) -> list[Path]:
         }
     )
     p = out / "figure2_torque_lines.csv"
-    df.to_csv(p, index=False)
+    df.to_csv(p, index=False, float_format="%.6g")
     written.append(p)
     ax, (w, t, fuel) = plot_fuel_map(eng)
     p = out / "figure3_fuel_map.png"
@@ -84,10 +92,8 @@ def write_map_figures(eng, out: Path) -> list[Path]:
     ax.figure.savefig(p, dpi=120)
     plt.close(ax.figure)
     written.append(p)
-    ww, tt = np.meshgrid(w, t, indexing="ij")
-    df = pd.DataFrame({"speed_radps": ww.ravel(), "torque_nm": tt.ravel(), "fuel_flow_kgps": fuel.ravel()})
-    df = df.dropna()
+    df = pd.DataFrame({"speed_radps": w.ravel(), "torque_nm": t.ravel(), "fuel_flow_kgps": fuel.ravel()})
     p = out / "figure3_fuel_map.csv"
-    df.to_csv(p, index=False)
+    df.to_csv(p, index=False, float_format="%.6g")
     written.append(p)
     return written

@@ -399,6 +399,19 @@ def cycle_points(measured_map, params, cycles=TABLE4_CYCLES) -> tuple[np.ndarray
 # --------------------------------------------------------------------------------------- Figure 7
 
 
+def _speed_axes(ax) -> None:
+    """Engine speed in rad/s below (vpsim's unit, as in Figures 2 and 3), in rpm on a secondary axis above."""
+    ax.set_xlabel("engine speed ω_e (rad/s)")
+    top = ax.secondary_xaxis("top", functions=(lambda w: w * 30.0 / np.pi, lambda n: n * np.pi / 30.0))
+    top.set_xlabel("engine speed (rpm)", fontsize=8)
+    top.tick_params(labelsize=7)
+
+
+def _legend_below(ax) -> None:
+    """The legend under the axes, clear of the maps (the panels are filled to their edges)."""
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, frameon=False)
+
+
 def plot_figure7(comparisons, path=None, points=None, labels=None, points_label="NEDC + FTP-75 points"):
     """Paper Figure 7: per engine, measured and generated BSFC contours and the relative difference map.
 
@@ -413,8 +426,8 @@ def plot_figure7(comparisons, path=None, points=None, labels=None, points_label=
     bsfc_levels = [230, 250, 270, 290, 320, 350, 400, 450, 500, 600, 800]
     norm = colors.BoundaryNorm(bsfc_levels, 256, extend="both")
     for row, cmp in enumerate(comparisons):
-        w_rpm = cmp.speed * 60 / (2 * np.pi)
-        w_fl = cmp.full_load_speed * 60 / (2 * np.pi)
+        w_rad = cmp.speed  # rad/s as everywhere in vpsim; rpm on the top axis
+        w_fl = cmp.full_load_speed
         t_top = 1.05 * max(float(np.max(cmp.full_load_torque)), float(np.max(cmp.generated_full_load)))
         t_node, w_node = np.meshgrid(cmp.torque, cmp.speed)
         power_kw = t_node * w_node / 1e3
@@ -426,7 +439,7 @@ def plot_figure7(comparisons, path=None, points=None, labels=None, points_label=
             with np.errstate(divide="ignore", invalid="ignore"):
                 bsfc = np.where(shown, flow * 1e3 / power_kw * 3600, np.nan)
             cs = ax.contourf(
-                w_rpm,
+                w_rad,
                 cmp.torque,
                 np.ma.masked_invalid(bsfc).T,
                 levels=bsfc_levels,
@@ -435,7 +448,7 @@ def plot_figure7(comparisons, path=None, points=None, labels=None, points_label=
                 extend="both",
             )
             ax.contour(
-                w_rpm,
+                w_rad,
                 cmp.torque,
                 np.ma.masked_invalid(bsfc).T,
                 levels=bsfc_levels,
@@ -447,21 +460,21 @@ def plot_figure7(comparisons, path=None, points=None, labels=None, points_label=
                 ax.plot(w_fl, cmp.generated_full_load, "k--", lw=1.2, label="model full load (A_max)")
             ax.set_ylim(0, t_top)
             ax.set_title(f"{label}: {title}", fontsize=9)
-            ax.set_xlabel("engine speed (rpm)")
+            _speed_axes(ax)
             ax.set_ylabel("torque (N m)")
-            ax.legend(fontsize=7, loc="lower right")
+            _legend_below(ax)
             if col == 1:
                 fig.colorbar(cs, ax=axes[row, :2], label="BSFC (g/kWh)", shrink=0.9)
         ax = axes[row, 2]
         rel = np.ma.masked_invalid(cmp.relative_error * 100).T
         lim = 30.0
-        cs = ax.pcolormesh(w_rpm, cmp.torque, rel, cmap="RdBu_r", vmin=-lim, vmax=lim, shading="nearest")
+        cs = ax.pcolormesh(w_rad, cmp.torque, rel, cmap="RdBu_r", vmin=-lim, vmax=lim, shading="nearest")
         ax.plot(w_fl, cmp.full_load_torque, "k-", lw=1.8)
         ax.set_ylim(0, t_top)
         if points is not None and points[row] is not None:
             t_p, w_p = points[row]
             ax.plot(
-                w_p * 60 / (2 * np.pi),
+                w_p,
                 t_p,
                 ".",
                 ms=1.5,
@@ -469,14 +482,14 @@ def plot_figure7(comparisons, path=None, points=None, labels=None, points_label=
                 alpha=0.35,
                 label=points_label,
             )
-            ax.legend(fontsize=7, loc="upper right")
+            _legend_below(ax)
         s = cmp.stats()
         ax.set_title(
             f"{label}: generated / measured - 1 (median |e| {s['median_abs_pct']:.1f} %, "
             f"p90 {s['p90_abs_pct']:.1f} %)",
             fontsize=9,
         )
-        ax.set_xlabel("engine speed (rpm)")
+        _speed_axes(ax)
         ax.set_ylabel("torque (N m)")
         fig.colorbar(cs, ax=ax, label="relative difference of fuel flow (%)", extend="both")
     if path is not None:

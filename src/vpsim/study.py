@@ -312,7 +312,7 @@ def run_study(
     table2_ext = _table2(results, names, "extended")
     table3 = _table3(results, names)
     tracking = _tracking(results, names)
-    inversion = [{k: c[k] for k in INVERSION_COLUMNS} for c in checks]
+    inversion = [_rounded_check(c) for c in checks]
     files: list[Path] = []
     if out is not None:
         for fname, rows, cols in (
@@ -339,6 +339,8 @@ def run_study(
         figures and out is not None,
     )
     if advisor_dir is not None:
+        if progress is not None:  # the longest single step: say what runs while it runs
+            progress(done, steps_total, "engine scaling (Figure 7, Table 4) ...")
         report += "\n" + scaling_section(advisor_dir, out if out is not None else Path(".")).rstrip() + "\n"
         tick("engine scaling")
     if out is not None:
@@ -359,6 +361,19 @@ def _scaling_function():
     if not callable(fn):
         raise VpsimError("engine scaling is not available")
     return fn
+
+
+def _sig(x: float, digits: int = 3) -> float:
+    """``x`` to ``digits`` significant digits (a small error's magnitude, not its last bits)."""
+    return float(f"{x:.{digits}g}")
+
+
+def _rounded_check(check: dict) -> dict:
+    row = {k: check[k] for k in INVERSION_COLUMNS}
+    row["checked_s"] = round(row["checked_s"], 2)
+    row["moving_s"] = round(row["moving_s"], 2)
+    row["max_speed_error_mps"] = _sig(row["max_speed_error_mps"])
+    return row
 
 
 def _write_csv(path: Path, rows, columns) -> Path:
@@ -479,24 +494,37 @@ def _tracking(results, names):
 
 # --- figures ------------------------------------------------------------------------------------------------
 
+# the BQM follows the cycle exactly, so it is drawn wide and light beneath the others, and the cycle itself
+# last, thin, dashed black on top: neither hides the other
 _STYLE = {
-    ("backward", NA): {"color": "k", "lw": 1.4, "label": "BQM"},
-    ("forward", "1"): {"color": "tab:blue", "lw": 1.0, "label": "FDM driver 1"},
-    ("forward", "2"): {"color": "tab:cyan", "lw": 1.0, "ls": "--", "label": "FDM driver 2"},
-    ("inverse", "1"): {"color": "tab:red", "lw": 1.0, "label": "IDM driver 1"},
-    ("inverse", "2"): {"color": "tab:orange", "lw": 1.0, "ls": "--", "label": "IDM driver 2"},
+    ("backward", NA): {"color": "0.6", "lw": 2.6, "label": "BQM", "zorder": 1},
+    ("forward", "1"): {"color": "tab:blue", "lw": 1.0, "label": "FDM driver 1", "zorder": 3},
+    ("forward", "2"): {"color": "tab:green", "lw": 1.0, "ls": "--", "label": "FDM driver 2", "zorder": 3},
+    ("inverse", "1"): {"color": "tab:red", "lw": 1.0, "label": "IDM driver 1", "zorder": 3},
+    ("inverse", "2"): {"color": "tab:purple", "lw": 1.0, "ls": "--", "label": "IDM driver 2", "zorder": 3},
 }
+_CYCLE_STYLE = {"color": "k", "lw": 1.1, "ls": (0, (4, 2)), "label": "cycle", "zorder": 5}
+
+
+def _window(t, y, t0: float, t1: float):
+    """The samples of (t, y) within [t0, t1] plus one on each side, so a line reaches the plot's edges."""
+    t = np.asarray(t, float)
+    i0 = max(int(np.searchsorted(t, t0, side="left")) - 1, 0)
+    i1 = min(int(np.searchsorted(t, t1, side="right")) + 1, t.size)
+    return t[i0:i1], np.asarray(y, float)[i0:i1]
+
+
+def _legend_outside(ax) -> None:
+    """The legend to the right of the axes, clear of the data (savefig with bbox_inches="tight")."""
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
 
 
 def _figures(out: Path, params, results, checks, names, tick) -> list[Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from .plots import write_map_figures
 
-    files = [p for p in write_map_figures(params.engine, out) if p.suffix == ".png"]
+    files = write_map_figures(params.engine, out)  # the figures and their data
     tick("figures 2 and 3")
     nedc = next((n for n in names if n == "nedc"), names[0])
     t0, t1 = FIGURE_WINDOW_S
@@ -519,27 +547,30 @@ def _figures(out: Path, params, results, checks, names, tick) -> list[Path]:
         ),
     )
     for fname, key, scale, ylabel, title in panels:
-        fig, ax = plt.subplots(figsize=(9, 4))
-        if key == "speed_mps":
-            s = fine["forward", "1"]
-            ax.plot(s["time_s"], s["reference_speed_mps"] * 3.6, color="0.6", lw=3, alpha=0.5, label="cycle")
+        fig, ax = plt.subplots(figsize=(10, 4))
+        lowest = 0.0
         for (method, d), style in _STYLE.items():
             s = fine[method, d]
             if key in s:
-                ax.plot(s["time_s"], np.asarray(s[key]) * scale, **style)
+                t, y = _window(s["time_s"], np.asarray(s[key]) * scale, t0, t1)
+                ax.plot(t, y, **style)
+                lowest = min(lowest, float(np.nanmin(y)))
+        if key == "speed_mps":  # only the data in the window sets the axes
+            s = fine["forward", "1"]
+            ax.plot(*_window(s["time_s"], np.asarray(s["reference_speed_mps"]) * 3.6, t0, t1), **_CYCLE_STYLE)
         ax.set_xlim(t0, t1)
+        ax.set_ylim(bottom=lowest)
         ax.set_xlabel("time (s)")
         ax.set_ylabel(ylabel)
         ax.set_title(f"{title}: {CYCLE_NAMES.get(nedc, nedc)} {t0:g}-{t1:g} s, paper mode", fontsize=9)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, ncol=3)
-        fig.tight_layout()
-        fig.savefig(out / fname, dpi=110)
+        _legend_outside(ax)
+        fig.savefig(out / fname, dpi=110, bbox_inches="tight")
         plt.close(fig)
         files.append(out / fname)
         tick(fname)
     # forward speed error over the whole cycles, both modes
-    fig, axes = plt.subplots(len(names), 1, figsize=(9, 2.6 * len(names)), squeeze=False)
+    fig, axes = plt.subplots(len(names), 1, figsize=(10, 2.6 * len(names)), squeeze=False)
     for ax, n in zip(axes[:, 0], names, strict=True):
         for d in DRIVERS:
             for mode, ls in (("paper", "-"), ("extended", ":")):
@@ -547,6 +578,9 @@ def _figures(out: Path, params, results, checks, names, tick) -> list[Path]:
                 ax.plot(
                     s["time_s"],
                     (s["speed_mps"] - s["reference_speed_mps"]) * 3.6,
+                    color=_STYLE["forward", d]["color"]
+                    if mode == "paper"
+                    else ("tab:orange", "k")[int(d) - 1],
                     ls=ls,
                     lw=0.8,
                     label=f"driver {d}, {mode}",
@@ -556,10 +590,10 @@ def _figures(out: Path, params, results, checks, names, tick) -> list[Path]:
         ax.set_title(
             f"forward method tracking error on {CYCLE_NAMES.get(n, n)} (grey: the ±2 km/h band)", fontsize=9
         )
-        ax.legend(fontsize=7, ncol=4)
+        _legend_outside(ax)
     axes[-1, 0].set_xlabel("time (s)")
     fig.tight_layout()
-    fig.savefig(out / "figure_tracking.png", dpi=110)
+    fig.savefig(out / "figure_tracking.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
     files.append(out / "figure_tracking.png")
     tick("tracking figure")
@@ -660,9 +694,15 @@ def standstill_behaviour(params, cycle_name="nedc", driver="1", dt: float = 0.05
 # --- report -------------------------------------------------------------------------------------------------
 
 
+def _cell(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.6g}"  # the rows are rounded already; no float noise in any case
+    return str(value)
+
+
 def _md_table(rows, columns) -> list[str]:
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-    lines += ["| " + " | ".join(str(r[c]) for c in columns) + " |" for r in rows]
+    lines += ["| " + " | ".join(_cell(r[c]) for c in columns) + " |" for r in rows]
     return lines
 
 

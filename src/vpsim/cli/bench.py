@@ -27,6 +27,9 @@ from .main import cli
 def bench(quick, json_path, no_peer, tiny):
     """Time the methods on UDDS, NEDC, FTP-75 against FASTSim 3.1 (pip install 'vpsim[bench]')."""
     from ..bench import format_report, run_benchmarks
+    from .notices import announce_compilation
+
+    announce_compilation()
 
     profile = "tiny" if tiny else "quick" if quick else "full"
     if json_path:  # fail before minutes of measuring, not after

@@ -16,6 +16,10 @@ from .main import cli
 )
 def maps(out, vehicle):
     """Write the FQM torque lines and the BQM fuel map of an engine (PNG + CSV)."""
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only: the command line never opens a window
+
     from ..params import load_parameters
     from ..plots import write_map_figures
 

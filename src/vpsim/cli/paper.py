@@ -33,28 +33,68 @@ from .main import cli
 )
 def paper(out, vehicle, advisor_dir, repeats):
     """Run every method x driver on NEDC and FTP-75 (paper mode) and write the paper's tables and figures."""
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only: the command line never opens a window
+
     from ..study import _scaling_function, run_study
+    from .notices import announce_compilation, echo
+
+    announce_compilation()
 
     if advisor_dir is not None:
         _scaling_function()  # fail before the long run if engine scaling is missing
         if not Path(advisor_dir).is_dir():
             raise VpsimError(f"--advisor-dir {advisor_dir}: no such folder")
+    from ..params import load_parameters
+
+    params = load_parameters(vehicle)  # bad input: one line, before anything is announced
     start = time.perf_counter()
+    before = _files(out)
+    echo(
+        f"vpsim paper: 3 methods x 2 drivers x 2 modes on NEDC and FTP-75, best of {repeats} runs each, "
+        "figures and report"
+        + (", engine scaling" if advisor_dir is not None else "")
+        + " (10-60 s on 2 cores once compiled)"
+    )
+    _load_kernels(params)  # compiled (and announced) now, if ever, so the bar's rate and ETA are the study's
     with click.progressbar(length=1, label="vpsim paper", file=sys.stderr, show_pos=True) as bar:
         state = {"done": 0}
 
         def progress(done, total, label):
             bar.length = total
-            bar.label = f"vpsim paper: {label:<34.34}"
-            bar.update(done - state["done"])
+            bar.label = f"vpsim paper: {label:<40.40}"
+            if done == state["done"]:  # what is running now, before it is done
+                bar.render_progress()
+            else:
+                bar.update(done - state["done"])
             state["done"] = done
 
-        result = run_study(out, params=vehicle, repeats=repeats, progress=progress, advisor_dir=advisor_dir)
+        result = run_study(out, params=params, repeats=repeats, progress=progress, advisor_dir=advisor_dir)
     for row in result.table2:
         click.echo(
             f"  {row['method']:<9} driver {row['driver']:<4} {row['cycle']:<6} "
             f"{row['fuel_l_per_100km']:8.3f} L/100 km  {row['diff_vs_bqm_pct']:+7.2f} %"
         )
+    after = _files(out)
+    written = {p for p, stamp in after.items() if before.get(p) != stamp} | {Path(p) for p in result.files}
     click.echo(
-        f"wrote {len(result.files)} files into {out} in {time.perf_counter() - start:.1f} s (see report.md)"
+        f"wrote {len(written)} files into {out} in {time.perf_counter() - start:.1f} s "
+        f"(see {Path(out) / 'report.md'})"
     )
+
+
+def _files(folder) -> dict:
+    """Every file under ``folder`` with its modification stamp: what the study wrote is what changed."""
+    root = Path(folder)
+    if not root.is_dir():
+        return {}
+    return {p: (p.stat().st_mtime_ns, p.stat().st_size) for p in root.rglob("*") if p.is_file()}
+
+
+def _load_kernels(params) -> None:
+    """Load every method's compiled kernels (compiling them the first time) with one short run each."""
+    from ..simulation import simulate
+
+    for method, driver in (("backward", None), ("forward", 1), ("inverse", 1)):
+        simulate("nedc", method=method, params=params, driver=driver)

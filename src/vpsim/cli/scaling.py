@@ -73,6 +73,7 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
     import matplotlib.pyplot as plt
 
     from ..calibration import calibrate as fit
+    from ..cycles import load_cycle
     from ..engines import load_engine
     from ..params import load_parameters
     from ..scaling import (
@@ -85,7 +86,9 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
         scaled_parameters,
         write_csv,
     )
+    from .notices import announce_compilation, echo
 
+    announce_compilation()
     cycle_names = _names(cycles, "--cycles")
     cal_cycles = _names(calibration_cycles, "--calibration-cycles")
     eng = load_engine(measured)
@@ -95,6 +98,13 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
         stroke=stroke,
         cylinders=cylinders,
         inertia=eng.inertia if inertia is None else inertia,
+    )
+    for c in dict.fromkeys(cycle_names + (cal_cycles if calibrate else [])):
+        load_cycle(c)  # bad input is one line and nothing else, before any announcement
+    echo(
+        f"vpsim scaling: {Path(measured).name} against the scaled model, fuel on {', '.join(cycle_names)}"
+        + (f", calibrating on {', '.join(cal_cycles)}" if calibrate else "")
+        + " (a few seconds)"
     )
     mmap = eng.engine_map()
     cmp = compare_maps(eng, params.engine, name=eng.name)
@@ -145,7 +155,6 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
             click.echo(f"  fitted {n} = {cal.values[k]:.4g} +- {cal.std_errors[k]:.2g}")
         if cal.message:
             click.echo(f"  note: {cal.message}")
-    click.echo(
-        f"  wrote {out}/figure7.png, map_comparison.csv, map_stats.json, fuel.csv"
-        + (", calibration.json" if cal is not None else "")
-    )
+    names = ["figure7.png", "map_comparison.csv", "map_stats.json", "fuel.csv"]
+    names += ["calibration.json"] if cal is not None else []
+    click.echo(f"  wrote {path / names[0]}, " + ", ".join(names[1:]))

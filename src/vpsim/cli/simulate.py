@@ -63,6 +63,9 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
     """Simulate a vehicle on a drive cycle and report its fuel consumption."""
     from ..cycles import load_cycle
     from ..simulation import simulate as run
+    from .notices import announce_compilation
+
+    announce_compilation()
 
     if driver is not None and method == "backward":
         raise VpsimError(
@@ -71,19 +74,23 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
     cyc = load_cycle(cycle, speed_unit=speed_unit)
     result = run(cyc, method=method, params=vehicle, driver=driver, mode=mode, gears=gears)
     summary = result.summary()
+    if summary.get("driver") is not None:  # the driver is a number (1 or 2), in JSON too
+        summary["driver"] = int(summary["driver"])
+    written = []
     if out:
         path = Path(out)
         path.mkdir(parents=True, exist_ok=True)
-        result.to_dataframe().to_csv(path / "timeseries.csv", index=False)
+        result.to_dataframe().to_csv(path / "timeseries.csv", index=False, float_format="%.10g")
         (path / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         import matplotlib
 
-        matplotlib.use("Agg")
+        matplotlib.use("Agg")  # the command line draws into files; the library leaves the backend alone
         import matplotlib.pyplot as plt
 
         fig = result.plot()
         fig.savefig(path / "timeseries.png", dpi=110)
         plt.close(fig)
+        written = [path / "timeseries.csv", path / "summary.json", path / "timeseries.png"]
     if as_json:
         click.echo(json.dumps(summary))
         return
@@ -102,5 +109,5 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         )
     for note in result.notes:
         click.echo(f"  note: {note}")
-    if out:
-        click.echo(f"  wrote {out}/timeseries.csv, summary.json, timeseries.png")
+    for p in written:
+        click.echo(f"  wrote {p}")

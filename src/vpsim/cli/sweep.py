@@ -59,6 +59,48 @@ def _hms(s: float) -> str:
     return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60:02d}:{s % 60:02d}"
 
 
+def _installed(module: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(module) is not None
+
+
+def _check_requirements(out, fmt, resume: bool, *, cluster: bool):
+    """Check the optional packages this sweep needs before anything is computed; return the format to use.
+
+    pyarrow is a dependency of vpsim, so it is normally present; should it be missing (an install with
+    ``--no-deps``, a platform without its wheels) a new sweep writes CSV and says so in one line.
+    """
+    from pathlib import Path
+
+    if cluster and not _installed("dask.distributed"):
+        raise VpsimError("--scheduler and --local-cluster need Dask: pip install 'vpsim[cluster]'")
+    if _installed("pyarrow"):
+        return fmt
+    if resume and (Path(out) / "results.parquet").exists():
+        raise VpsimError(f"{out} holds Parquet results, which need pyarrow: pip install pyarrow")
+    if fmt == "parquet":
+        raise VpsimError("--format parquet needs pyarrow: pip install pyarrow (or use --format csv)")
+    if fmt is None and not resume:
+        click.echo("vpsim: pyarrow is not installed: writing results.csv instead of Parquet", err=True)
+        return "csv"
+    return fmt
+
+
+def _announce_compilation(methods, quiet: bool) -> None:
+    """Say at once if the kernels this sweep needs are not compiled yet (its workers will compile them)."""
+    from .notices import announce_compilation, cold_kernels, echo
+
+    cold = cold_kernels(methods)
+    if cold and not quiet:
+        echo(
+            f"vpsim: compiling the {' and '.join(cold)} on first use (one-time: cached on disk for later "
+            "runs; typically 10-60 s before the first rows)"
+        )
+    elif not quiet:
+        announce_compilation()  # anything compiled in this process after all is announced when it starts
+
+
 @cli.command()
 @click.argument("spec", type=click.Path(dir_okay=False))
 @click.option(
@@ -116,6 +158,7 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
     if workers is not None and (scheduler is not None or local_cluster is not None):
         raise VpsimError("--workers applies to local processes; with a Dask cluster its workers do the work")
     sp = load_spec(spec)
+    fmt = _check_requirements(out, fmt, resume, cluster=scheduler is not None or local_cluster is not None)
     bar = _Progress(enabled=not quiet)
     where = (
         f"Dask scheduler {scheduler}"
@@ -139,6 +182,7 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
             f"x {len(sp.combos)} cycle/method/driver combinations on {where}{extra}",
             err=True,
         )
+    _announce_compilation(sp.methods, quiet)
     try:
         run = run_sweep(
             sp,
@@ -166,6 +210,10 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
     )
     click.echo(f"wrote {run.path}")
     if plots and not run.results.empty:
+        import matplotlib
+
+        matplotlib.use("Agg")  # files only: the command line never opens a window
+
         from ..sweep.plots import write_sweep_figures
 
         for p in write_sweep_figures(run.results, out):

@@ -133,10 +133,10 @@ def plot_pareto(
 
 
 def write_sweep_figures(df: pd.DataFrame, out: str | Path) -> list[Path]:
-    """Write ``fuel_vs_displacement.png`` and ``pareto_<cycle>.png`` (one per cycle) into ``out``."""
-    import matplotlib
+    """Write ``fuel_vs_displacement.png`` and ``pareto_<cycle>.png`` (one per cycle) into ``out``.
 
-    matplotlib.use("Agg")
+    Draws with pyplot under whatever backend is in use (the command line picks a non-interactive one).
+    """
     import matplotlib.pyplot as plt
 
     out = Path(out)
