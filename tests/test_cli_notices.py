@@ -45,7 +45,7 @@ def test_other_compilations_are_not_announced(heard):
 
 
 def test_nested_compilation_is_part_of_the_outer_one(heard):
-    inner = _jitted_in("vpsim._kernels", "return x + 1.0")
+    inner = _jitted_in("vpsim.model.engine", "return x + 1.0")
     ns = {"__name__": "vpsim.methods.inverse", "inner": inner}
     exec("def outer(x):\n    return inner(x) * 2.0\n", ns)
     outer = numba.njit(ns["outer"])

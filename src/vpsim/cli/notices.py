@@ -19,16 +19,17 @@ import click
 # which kernels a module's compiled functions are, and what their first compilation costs on a 2-core
 # machine with other load (measured with an empty cache; see benchmarks/README.md)
 KERNELS = {
-    "vpsim._kernels": ("backward kernels", "5-20 s"),
-    "vpsim.batch": ("batch kernels", "5-20 s"),
+    "vpsim.model.engine": ("model's array views", "2-10 s"),
+    "vpsim.model.tables": ("model's table look-ups", "1-5 s"),
     "vpsim.methods.backward": ("backward kernels", "5-20 s"),
     "vpsim.methods.forward": ("forward integrator", "10-50 s"),
     "vpsim.methods.inverse": ("inverse kernels", "10-55 s"),
 }
+_MODEL = ("vpsim.model.engine", "vpsim.model.tables", "vpsim.methods.backward")  # maps and gear rule too
 METHOD_MODULES = {
-    "backward": ("vpsim._kernels",),
-    "forward": ("vpsim._kernels", "vpsim.methods.forward"),
-    "inverse": ("vpsim._kernels", "vpsim.methods.inverse"),
+    "backward": _MODEL,
+    "forward": (*_MODEL, "vpsim.methods.forward"),
+    "inverse": (*_MODEL, "vpsim.methods.inverse"),
 }
 
 _listener = None
