@@ -71,7 +71,25 @@ def test_extended_mode_brakes_and_idles(params):
     s = r.series
     standstill = s["speed_mps"] == 0
     assert np.all(s["engine_speed_radps"][standstill] == IDLE_SPEED)
-    assert np.allclose(s["fuel_flow_used_kgps"][standstill], params.simulation.idle_fuel_flow)
+    # inside a stop (at rest on both adjacent intervals) the engine idles on the idle flow
+    v = s["speed_mps"]
+    inside = np.r_[False, (v[1:-1] == 0) & (v[:-2] == 0) & (v[2:] == 0), False]
+    assert inside.sum() > 100
+    assert np.allclose(s["fuel_flow_used_kgps"][inside], params.simulation.idle_fuel_flow)
+
+
+def test_series_are_at_the_cycle_samples_like_every_method(params):
+    """One time base for all methods: the cycle's samples; the core columns in every method's series."""
+    from vpsim.result import CORE_COLUMNS
+
+    c = load_cycle("nedc")
+    runs = [vpsim.simulate(c, method=m) for m in ("backward", "forward", "inverse")]
+    for r in runs:
+        np.testing.assert_array_equal(r.series["time_s"], c.time_s)
+        assert set(CORE_COLUMNS) <= set(r.series), r.method
+    both = runs[0].compare(*runs[1:])
+    assert both.shape[0] == c.time_s.size
+    assert ("forward/2", "engine_speed_radps") in both.columns
 
 
 def test_heavier_car_uses_more_fuel(params):

@@ -54,7 +54,7 @@ def test_simulate_json_driver_is_a_number_and_paths_are_clean(capsys, tmp_path):
     code, out, err = run(capsys, "simulate", "--method", "inverse", "--out", f"{tmp_path / 'res'}/")
     assert code == 0, err
     assert f"wrote {tmp_path / 'res' / 'timeseries.csv'}\n" in out and "//" not in out
-    assert json.loads((tmp_path / "res" / "summary.json").read_text())["driver"] == 1
+    assert json.loads((tmp_path / "res" / "summary.json").read_text())["driver"] == 2  # the realistic default
     # numbers to meaningful digits: no float noise such as 852.5000000000008 in the CSV
     rows = (tmp_path / "res" / "timeseries.csv").read_text().splitlines()[1:]
     mantissas = (x.lower().split("e")[0].lstrip("-").replace(".", "") for r in rows for x in r.split(","))

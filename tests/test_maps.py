@@ -115,7 +115,7 @@ def test_idle_flow_is_the_models_zero_torque_flow(params):
 def test_figure2_colours_are_distinct_and_figure3_fills_up_to_the_max_torque_line(params):
     import matplotlib.pyplot as plt
 
-    from vpsim.maps import cached_engine_map
+    from vpsim.model.maps import cached_engine_map
     from vpsim.plots import plot_fuel_map, plot_torque_lines
 
     ax, tm = plot_torque_lines(params.engine)

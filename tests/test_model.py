@@ -17,6 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import vpsim
@@ -244,3 +245,50 @@ def test_parameter_record_fields_follow_parameters(params):
         2000.0 * params.vehicle.gravity * params.vehicle.rolling_resistance
     )
     assert vh.equivalent_mass(10.0, heavier) > 2000.0
+
+
+# --- the realistic car's extra physics: coast-down road load, accessories, fuel cut-off -------------------------
+
+
+def test_coastdown_road_load_is_a_plus_bv_plus_cv2(params):
+    """F = A + B v + C v^2 while moving (hand values), replacing m g c_r and 1/2 rho c_d A_f."""
+    q = params.with_changes(vehicle={"road_load_a": 150.0, "road_load_b": 2.0, "road_load_c": 0.45})
+    c = record(q)
+    for v in (0.5, 10.0, 30.0):
+        assert vh.road_load(v, c) == pytest.approx(150.0 + 2.0 * v + 0.45 * v * v, rel=1e-14)
+    assert vh.road_load(0.0, c) == 0.0  # at rest: static friction, no push
+
+
+@pytest.mark.parametrize("method", ["backward", "forward", "inverse"])
+def test_accessories_cost_fuel_and_close_the_balance(params, method):
+    q = params.with_changes(engine={"accessory_power": 800.0})
+    base = vpsim.simulate("nedc", method=method, params=params)
+    more = vpsim.simulate("nedc", method=method, params=q)
+    assert more.fuel_kg > base.fuel_kg * 1.02
+    e = more.energy
+    assert abs(e.residual) <= 1e-9 * e.indicated
+    # 800 W on the crank while the clutch is engaged or slipping: a bit less than 800 W x the cycle time
+    assert 0.5 * 800.0 * 1180 < e.accessories <= 800.0 * 1180
+
+
+@pytest.mark.parametrize("method", ["backward", "inverse"])
+def test_fuel_cutoff_burns_nothing_in_overrun(params, method):
+    q = params.with_changes(simulation={"fuel_cutoff_speed": 100.0})
+    base = vpsim.simulate("ftp75", method=method, params=params)
+    cut = vpsim.simulate("ftp75", method=method, params=q)
+    assert cut.fuel_kg < base.fuel_kg * 0.99  # the overrun's idle flow saved
+    s = cut.series
+    zero = s["fuel_flow_used_kgps"] == 0.0
+    assert zero.sum() > 50  # seconds of cut-off on FTP-75
+    assert np.all(s["engine_speed_radps"][zero] >= 100.0 * 0.999 - 1.0)  # only above the cut-off speed
+    e = cut.energy
+    assert abs(e.residual) <= 1e-9 * e.indicated
+    assert cut.deviations.negative_fuel_flow_s == 0.0
+
+
+def test_paper_mode_ignores_the_realistic_extras(params):
+    """The paper's model has no accessories and no cut-off: its numbers do not move."""
+    q = params.with_changes(engine={"accessory_power": 800.0}, simulation={"fuel_cutoff_speed": 100.0})
+    a = vpsim.simulate("nedc", params=params, mode="paper")
+    b = vpsim.simulate("nedc", params=q, mode="paper")
+    assert a.fuel_kg == b.fuel_kg

@@ -10,10 +10,14 @@ import numpy as np
 import vpsim
 
 
+def r_params():
+    return vpsim.load_parameters("hofman2011")
+
+
 def test_result_views():
     r = vpsim.simulate("udds", method="backward")
     df = r.to_dataframe()
-    assert len(df) == r.steps
+    assert len(df) == r.steps + 1  # one row per cycle sample (steps: the intervals)
     for col in (
         "time_s",
         "speed_mps",
@@ -26,9 +30,14 @@ def test_result_views():
         "fuel_flow_used_kgps",
     ):
         assert col in df.columns
-    # fuel in the summary is the integral of the series
-    dt = np.diff(vpsim.load_cycle("udds").time_s)
-    assert np.isclose((df["fuel_flow_used_kgps"] * dt).sum(), r.fuel_kg, rtol=1e-12)
+    # fuel in the summary is the integral of the per-interval flows; the samples carry their means
+    from vpsim.methods import backward
+
+    op = backward.intervals(vpsim.load_cycle("udds"), r_params(), mode="realistic")
+    used = np.maximum(op["fuel_flow_kgps"], r_params().simulation.idle_fuel_flow)
+    assert np.isclose((used * op["dt_s"]).sum(), r.fuel_kg, rtol=1e-12)
+    # (the flows at the samples are means of the two adjacent intervals: their trapezoid is close, not equal)
+    assert np.isclose(np.trapezoid(df["fuel_flow_used_kgps"], df["time_s"]), r.fuel_kg, rtol=5e-3)
     d = json.loads(r.to_json())
     assert d["fuel_kg"] == r.fuel_kg and d["cycle"] == "udds"
     assert "L/100 km" in repr(r)
@@ -37,3 +46,49 @@ def test_result_views():
     assert len(fig.axes) >= 5
     plt.close(fig)
     assert r.engine_speed_radps is r.series["engine_speed_radps"]  # series are attributes too
+
+
+def test_deviations_are_named_alike_in_print_json_and_dataframe():
+    """Speed not followed and demand not deliverable (per cause), and states outside physics: the same names
+    in the summary (JSON), the DataFrame's flag columns and the printed result; a negative pressure is not
+    shown as a plain number."""
+    r = vpsim.simulate("nedc", method="backward", mode="paper")
+    d = r.summary()
+    for key in (
+        "speed_not_followed_s",
+        "demand_not_deliverable_s",
+        "torque_beyond_full_load_s",
+        "throttle_below_minimum_s",
+        "engine_speed_out_of_range_s",
+        "negative_intake_pressure_s",
+        "negative_fuel_flow_s",
+        "outside_physics_s",
+    ):
+        assert key in d
+    assert d["negative_intake_pressure_s"] > 0  # the paper's model without brakes, at closed throttle
+    df = r.to_dataframe()
+    assert df["negative_intake_pressure"].sum() > 0
+    assert df.loc[df["negative_intake_pressure"], "intake_pressure_pa"].isna().all()
+    assert (r.to_dataframe(raw=True)["intake_pressure_pa"] < 0).any()
+    assert "outside physics" in repr(r)
+
+
+def test_realistic_defaults_show_no_state_outside_physics():
+    """The default car on NEDC and FTP-75: no state outside physics for any method; US06 asks more than
+    full load of the backward method, reported as demand not deliverable."""
+    for cycle in ("nedc", "ftp75"):
+        for method in ("backward", "forward", "inverse"):
+            dev = vpsim.simulate(cycle, method=method).deviations
+            assert dev.outside_physics_s == 0.0, (cycle, method, dev)
+    us06 = vpsim.simulate("us06").deviations
+    assert us06.torque_beyond_full_load_s == 3.0 and us06.demand_not_deliverable_s == 3.0
+
+
+def test_all_first_gear_is_reported_as_engine_over_speed(tmp_path):
+    """A gear schedule that over-revs the engine is not 'trace miss none': seconds and size are reported."""
+    c = vpsim.load_cycle("nedc")
+    (tmp_path / "g.csv").write_text("time_s,gear\n0,1\n")
+    r = vpsim.simulate(c, gears=str(tmp_path / "g.csv"))
+    dev = r.deviations
+    assert dev.engine_speed_out_of_range_s > 100 and dev.max_engine_speed_radps > 1000
+    assert dev.demand_not_deliverable_s >= dev.engine_speed_out_of_range_s

@@ -98,8 +98,9 @@ def run_batch(
 
     if method not in METHODS:
         raise VpsimError(f"batch method {method!r} is not available; expected one of {', '.join(METHODS)}")
-    if mode not in ("paper", "extended"):
-        raise VpsimError(f"unknown mode {mode!r}; expected paper or extended")
+    from .model.rules import canonical_mode
+
+    mode = canonical_mode(mode)
     if method == "backward" and (driver is not None or rtol is not None):
         raise VpsimError("the backward method tracks the cycle exactly and takes no driver or rtol")
     if not isinstance(cycle, Cycle):

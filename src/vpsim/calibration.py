@@ -125,10 +125,10 @@ def cycle_operating_points(measured_map, params, cycles) -> tuple[np.ndarray, np
     for c in cycles:
         cyc = load_cycle(c) if isinstance(c, str) else c
         schedule = default_schedule(cyc, params, measured_map)
-        r = backward.run(cyc, params, engine_map=measured_map, schedule=schedule)
-        t_cr = r.series["crank_torque_nm"]
-        w_e = r.series["engine_speed_radps"]
-        dt = np.diff(cyc.time_s)
+        op = backward.intervals(cyc, params, engine_map=measured_map, schedule=schedule, mode="paper")
+        t_cr = op["crank_torque_nm"]
+        w_e = op["engine_speed_radps"]
+        dt = op["dt_s"]
         trac = t_cr > 0
         torques.append(t_cr[trac])
         speeds.append(w_e[trac])

@@ -35,6 +35,11 @@ class Vehicle:
     air_density: float  # kg/m^3
     gravity: float  # m/s^2
     wheel_radius: float  # m
+    # coast-down road load F = A + B v + C v^2 (certification data); when any is set it replaces
+    # m g c_r and 1/2 rho c_d A_f (docs/model.md)
+    road_load_a: float = 0.0  # N
+    road_load_b: float = 0.0  # N per m/s
+    road_load_c: float = 0.0  # N per (m/s)^2
 
 
 @dataclass(frozen=True)
@@ -78,6 +83,7 @@ class Engine:
     max_throttle_area: float  # m^2
     min_throttle_area: float  # m^2
     map_speed_range: tuple[float, float]  # rad/s
+    accessory_power: float = 0.0  # W, mechanical load of the accessories (alternator, pumps) while running
 
     @property
     def displacement(self) -> float:
@@ -93,6 +99,7 @@ class Simulation:
     fuel_density: float  # kg/L
     ode_relative_tolerance: float
     inverse_max_step: float  # s
+    fuel_cutoff_speed: float = 0.0  # rad/s; realistic mode: fuel cut in overrun above this speed (0: never)
 
 
 @dataclass(frozen=True)
@@ -194,6 +201,11 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "simulation.fuel_density": (0.3, 2.0, False),
     "simulation.ode_relative_tolerance": (0.0, 0.5, False),
     "simulation.inverse_max_step": (0.0, 100.0, False),
+    "simulation.fuel_cutoff_speed": (0.0, 2000.0, True),
+    "vehicle.road_load_a": (0.0, 1.0e4, True),
+    "vehicle.road_load_b": (-1.0e3, 1.0e3, True),
+    "vehicle.road_load_c": (0.0, 100.0, True),
+    "engine.accessory_power": (0.0, 1.0e5, True),
 }
 _EFFICIENCIES = ("transmission.efficiency", "engine.thermal_efficiency")
 _POSITIVE_INTS = ("engine.cylinders", "engine.revolutions_per_cycle")
@@ -333,7 +345,8 @@ def _from_mapping(data: dict[str, Any], where: str, base: Parameters | None) -> 
         if base is not None:
             sections[sec] = replace(getattr(base, sec), **kw)
         else:
-            missing = attrs - set(kw)
+            required = {f.name for f in fields(cls) if f.default is dataclasses.MISSING}
+            missing = required - set(kw)
             if missing:
                 raise ParameterError(f"{where}: [{sec}] is missing {', '.join(sorted(missing))}")
             sections[sec] = cls(**kw)

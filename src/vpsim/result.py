@@ -59,6 +59,7 @@ class EnergyBalance:
     brake: float = 0.0
     trace_miss: float = 0.0
     idle_control: float = 0.0
+    accessories: float = 0.0
 
     @property
     def consumers(self) -> float:
@@ -73,6 +74,7 @@ class EnergyBalance:
             + self.brake
             - self.trace_miss
             + self.idle_control
+            + self.accessories
         )
 
     @property
@@ -125,6 +127,206 @@ class TraceMiss:
         return ", ".join(parts)
 
 
+BAND_KMH = 2.0  # the regulations' speed tolerance (UN ECE R83 / EPA: +-2 km/h resp. +-2 mph)
+# the core columns every method's time series has (at the cycle's samples); methods add their own extras
+CORE_COLUMNS = tuple(SERIES) + ("torque_shortfall_nm", "clutch_engaged")
+
+
+@dataclass(frozen=True)
+class Deviations:
+    """Where a run left what the cycle asked or what physics allows, in seconds of the cycle.
+
+    * speed not followed: ``speed_not_followed_s`` (|v - v_cycle| beyond the +-2 km/h band) and
+      ``max_speed_error_mps``;
+    * demand not deliverable, per cause: ``torque_beyond_full_load_s`` (with ``max_torque_shortfall_nm``),
+      ``throttle_below_minimum_s`` (deceleration beyond engine braking without brakes),
+      ``engine_speed_out_of_range_s`` (above the engine's top speed); ``demand_not_deliverable_s`` is the time
+      any of them holds;
+    * states outside physics: ``negative_intake_pressure_s``, ``negative_fuel_flow_s`` (the model's flow
+      below zero: an air charge below zero), plus overspeed and speed error above.
+
+    The same names are the keys of ``Result.summary()`` (the CLI's ``--json``) and the flag columns of
+    ``Result.to_dataframe()``. ``None`` where a run kept no time series to assess.
+    """
+
+    speed_not_followed_s: float | None = 0.0
+    max_speed_error_mps: float = 0.0
+    demand_not_deliverable_s: float | None = 0.0
+    torque_beyond_full_load_s: float | None = 0.0
+    max_torque_shortfall_nm: float = 0.0
+    throttle_below_minimum_s: float | None = 0.0
+    engine_speed_out_of_range_s: float | None = 0.0
+    max_engine_speed_radps: float | None = 0.0
+    negative_intake_pressure_s: float | None = 0.0
+    negative_fuel_flow_s: float | None = 0.0
+    band_kmh: float = BAND_KMH
+
+    @property
+    def outside_physics_s(self) -> float | None:
+        """Seconds with any state outside physics (the largest of its parts; they may overlap)."""
+        parts = (
+            self.negative_intake_pressure_s,
+            self.negative_fuel_flow_s,
+            self.engine_speed_out_of_range_s,
+            self.speed_not_followed_s,
+        )
+        return None if any(p is None for p in parts) else max(parts)
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        d["outside_physics_s"] = self.outside_physics_s
+        return d
+
+    def __str__(self) -> str:
+        def s(x):
+            return "not assessed" if x is None else f"{x:g} s"
+
+        parts = [
+            f"speed not followed {s(self.speed_not_followed_s)} (max error {self.max_speed_error_mps:.2f} m/s)"
+        ]
+        dn = self.demand_not_deliverable_s
+        if dn:
+            causes = [
+                f"torque beyond full load {self.torque_beyond_full_load_s:g} s"
+                + (f" (max {self.max_torque_shortfall_nm:.1f} N m)" if self.max_torque_shortfall_nm else "")
+                if self.torque_beyond_full_load_s
+                else "",
+                f"throttle below minimum {self.throttle_below_minimum_s:g} s"
+                if self.throttle_below_minimum_s
+                else "",
+                f"engine speed out of range {self.engine_speed_out_of_range_s:g} s "
+                f"(max {self.max_engine_speed_radps:.0f} rad/s)"
+                if self.engine_speed_out_of_range_s
+                else "",
+            ]
+            parts.append(f"demand not deliverable {dn:g} s: " + ", ".join(c for c in causes if c))
+        else:
+            parts.append(f"demand not deliverable {s(dn)}")
+        neg = [
+            f"negative intake pressure {self.negative_intake_pressure_s:g} s"
+            if self.negative_intake_pressure_s
+            else "",
+            f"negative fuel flow {self.negative_fuel_flow_s:g} s" if self.negative_fuel_flow_s else "",
+        ]
+        if any(neg):
+            parts.append("outside physics: " + ", ".join(n for n in neg if n))
+        return "; ".join(parts)
+
+
+def sample_weights(t) -> np.ndarray:
+    """The time each sample stands for (trapezoid weights): half of each adjacent interval."""
+    t = np.asarray(t, float)
+    w = np.zeros(t.size)
+    if t.size > 1:
+        d = np.diff(t)
+        w[:-1] += 0.5 * d
+        w[1:] += 0.5 * d
+    return w
+
+
+def flags(series: dict, limits: dict) -> dict[str, np.ndarray]:
+    """Per-sample flags of the deviations (boolean arrays, the keys of :class:`Deviations` without ``_s``)."""
+    n = len(series["time_s"])
+    zero = np.zeros(n, bool)
+
+    def col(k):
+        return np.asarray(series[k], float) if k in series else None
+
+    v, ref = col("speed_mps"), col("reference_speed_mps")
+    band = BAND_KMH / 3.6
+    err = np.abs(v - ref) if v is not None and ref is not None else np.zeros(n)
+    out = {"speed_not_followed": err > band * (1 + 1e-9)}
+    short = col("torque_shortfall_nm")
+    beyond = zero.copy() if short is None else short > 1e-9
+    below = zero.copy()
+    demand, thr = col("throttle_demand_m2"), col("throttle_area_m2")
+    brake = col("brake_force_n")
+    braked = zero if brake is None else brake > 0.0
+    a_min, a_max = limits.get("min_throttle_area_m2"), limits.get("max_throttle_area_m2")
+    moving = (v > 1e-9) if v is not None else zero
+    if demand is not None and a_min is not None:  # the inverse method's throttle demand
+        below |= moving & ~braked & ~(demand >= a_min)
+        beyond |= moving & (demand > a_max)
+    elif thr is not None and a_max is not None and ref is not None:  # a driver at its limits, still behind
+        beyond |= (thr >= a_max * (1 - 1e-9)) & (v < ref - band)
+        below |= (thr <= a_min * (1 + 1e-9)) & ~braked & (v > ref + band)
+    out["torque_beyond_full_load"] = beyond
+    out["throttle_below_minimum"] = below
+    w_e = col("engine_speed_radps")
+    w_max = limits.get("max_engine_speed_radps")
+    over = zero.copy() if w_e is None or w_max is None else w_e > w_max * (1 + 1e-9)
+    out["engine_speed_out_of_range"] = over
+    out["demand_not_deliverable"] = beyond | below | over
+    p = col("intake_pressure_pa")
+    out["negative_intake_pressure"] = zero.copy() if p is None else p < 0.0
+    f = col("fuel_flow_kgps")
+    out["negative_fuel_flow"] = zero.copy() if f is None else f < 0.0
+    return out
+
+
+def assess(series: dict, limits: dict, trace) -> Deviations:
+    """:class:`Deviations` of a run from its time series (at the cycle's samples) and its trace figures."""
+    if not series:
+        return Deviations(
+            speed_not_followed_s=None,
+            max_speed_error_mps=float(trace.max_speed_error_mps),
+            demand_not_deliverable_s=None,
+            torque_beyond_full_load_s=float(trace.seconds) if trace.max_torque_shortfall_nm else None,
+            max_torque_shortfall_nm=float(trace.max_torque_shortfall_nm),
+            throttle_below_minimum_s=None,
+            engine_speed_out_of_range_s=None,
+            max_engine_speed_radps=None,
+            negative_intake_pressure_s=None,
+            negative_fuel_flow_s=None,
+        )
+    w = sample_weights(series["time_s"])
+    f = flags(series, limits)
+    exact = trace.details if isinstance(trace.details, dict) else {}
+
+    def sec(k):
+        if f"{k}_s" in exact:  # counted by the method over its own intervals
+            return round(float(exact[f"{k}_s"]), 6)
+        return round(float(np.sum(w[f[k]])), 6)
+
+    v = np.asarray(series["speed_mps"], float)
+    ref = np.asarray(series.get("reference_speed_mps", v), float)
+    w_e = np.asarray(series.get("engine_speed_radps", np.zeros(v.size)), float)
+    short = np.asarray(series.get("torque_shortfall_nm", np.zeros(v.size)), float)
+    return Deviations(
+        speed_not_followed_s=sec("speed_not_followed"),
+        max_speed_error_mps=max(
+            float(np.max(np.abs(v - ref), initial=0.0)), float(trace.max_speed_error_mps)
+        ),
+        demand_not_deliverable_s=_union_s(w, f, exact),
+        torque_beyond_full_load_s=sec("torque_beyond_full_load"),
+        max_torque_shortfall_nm=max(float(np.max(short, initial=0.0)), float(trace.max_torque_shortfall_nm)),
+        throttle_below_minimum_s=sec("throttle_below_minimum"),
+        engine_speed_out_of_range_s=sec("engine_speed_out_of_range"),
+        max_engine_speed_radps=float(np.nanmax(w_e, initial=0.0)),
+        negative_intake_pressure_s=sec("negative_intake_pressure"),
+        negative_fuel_flow_s=sec("negative_fuel_flow"),
+    )
+
+
+def _union_s(w, f, exact) -> float:
+    """Seconds with any cause of demand not deliverable; a cause the method counted exactly over its own
+    intervals counts so, the others at the samples where it does not hold."""
+    if "torque_beyond_full_load_s" not in exact:
+        return round(float(np.sum(w[f["demand_not_deliverable"]])), 6)
+    rest = (f["throttle_below_minimum"] | f["engine_speed_out_of_range"]) & ~f["torque_beyond_full_load"]
+    return round(float(exact["torque_beyond_full_load_s"]) + float(np.sum(w[rest])), 6)
+
+
+def limits_of(params) -> dict:
+    """The physical limits a run is assessed against (:func:`flags`)."""
+    e = params.engine
+    return {
+        "max_engine_speed_radps": float(e.map_speed_range[1]),
+        "min_throttle_area_m2": float(e.min_throttle_area),
+        "max_throttle_area_m2": float(e.max_throttle_area),
+    }
+
+
 @dataclass(frozen=True)
 class Result:
     """Outcome of one simulation: time series (``series``), summary figures, energy balance."""
@@ -144,6 +346,16 @@ class Result:
     vehicle: str = ""
     notes: tuple[str, ...] = ()
     solver: dict = field(default_factory=dict)  # integrator statistics (steps, rejections, evaluations)
+    limits: dict = field(default_factory=dict, repr=False)  # physical limits the run is assessed against
+
+    @property
+    def deviations(self) -> Deviations:
+        """Speed not followed, demand not deliverable (per cause), states outside physics (seconds)."""
+        hit = self.__dict__.get("_deviations")
+        if hit is None:
+            hit = assess(self.series, self.limits, self.trace_miss)
+            object.__setattr__(self, "_deviations", hit)
+        return hit
 
     @property
     def fuel_l_per_100km(self) -> float:
@@ -166,7 +378,11 @@ class Result:
         return {
             "method": self.method,
             "cycle": self.cycle,
-            "driver": self.driver,
+            "driver": None
+            if self.driver is None
+            else int(self.driver)
+            if str(self.driver).isdigit()
+            else self.driver,
             "mode": self.mode,
             "vehicle": self.vehicle,
             "fuel_l_per_100km": float(self.fuel_l_per_100km),
@@ -179,64 +395,136 @@ class Result:
             "max_speed_error_mps": float(self.trace_miss.max_speed_error_mps),
             "infeasible_throttle_s": float(self.trace_miss.infeasible_throttle_s),
             "energy_relative_residual": None if self.energy is None else float(self.energy.relative_residual),
+            **self.deviations.as_dict(),
         }
 
     def to_json(self, **kw) -> str:
         return json.dumps(self.summary(), **kw)
 
-    def to_dataframe(self):
-        """Time series as a pandas DataFrame, one row per sample, SI units in the column names."""
+    def to_dataframe(self, *, raw: bool = False):
+        """Time series as a pandas DataFrame, one row per cycle sample, SI units in the column names.
+
+        The core columns (:data:`CORE_COLUMNS`) come first, then the method's own; then one boolean column per
+        deviation (``speed_not_followed``, ``demand_not_deliverable``, ``torque_beyond_full_load``,
+        ``throttle_below_minimum``, ``engine_speed_out_of_range``, ``negative_intake_pressure``,
+        ``negative_fuel_flow``). A state outside physics is not shown as a plain number: a negative
+        intake pressure or fuel flow is NaN there (flagged in its column); ``raw=True`` keeps the values.
+        """
         import pandas as pd
 
-        cols = {k: self.series[k] for k in SERIES if k in self.series}
+        cols = {k: self.series[k] for k in CORE_COLUMNS if k in self.series}
         cols.update({k: v for k, v in self.series.items() if k not in cols})
-        return pd.DataFrame(cols)
+        df = pd.DataFrame(cols)
+        if not self.series:
+            return df
+        fl = flags(self.series, self.limits)
+        if not raw:
+            for key, flag in (
+                ("intake_pressure_pa", "negative_intake_pressure"),
+                ("fuel_flow_kgps", "negative_fuel_flow"),
+            ):
+                if key in df:
+                    df.loc[fl[flag], key] = np.nan
+        for k, v in fl.items():
+            df[k] = v
+        return df
+
+    def compare(self, *others):
+        """The core columns of this run and ``others`` side by side on the cycle's samples (one DataFrame,
+        columns ``(label, column)`` with label method[/driver])."""
+        import pandas as pd
+
+        frames = {}
+        for r in (self, *others):
+            label = r.method if r.driver is None else f"{r.method}/{r.driver}"
+            while label in frames:
+                label += "'"
+            df = r.to_dataframe()
+            frames[label] = df[[c for c in CORE_COLUMNS if c in df]].set_index("time_s")
+        return pd.concat(frames, axis=1)
 
     def __repr__(self) -> str:
         return (
             f"Result({self.method}{'' if self.driver is None else ' driver ' + self.driver}, "
             f"{self.cycle}, {self.mode}: {self.fuel_l_per_100km:.3f} L/100 km, "
             f"{self.fuel_kg * 1e3:.1f} g over {self.distance_km:.3f} km, "
-            f"{self.steps} steps, {self.cpu_time_s * 1e3:.2f} ms, trace miss {self.trace_miss})"
+            f"{self.steps} steps, {self.cpu_time_s * 1e3:.2f} ms; {self.deviations})"
         )
 
     def plot(self, *, t_range: tuple[float, float] | None = None, fig=None):
-        """Speed, gear, engine speed and torque, intake pressure, throttle and fuel flow against time."""
+        """Speed, gear, engine speed and torque, intake pressure, throttle and fuel flow against time.
+
+        The cycle is drawn dashed over the method's line; seconds with a deviation (speed not followed,
+        demand not deliverable, a state outside physics) are shaded, and values outside physics (negative
+        intake pressure or fuel flow) are not drawn.
+        """
         import matplotlib.pyplot as plt
 
-        s = self.series
-        t = s["time_s"]
-        sel = slice(None) if t_range is None else (t >= t_range[0]) & (t <= t_range[1])
+        df = self.to_dataframe()
+        t = df["time_s"].to_numpy()
+        sel = np.ones(t.size, bool) if t_range is None else (t >= t_range[0]) & (t <= t_range[1])
         panels = [
-            ("speed (km/h)", [("reference_speed_mps", 3.6, "cycle"), ("speed_mps", 3.6, self.method)]),
+            ("speed (km/h)", [("speed_mps", 3.6, self.method), ("reference_speed_mps", 3.6, "cycle")]),
             ("gear", [("gear", 1, None)]),
             ("engine speed (rad/s)", [("engine_speed_radps", 1, None)]),
             ("crank torque (N m)", [("crank_torque_nm", 1, None)]),
             ("intake pressure (kPa)", [("intake_pressure_pa", 1e-3, None)]),
-            ("throttle area (mm^2)", [("throttle_area_m2", 1e6, None)]),
+            ("throttle area (mm²)", [("throttle_area_m2", 1e6, None)]),
             (
                 "fuel flow (g/s)",
                 [("fuel_flow_kgps", 1e3, "model"), ("fuel_flow_used_kgps", 1e3, "with idle floor")],
             ),
         ]
-        panels = [(lab, [c for c in cs if c[0] in s and np.any(np.isfinite(s[c[0]]))]) for lab, cs in panels]
+        panels = [
+            (lab, [c for c in cs if c[0] in df and np.any(np.isfinite(df[c[0]].to_numpy(float)))])
+            for lab, cs in panels
+        ]
         panels = [p for p in panels if p[1]]
         if fig is None:
             fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(9, 1.6 * len(panels) + 1))
         else:
             axes = fig.subplots(len(panels), 1, sharex=True)
         axes = np.atleast_1d(axes)
+        bad = {
+            "speed not followed": df["speed_not_followed"].to_numpy(bool),
+            "demand not deliverable": df["demand_not_deliverable"].to_numpy(bool),
+            "outside physics": (df["negative_intake_pressure"] | df["negative_fuel_flow"]).to_numpy(bool),
+        }
+        colours = {
+            "speed not followed": "tab:orange",
+            "demand not deliverable": "tab:red",
+            "outside physics": "k",
+        }
         for ax, (label, curves) in zip(axes, panels, strict=True):
             for key, scale, name in curves:
-                kw = {"drawstyle": "steps-post"} if key == "gear" else {}
-                ax.plot(t[sel], np.asarray(s[key])[sel] * scale, label=name, lw=1, **kw)
+                y = df[key].to_numpy(float)[sel] * scale
+                if key == "gear":
+                    ax.plot(t[sel], y, lw=1, drawstyle="steps-post")
+                elif key == "reference_speed_mps":
+                    ax.plot(t[sel], y, "k--", lw=0.8, label=name)
+                else:
+                    ax.plot(t[sel], y, lw=1, label=name)
+            for what, mask in bad.items():
+                m = mask & sel
+                if m.any():
+                    ax.fill_between(
+                        t,
+                        0,
+                        1,
+                        where=m,
+                        transform=ax.get_xaxis_transform(),
+                        color=colours[what],
+                        alpha=0.15,
+                        lw=0,
+                        label=what if ax is axes[0] else None,
+                    )
             ax.set_ylabel(label, fontsize=8)
-            if any(c[2] for c in curves) and len(curves) > 1:
-                ax.legend(fontsize=7, loc="upper right")
+            if any(c[2] for c in curves) and len(curves) > 1 or ax is axes[0]:
+                ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.0, 0.5))
         axes[-1].set_xlabel("time (s)")
         axes[0].set_title(
-            f"{self.method}{'' if self.driver is None else ' driver ' + self.driver} on {self.cycle}: "
-            f"{self.fuel_l_per_100km:.2f} L/100 km",
+            f"{self.method}{'' if self.driver is None else ' driver ' + str(self.driver)} on {self.cycle} "
+            f"({self.mode}): {self.fuel_l_per_100km:.2f} L/100 km",
             fontsize=9,
         )
         fig.tight_layout()

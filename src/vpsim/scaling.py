@@ -321,9 +321,10 @@ def compare_on_cycle(
         trace["calibrated"] = r_cal.trace_miss.seconds
         engines["calibrated"] = calibrated_engine
 
-    t_cr = r_meas.series["crank_torque_nm"]
-    w_e = r_meas.series["engine_speed_radps"]
-    dt = np.diff(cyc.time_s)
+    op = backward.intervals(cyc, params, engine_map=measured_map, schedule=schedule, mode="paper")
+    t_cr = op["crank_torque_nm"]
+    w_e = op["engine_speed_radps"]
+    dt = op["dt_s"]
     masks = measured_map.coverage(t_cr, w_e)
     coverage = {k: float(np.sum(dt[masks[k]]) / np.sum(dt)) for k in COVERAGE_KEYS}
 
@@ -336,8 +337,11 @@ def compare_on_cycle(
         point_stats[key] = error_stats((f_gen / f_meas - 1.0)[trac], dt[trac])
 
     # where the fuel difference comes from: contribution (% of measured cycle fuel) by load band
-    f_gen_run = r_gen.series["fuel_flow_used_kgps"]
-    f_meas_run = r_meas.series["fuel_flow_used_kgps"]
+    op_gen = backward.intervals(
+        cyc, params, engine_map=generated_map(params.engine), schedule=schedule, mode="paper"
+    )
+    f_gen_run = np.maximum(op_gen["fuel_flow_kgps"], idle)
+    f_meas_run = np.maximum(op["fuel_flow_kgps"], idle)
     total = float(np.sum(f_meas_run * dt))
     peak = float(np.max(measured_map.engine.max_torque))
     bands = {

@@ -5,9 +5,8 @@
     >>> print(f"{r.fuel_l_per_100km:.2f} L/100 km")  # doctest: +SKIP
 
 Methods: ``backward`` (quasi-static, exact tracking), ``forward`` (dynamic, PI driver), ``inverse`` (stable
-inversion, smoothing driver). Modes: ``paper`` (the paper's model: no clutch, no brakes, idle fuel floor;
-the default, so the three methods compare as in the paper) and ``extended`` (clutch and idle at standstill,
-friction brakes).
+inversion, smoothing driver). Modes: ``realistic`` (the default: clutch and idle at standstill, friction
+brakes) and ``paper`` (the paper's model: no clutch, no brakes, idle fuel floor; ``vpsim paper`` uses it).
 """
 
 from __future__ import annotations
@@ -20,7 +19,7 @@ from .gears import GearSchedule, default_schedule, load_schedule
 from .params import Parameters, load_parameters
 
 METHODS = ("backward", "forward", "inverse")
-MODES = ("paper", "extended")
+MODES = ("realistic", "paper", "extended")  # "extended": the realistic mode's earlier name
 
 
 def resolve_inputs(cycle, params, gears=None):
@@ -46,20 +45,24 @@ def simulate(
     params: str | Path | Parameters = "hofman2011",
     *,
     driver: int | str | None = None,
-    mode: str = "paper",
+    mode: str = "realistic",
     gears=None,
     **options,
 ):
     """Simulate ``params`` (preset name, TOML file or Parameters) on ``cycle`` with ``method``.
 
-    ``driver`` (1 or 2; forward and inverse only, default 1) picks the tuning; ``gears`` is a schedule file or
+    ``mode``: ``"realistic"`` (default: clutch and idle at standstill, friction brakes) or ``"paper"`` (the
+    paper's model: stiff driveline, no brakes; ``"extended"`` is the realistic mode's earlier name).
+    ``driver`` (1 or 2; forward and inverse only) picks the tuning: default 2 (tight tracking) in the
+    realistic mode, 1 in the paper mode (the paper's tables use both); ``gears`` is a schedule file or
     :class:`~vpsim.gears.GearSchedule` (default: derived from the cycle by the documented rule); further
     ``options`` go to the method (e.g. ``engine_map=`` for the backward method, ``rtol=`` for the forward).
     """
     if method not in METHODS:
         raise VpsimError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
-    if mode not in MODES:
-        raise VpsimError(f"unknown mode {mode!r}; expected one of {', '.join(MODES)}")
+    from .model.rules import canonical_mode
+
+    mode = canonical_mode(mode)
     cycle, params, schedule = resolve_inputs(cycle, params, gears)
     if method == "backward":
         if driver is not None:
@@ -67,7 +70,7 @@ def simulate(
         from .methods import backward
 
         return backward.run(cycle, params, schedule=schedule, mode=mode, **options)
-    driver = "1" if driver is None else str(driver)
+    driver = ("2" if mode == "realistic" else "1") if driver is None else str(driver)
     params.driver(driver)  # validates
     if method == "forward":
         from .methods import forward

@@ -29,14 +29,16 @@ from .main import cli
     "--driver",
     type=click.Choice(["1", "2"]),
     default=None,
-    help="Driver tuning for forward/inverse (default 1); not used by backward.",
+    help="Driver tuning for forward/inverse (default 2 in the realistic mode, 1 in the paper mode); "
+    "not used by backward.",
 )
 @click.option(
     "--mode",
-    type=click.Choice(["paper", "extended"]),
-    default="paper",
+    type=click.Choice(["realistic", "paper", "extended"]),
+    default="realistic",
     show_default=True,
-    help="paper: no clutch, no brakes (the paper's model); extended: clutch/idle at standstill, brakes.",
+    help="realistic: clutch and idle at standstill, friction brakes; paper: the paper's model (no clutch, no "
+    "brakes; what 'vpsim paper' uses). 'extended' is the realistic mode's earlier name.",
 )
 @click.option(
     "--gears",
@@ -95,14 +97,26 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         click.echo(json.dumps(summary))
         return
     click.echo(
-        f"{method} on {result.cycle} ({mode} mode, vehicle {result.vehicle}"
+        f"{method} on {result.cycle} ({result.mode} mode, vehicle {result.vehicle}"
         f"{'' if result.driver is None else ', driver ' + result.driver})"
     )
     click.echo(f"  fuel consumption  {result.fuel_l_per_100km:8.3f} L/100 km")
     click.echo(f"  fuel              {result.fuel_kg * 1e3:8.1f} g")
     click.echo(f"  distance          {result.distance_km:8.3f} km")
     click.echo(f"  CPU time          {result.cpu_time_s * 1e3:8.2f} ms ({result.steps} steps)")
-    click.echo(f"  trace miss        {result.trace_miss}")
+    dev = result.deviations
+    click.echo(
+        f"  speed not followed      {_seconds(dev.speed_not_followed_s)} outside ±2 km/h "
+        f"(max error {dev.max_speed_error_mps:.2f} m/s)"
+    )
+    click.echo(
+        f"  demand not deliverable  {_seconds(dev.demand_not_deliverable_s)}"
+        + (f" ({_causes(dev)})" if dev.demand_not_deliverable_s else "")
+    )
+    click.echo(
+        f"  outside physics         {_seconds(dev.outside_physics_s)}"
+        + (f" ({_physics(dev)})" if dev.outside_physics_s else "")
+    )
     if result.energy is not None:
         click.echo(
             f"  energy balance    residual {result.energy.relative_residual:.1e} of the indicated work"
@@ -111,3 +125,36 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         click.echo(f"  note: {note}")
     for p in written:
         click.echo(f"  wrote {p}")
+
+
+def _seconds(x) -> str:
+    return "not assessed" if x is None else f"{x:g} s"
+
+
+def _causes(dev) -> str:
+    parts = []
+    if dev.torque_beyond_full_load_s:
+        extra = (
+            f", max shortfall {dev.max_torque_shortfall_nm:.1f} N m" if dev.max_torque_shortfall_nm else ""
+        )
+        parts.append(f"torque beyond full load {dev.torque_beyond_full_load_s:g} s{extra}")
+    if dev.throttle_below_minimum_s:
+        parts.append(f"throttle below minimum {dev.throttle_below_minimum_s:g} s")
+    if dev.engine_speed_out_of_range_s:
+        parts.append(
+            f"engine speed out of range {dev.engine_speed_out_of_range_s:g} s, max {dev.max_engine_speed_radps:.0f} rad/s"
+        )
+    return "; ".join(parts)
+
+
+def _physics(dev) -> str:
+    parts = []
+    if dev.negative_intake_pressure_s:
+        parts.append(f"negative intake pressure {dev.negative_intake_pressure_s:g} s")
+    if dev.negative_fuel_flow_s:
+        parts.append(f"negative fuel flow {dev.negative_fuel_flow_s:g} s")
+    if dev.engine_speed_out_of_range_s:
+        parts.append(f"engine over its top speed {dev.engine_speed_out_of_range_s:g} s")
+    if dev.speed_not_followed_s:
+        parts.append(f"speed outside the band {dev.speed_not_followed_s:g} s")
+    return "; ".join(parts)

@@ -83,6 +83,9 @@ class PIDriver:
         d = params.driver(driver)
         eng, veh = params.engine, params.vehicle
         tt = 0.5 * d.forward_kp / d.forward_ki if tracking_time_s is None else float(tracking_time_s)
+        from ..model.rules import canonical_mode
+
+        mode = canonical_mode(mode)
         if mode == "paper":
             return cls(
                 d.forward_kp,
@@ -92,7 +95,7 @@ class PIDriver:
                 eng.min_throttle_area,
                 tt,
             )
-        if mode == "extended":
+        if mode == "realistic":
             gain = veh.mass * veh.gravity / eng.max_throttle_area
             return cls(
                 d.forward_kp,

@@ -37,16 +37,16 @@ from ..model.engine import equation, inline
 from ..model.maps import EngineMap, GeneratedEngineMap, cached_engine_map
 from ..model.record import ratios as total_ratios
 from ..model.record import record_array
-from ..result import EnergyBalance, Result, TraceMiss
-
-MODES = ("paper", "extended")
+from ..result import EnergyBalance, Result, TraceMiss, limits_of
 
 # how the fuel flow of an operating point is found
 FUEL_EXACT, FUEL_TABLE, FUEL_GIVEN = 0, 1, 2
 
 # rows of the per-interval array
-(R_TIME, R_V, R_A, R_W, R_DW, R_WWHEEL, R_TCR, R_SHORT, R_BRAKE, R_CLUTCH, R_P, R_MDOT) = range(12)
-N_ROWS = 12
+(R_TIME, R_V, R_A, R_W, R_DW, R_WWHEEL, R_TCR, R_SHORT, R_BRAKE, R_CLUTCH, R_P, R_MDOT, R_THR, R_FIRED) = (
+    range(14)
+)
+N_ROWS = 14
 # results of account(): the energy terms (rules.ENERGY_TERMS order), then these
 A_FUEL = rules.N_TERMS
 A_DIST, A_MISS_S, A_MAX_SHORT, A_DEFICIT = A_FUEL + 1, A_FUEL + 2, A_FUEL + 3, A_FUEL + 4
@@ -94,11 +94,11 @@ def _point(
     t_closed = 0.0
     if extended:
         t_closed = tb.interp_at(i * v / c.wheel_radius, line_speed, line_min, inv_line)
-    w, dw, w_wheel, t_req, brake, clutch, _ = rules.operating_point(v, a, i, t_closed, extended, c)
+    w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(v, a, i, t_closed, extended, c)
     t_max = tb.interp_at(w, line_speed, line_max, inv_line)
     short = t_req - t_max if t_req > t_max else 0.0
     t_cr = t_req - short
-    p = en.intake_pressure_for_torque(t_cr, w, c)
+    p = en.intake_pressure_for_torque(t_cr if fired else t_closed, w, c)  # fuel cut: the closed throttle's
     if fuel_kind == FUEL_EXACT:
         mdot = en.fuel_flow(p, w, c)
     elif fuel_kind == FUEL_TABLE:
@@ -107,11 +107,13 @@ def _point(
         mdot = math.nan
     if clutch == rules.CLUTCH_OPEN:
         mdot = c.idle_fuel_flow
-    return v, a, w, dw, w_wheel, t_cr, short, brake, clutch, p, mdot
+    if not fired:  # fuel cut-off in overrun
+        mdot = 0.0
+    return v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot
 
 
 @inline
-def _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, p, mdot):
+def _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot, c):
     rows[R_TIME, k] = 0.5 * (time_s[k + 1] + time_s[k])
     rows[R_V, k] = v
     rows[R_A, k] = a
@@ -122,8 +124,10 @@ def _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, p,
     rows[R_SHORT, k] = short
     rows[R_BRAKE, k] = brake
     rows[R_CLUTCH, k] = clutch
+    rows[R_FIRED, k] = 1.0 if fired else 0.0
     rows[R_P, k] = p
     rows[R_MDOT, k] = mdot
+    rows[R_THR, k] = en.throttle_for_flow(p, en.cylinder_air_flow(p, w, c), c)  # the FQM's steady throttle
 
 
 @inline
@@ -136,12 +140,47 @@ def _kahan(acc, comp, q, x):
 
 
 @inline
-def _book(acc, comp, cur, dt, i, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, p, mdot, c, with_engine):
+def _book(
+    acc,
+    comp,
+    cur,
+    dt,
+    i,
+    v,
+    a,
+    w,
+    dw,
+    w_wheel,
+    t_cr,
+    short,
+    brake,
+    clutch,
+    fired,
+    p,
+    mdot,
+    c,
+    with_engine,
+    realistic,
+):
     """Add interval's fuel, distance, energy terms and trace miss to the sums; returns the speed deficit of
     the current contiguous miss (``cur``)."""
-    _kahan(acc, comp, A_FUEL, rules.fuel_with_idle_floor(mdot, c) * dt)
+    _kahan(acc, comp, A_FUEL, (rules.fuel_with_idle_floor(mdot, c) if fired else 0.0) * dt)
     _kahan(acc, comp, A_DIST, v * dt)
-    pw = rules.powers(p, w, dw, t_cr, short, w_wheel, v, a, brake, clutch, c)
+    pw = rules.powers(
+        p,
+        w,
+        dw,
+        t_cr,
+        short,
+        w_wheel,
+        v,
+        a,
+        brake,
+        clutch,
+        fired,
+        rules.accessories_torque(w, realistic, c),
+        c,
+    )
     if with_engine:  # the engine's terms need the model's physics at the operating point
         _kahan(acc, comp, 0, pw[0] * dt)
         _kahan(acc, comp, 1, pw[1] * dt)
@@ -150,6 +189,7 @@ def _book(acc, comp, cur, dt, i, v, a, w, dw, w_wheel, t_cr, short, brake, clutc
         _kahan(acc, comp, 4, pw[4] * dt)
         _kahan(acc, comp, 9, pw[9] * dt)
         _kahan(acc, comp, 10, pw[10] * dt)
+        _kahan(acc, comp, 11, pw[11] * dt)
     _kahan(acc, comp, 5, pw[5] * dt)
     _kahan(acc, comp, 6, pw[6] * dt)
     _kahan(acc, comp, 7, pw[7] * dt)
@@ -205,7 +245,7 @@ def run_kernel(
     for k in range(gear.size):
         g, j = gear_index(time_s, k, sched_t, sched_gear, j)
         gear[k] = g + 1
-        v, a, w, dw, w_wheel, t_cr, short, brake, clutch, p, mdot = _point(
+        v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot = _point(
             time_s,
             speed,
             k,
@@ -225,7 +265,7 @@ def run_kernel(
             inv_mt,
         )
         if keep:
-            _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, p, mdot)
+            _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot, c)
         if book:
             cur = _book(
                 acc,
@@ -242,15 +282,17 @@ def run_kernel(
                 short,
                 brake,
                 clutch,
+                fired,
                 p,
                 mdot,
                 c,
                 with_engine,
+                extended,
             )
 
 
 @kernel(_nrt=False)
-def account(time_s, rows, ratios, gear, c, with_engine, acc, comp):
+def account(time_s, rows, ratios, gear, c, with_engine, extended, acc, comp):
     """Fuel, distance, the energy terms (compensated sums over the intervals) and the trace miss: seconds
     beyond the max-torque line, the largest shortfall and the largest speed deficit accumulated over a
     contiguous miss, from the rows of :func:`run_kernel` (with the fuel flow of a measured map filled in)."""
@@ -274,10 +316,12 @@ def account(time_s, rows, ratios, gear, c, with_engine, acc, comp):
             rows[R_SHORT, k],
             rows[R_BRAKE, k],
             int(rows[R_CLUTCH, k]),
+            rows[R_FIRED, k] != 0.0,
             rows[R_P, k],
             rows[R_MDOT, k],
             c,
             with_engine,
+            extended,
         )
 
 
@@ -317,10 +361,10 @@ def run(
     schedule: GearSchedule | None = None,
     mode: str = "paper",
     keep_series: bool = True,
+    _rows: bool = False,
 ) -> Result:
     """Run the BQM on ``cycle``. ``engine_map`` defaults to the map generated from ``params.engine``."""
-    if mode not in MODES:
-        raise ValueError(f"mode must be 'paper' or 'extended', got {mode!r}")
+    mode = rules.canonical_mode(mode)
     if engine_map is None:
         engine_map = cached_engine_map(params.engine)
     elif not isinstance(engine_map, GeneratedEngineMap) and not isinstance(engine_map, EngineMap):
@@ -329,7 +373,7 @@ def run(
         )
     if schedule is None:
         schedule = default_schedule(cycle, params, engine_map)
-    extended = mode == "extended"
+    extended = mode == "realistic"
     kind, m_speed, m_torque, table, l_speed, l_max, l_min = _map_arrays(engine_map, params)
     generated = isinstance(engine_map, GeneratedEngineMap)
     c = record_array(params)[0]
@@ -368,13 +412,14 @@ def run(
             rows[R_MDOT] = np.where(
                 rows[R_CLUTCH] == rules.CLUTCH_OPEN, params.simulation.idle_fuel_flow, flow
             )
-            account(time_s, rows, ratios, gear, c, generated, acc, np.empty(N_ACC))
+            rows[R_MDOT] = np.where(rows[R_FIRED] != 0.0, rows[R_MDOT], 0.0)  # fuel cut-off
+            account(time_s, rows, ratios, gear, c, generated, extended, acc, np.empty(N_ACC))
         return gear, rows, acc
 
     if not run_kernel.overloads:  # compile (or load) outside the timing
         passes(cycle.time_s[:2], cycle.speed_mps[:2], keep_series)
     t0 = time.process_time()
-    gear, rows, acc = passes(cycle.time_s, cycle.speed_mps, keep_series)
+    gear, rows, acc = passes(cycle.time_s, cycle.speed_mps, keep_series or _rows)
     cpu = time.process_time() - t0
     sums = acc.tolist()
     trace = TraceMiss(
@@ -387,26 +432,80 @@ def run(
         if generated
         else None
     )
-    series = {}
-    if keep_series:
-        engaged = rows[R_CLUTCH] != rules.CLUTCH_OPEN
-        mdot = rows[R_MDOT]
-        series = {
-            "time_s": rows[R_TIME],
-            "reference_speed_mps": rows[R_V],
-            "speed_mps": rows[R_V],
-            "accel_mps2": rows[R_A],
-            "gear": gear,
-            "engine_speed_radps": rows[R_W],
-            "crank_torque_nm": rows[R_TCR],
-            "engine_torque_nm": rows[R_TCR] - params.engine.inertia * rows[R_DW],
-            "intake_pressure_pa": np.where(engaged, rows[R_P], np.nan) if generated else np.full(n, np.nan),
-            "fuel_flow_kgps": mdot,
-            "fuel_flow_used_kgps": np.maximum(mdot, params.simulation.idle_fuel_flow),
-            "brake_force_n": rows[R_BRAKE],
-            "torque_shortfall_nm": rows[R_SHORT],
-        }
-    return _result(cycle, params, mode, series, sums[A_FUEL], sums[A_DIST], cpu, n, trace, energy)
+    series = _sample_series(cycle, params, rows, gear, generated) if keep_series else {}
+    trace.details["torque_beyond_full_load_s"] = trace.seconds
+    r = _result(cycle, params, mode, series, sums[A_FUEL], sums[A_DIST], cpu, n, trace, energy)
+    if _rows:
+        r.solver.update(rows=rows, gear=gear)
+    return r
+
+
+def intervals(
+    cycle, params, *, engine_map: EngineMap | None = None, schedule=None, mode: str = "realistic"
+) -> dict:
+    """The operating point of every interval of ``cycle`` as the backward method computes it (the quantities
+    the per-sample series of :func:`run` average): ``dt_s``, ``crank_torque_nm``, ``engine_speed_radps``,
+    ``fuel_flow_kgps``, ``torque_shortfall_nm``, ``gear``; for analyses that weigh operating points by time
+    (the engine-map comparisons of :mod:`vpsim.scaling` and :mod:`vpsim.calibration`)."""
+    r = run(cycle, params, engine_map=engine_map, schedule=schedule, mode=mode, keep_series=False, _rows=True)
+    rows, gear = r.solver["rows"], r.solver["gear"]
+    return {
+        "time_s": rows[R_TIME],
+        "dt_s": np.diff(cycle.time_s),
+        "crank_torque_nm": rows[R_TCR],
+        "engine_speed_radps": rows[R_W],
+        "fuel_flow_kgps": rows[R_MDOT],
+        "torque_shortfall_nm": rows[R_SHORT],
+        "gear": gear,
+    }
+
+
+def _sample_series(cycle, params, rows, gear, generated) -> dict:
+    """The per-interval quantities at the cycle's samples, the time base of every method.
+
+    A sample shows the mean of its two adjacent intervals (the first and last sample their one interval);
+    the speed is the cycle's own; gear and clutch state are those engaged from the sample on (as the other
+    methods report them, right-continuous); the torque shortfall is the larger of the two intervals'.
+    """
+
+    def at_samples(x):
+        out = np.empty(x.size + 1)
+        out[0], out[-1] = x[0], x[-1]
+        out[1:-1] = 0.5 * (x[:-1] + x[1:])
+        return out
+
+    def held(x):
+        return np.concatenate([x, x[-1:]])
+
+    engaged = held(rows[R_CLUTCH]) != rules.CLUTCH_OPEN
+    w = at_samples(rows[R_W])
+    p = at_samples(rows[R_P])
+    t_cr = at_samples(rows[R_TCR])
+    mdot = at_samples(rows[R_MDOT])
+    short = np.maximum(np.concatenate([rows[R_SHORT][:1], rows[R_SHORT]]), held(rows[R_SHORT]))
+    if generated:  # the steady throttle of the operating point (the FQM inverted)
+        throttle = np.where(engaged, at_samples(rows[R_THR]), np.nan)
+    else:
+        throttle = np.full(w.size, np.nan)
+    return {
+        "time_s": cycle.time_s,
+        "reference_speed_mps": cycle.speed_mps,
+        "speed_mps": cycle.speed_mps,
+        "accel_mps2": at_samples(rows[R_A]),
+        "gear": held(gear),
+        "engine_speed_radps": w,
+        "crank_torque_nm": t_cr,
+        "engine_torque_nm": t_cr - params.engine.inertia * at_samples(rows[R_DW]),
+        "intake_pressure_pa": np.where(engaged, p, np.nan) if generated else np.full(w.size, np.nan),
+        "throttle_area_m2": throttle,
+        "fuel_flow_kgps": mdot,
+        "fuel_flow_used_kgps": np.where(
+            at_samples(rows[R_FIRED]) > 0.0, np.maximum(mdot, params.simulation.idle_fuel_flow), 0.0
+        ),
+        "brake_force_n": at_samples(rows[R_BRAKE]),
+        "torque_shortfall_nm": short,
+        "clutch_engaged": held(rows[R_CLUTCH]) != rules.CLUTCH_OPEN,
+    }
 
 
 def _result(cycle, params, mode, series, fuel_kg, distance, cpu, steps, trace, energy) -> Result:
@@ -431,6 +530,7 @@ def _result(cycle, params, mode, series, fuel_kg, distance, cpu, steps, trace, e
         energy=energy,
         vehicle=params.name,
         notes=tuple(notes),
+        limits=limits_of(params),
     )
 
 
@@ -516,7 +616,9 @@ def _variant(c, rat, gear, dt, v, a, v_top_gear, extended, out):
         t_closed = 0.0
         if extended:
             t_closed = _lazy_line(i * v[k] / c.wheel_radius, c.min_throttle_area, cache_min, n_line, w_end, c)
-        w, dw, w_wheel, t_req, brake, clutch, _ = rules.operating_point(v[k], a[k], i, t_closed, extended, c)
+        w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(
+            v[k], a[k], i, t_closed, extended, c
+        )
         p = en.intake_pressure_for_torque(t_req, w, c)
         short = 0.0
         if not (w <= w_end and p <= p_screen):
@@ -533,7 +635,8 @@ def _variant(c, rat, gear, dt, v, a, v_top_gear, extended, out):
             max_short = max(max_short, short)
             cur = 0.0
         mdot = en.fuel_flow(p, w, c) if clutch != rules.CLUTCH_OPEN else c.idle_fuel_flow
-        fuel += rules.fuel_with_idle_floor(mdot, c) * dt[k]
+        if fired:
+            fuel += rules.fuel_with_idle_floor(mdot, c) * dt[k]
     out[B_FUEL] = fuel
     out[B_MISS_S] = miss_s
     out[B_MAX_SHORT] = max_short
@@ -573,7 +676,7 @@ def run_variants(cycle, recs, ratios, gears, schedule_of_variant, mode: str) -> 
         dt,
         v,
         a,
-        mode == "extended",
+        rules.canonical_mode(mode) == "realistic",
         out,
     )
     return out

@@ -59,7 +59,7 @@ from ..model import tables as tb
 from ..model import vehicle as vh
 from ..model._compile import kernel
 from ..model.record import record
-from ..result import EnergyBalance, Result, TraceMiss
+from ..result import EnergyBalance, Result, TraceMiss, limits_of
 
 BAND_KMH = 2.0  # the regulation's speed tolerance (UN ECE R83 / EPA: +-2 km/h resp. +-2 mph)
 
@@ -76,7 +76,8 @@ _FUEL, _DIST, _E_IND, _E_FRIC, _E_PUMP, _E_ENG, _E_DRV, _E_VEH, _E_AERO, _E_ROLL
     3, 15
 )
 _ERR2, _OUTSIDE = 15, 16  # int (v_cycle - v)^2 dt and the time with |v_cycle - v| above the band
-NY = 17
+_E_ACC = 17  # the accessories' work
+NY = 18
 N_ERR = 3  # states in the error norm: v, p_i, z
 # states the right side reads (v, p_i, z): the quadrature states' stage values are never used, so the stages
 # are formed for these only (the quadratures enter the step through their derivatives k_j alone)
@@ -166,14 +167,15 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     dp = en.manifold_pressure_rate(p, a_eng, w, c)
     mdot_f = en.fuel_flow(p, w, c)
     # vehicle (18) with the engine inertia (1),(14)-(17)
+    t_acc = rules.accessories_torque(w, D[_EXT] != 0.0, c)
     if coupled:
-        t_clutch = t_cr
-        acc = vh.acceleration(vh.engine_to_wheel_force(t_cr, ratio, c), v, brake, 1.0 / G[_G_INV_MEQ], c)
+        t_clutch = t_cr - t_acc
+        acc = vh.acceleration(vh.engine_to_wheel_force(t_clutch, ratio, c), v, brake, 1.0 / G[_G_INV_MEQ], c)
         dw = G[_G_KIN] * acc
         clutch = rules.CLUTCH_ENGAGED
-        t_e = t_cr - c.inertia * dw  # (1): T_e = T_cr - J_e dw_e/dt
+        t_e = t_cr - t_acc - c.inertia * dw  # (1): T_e = T_cr - J_e dw_e/dt (less the accessories)
     else:
-        t_clutch = rules.slipping_clutch_torque(t_cr)
+        t_clutch = rules.slipping_clutch_torque(t_cr - t_acc)
         acc = vh.acceleration(vh.engine_to_wheel_force(t_clutch, ratio, c), v, brake, c.mass, c)
         dw = 0.0
         clutch = rules.CLUTCH_SLIPPING
@@ -185,7 +187,7 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     used = rules.fuel_with_idle_floor(mdot_f, c)
     dy[_FUEL] = used
     dy[_DIST] = vv
-    pw = rules.powers(p, w, dw, t_cr, 0.0, w_wheel, vv, acc, brake, clutch, c)
+    pw = rules.powers(p, w, dw, t_cr, 0.0, w_wheel, vv, acc, brake, clutch, True, t_acc, c)
     dy[_E_IND] = pw[0]
     dy[_E_FRIC] = pw[1]
     dy[_E_PUMP] = pw[2]
@@ -196,6 +198,7 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     dy[_E_ROLL] = pw[7]
     dy[_E_BRAKE] = pw[8]
     dy[_E_IDLE] = pw[10]
+    dy[_E_ACC] = pw[11]
     err = v_ref - vv
     dy[_ERR2] = err * err
     dy[_OUTSIDE] = 1.0 if abs(err) > D[_BAND] else 0.0
@@ -469,8 +472,9 @@ def settings(params, pi: PIDriver | None = None, mode: str = "paper") -> np.ndar
     D = np.zeros(N_SETTINGS)
     if pi is not None:
         D[_KP : _KB + 1] = pi.as_array()
-    D[_EXT] = 1.0 if mode == "extended" else 0.0
-    D[_AIDLE] = en.idle_throttle(record(params)) if mode == "extended" else 0.0
+    realistic = rules.canonical_mode(mode) == "realistic"
+    D[_EXT] = 1.0 if realistic else 0.0
+    D[_AIDLE] = en.idle_throttle(record(params)) if realistic else 0.0
     D[_BAND] = BAND_KMH / 3.6
     return D
 
@@ -630,8 +634,7 @@ def run(
     """
     from dataclasses import replace
 
-    if mode not in ("paper", "extended"):
-        raise VpsimError(f"unknown mode {mode!r}; expected paper or extended")
+    mode = rules.canonical_mode(mode)
     rtol = params.simulation.ode_relative_tolerance if rtol is None else float(rtol)
     if not (0.0 < rtol < 1.0):
         raise VpsimError(f"rtol = {rtol!r} must be in (0, 1)")
@@ -711,6 +714,7 @@ def run(
         rolling=float(y_end[_E_ROLL]),
         brake=float(y_end[_E_BRAKE]),
         idle_control=float(y_end[_E_IDLE]),
+        accessories=float(y_end[_E_ACC]),
     )
     series = {}
     if keep_series:
@@ -763,5 +767,6 @@ def run(
         energy=energy,
         vehicle=params.name,
         notes=tuple(notes),
+        limits=limits_of(params),
         solver=info,
     )

@@ -62,7 +62,7 @@ from ..model._compile import kernel
 from ..model.engine import equation
 from ..model.record import memo, record
 from ..model.record import ratios as total_ratios
-from ..result import EnergyBalance, Result, TraceMiss
+from ..result import EnergyBalance, Result, TraceMiss, limits_of
 
 BAND_KMH = 2.0  # the regulation's speed tolerance, as for the forward method
 MAX_TAPS = 200_001  # largest discrete smoothing kernel (2a/dt + 1 samples) the uniform-grid path builds
@@ -235,8 +235,8 @@ def evaluation_grid(cycle, schedule: GearSchedule):
 # --- the inversion, point by point ---------------------------------------------------------------------
 
 # rows of the per-point array
-(R_P, R_U, R_WENG, R_DWENG, R_W, R_TCR, R_MDOT, R_BRAKE, R_CLUTCH, R_MOVING) = range(10)
-N_ROWS = 10
+(R_P, R_U, R_WENG, R_DWENG, R_W, R_TCR, R_MDOT, R_BRAKE, R_CLUTCH, R_MOVING, R_FIRED) = range(11)
+N_ROWS = 11
 _ROW_KEYS = (
     "intake_pressure_pa",
     "throttle_demand_m2",
@@ -248,6 +248,7 @@ _ROW_KEYS = (
     "brake_force_n",
     "clutch_engaged",
     "moving",
+    "fired",
 )
 
 
@@ -260,31 +261,65 @@ def invert_point(v, dv, ddv, ratio, coef, extended, c):
     The throttle u_d is the one that gives the required dp_i/dt in the manifold equation (9)
     (:func:`vpsim.model.engine.throttle_for_pressure_rate`), which is (30)-(32) without restating (9).
     """
-    c1, c2, c3, c4, roll = coef[0], coef[1], coef[2], coef[3], coef[4]
+    c1, c2, c3, c4, roll, cb = coef[0], coef[1], coef[2], coef[3], coef[4], coef[5]
     x1 = v if v > 0.0 else 0.0
     moving = x1 > _MOVING
     if not moving:
         c4 = c4 + roll  # rolling resistance only while moving
+        cb = 0.0
     x108 = x1**0.8
-    x2 = (dv - c1 * x1 * x1 - c2 * x108 * x1 - c4) / c3  # (33)
-    dx2 = (ddv - (2.0 * c1 * x1 + 1.8 * c2 * x108) * dv) / c3  # (31): dp_i/dt the trajectory needs
+    x2 = (dv - c1 * x1 * x1 - c2 * x108 * x1 - cb * x1 - c4) / c3  # (33)
+    dx2 = (ddv - (2.0 * c1 * x1 + 1.8 * c2 * x108 + cb) * dv) / c3  # (31): dp_i/dt the trajectory needs
     w = vh.engine_speed(x1, ratio, c)
     dw = vh.engine_speed(dv, ratio, c)
+    if extended and rules.clutch_engaged(w, c):  # the accessories' torque on top (realistic car)
+        tpp = en.torque_per_pressure(w, c)
+        x2 += en.accessory_torque(w, c) / tpp
+        dx2 += en.accessory_torque_rate(w, dw, c) / tpp
     u = en.throttle_for_pressure_rate(x2, dx2, w, c)  # (30),(32)
     t_cr = en.crank_torque(x2, w, c)
     if not extended:
-        return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving
+        return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, True
     if rules.clutch_engaged(w, c):
         p_closed, _ = en.steady_pressure(c.min_throttle_area, w, c)
         t_closed = en.crank_torque(p_closed, w, c)
         if t_cr < t_closed:  # beyond engine braking: the engine on the closed-throttle line, brakes the rest
+            if c.fuel_cutoff_speed > 0.0 and w >= c.fuel_cutoff_speed:
+                t_motor = en.motoring_torque(p_closed, w, c)
+                if t_cr <= t_motor:  # overrun: fuel cut (vpsim.model.rules.operating_point)
+                    brake = rules.brake_force(t_cr, t_motor, ratio, c)
+                    return (
+                        p_closed,
+                        c.min_throttle_area,
+                        w,
+                        dw,
+                        w,
+                        t_motor,
+                        brake,
+                        rules.CLUTCH_ENGAGED,
+                        moving,
+                        False,
+                    )
             brake = rules.brake_force(t_cr, t_closed, ratio, c)
-            return p_closed, c.min_throttle_area, w, dw, w, t_closed, brake, rules.CLUTCH_ENGAGED, moving
-        return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving
+            return (
+                p_closed,
+                c.min_throttle_area,
+                w,
+                dw,
+                w,
+                t_closed,
+                brake,
+                rules.CLUTCH_ENGAGED,
+                moving,
+                True,
+            )
+        return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, True
     # below idle speed: the clutch slips (engine at idle passes the wheel torque) or the engine idles
     force = vh.wheel_force(x1, dv, c)
     traction = force > 0.0
-    t_c = vh.wheel_to_engine_torque(force, ratio, c) if traction else 0.0
+    t_c = (
+        vh.wheel_to_engine_torque(force, ratio, c) + en.accessory_torque(c.idle_speed, c) if traction else 0.0
+    )
     w_idle = c.idle_speed
     p = en.intake_pressure_for_torque(t_c, w_idle, c)
     dp = 0.0
@@ -293,7 +328,7 @@ def invert_point(v, dv, ddv, ratio, coef, extended, c):
         dp = dt_c / en.torque_per_pressure(w_idle, c)
     u_idle = en.throttle_for_pressure_rate(p, dp, w_idle, c)
     brake = -force if force < 0.0 else 0.0
-    return p, u_idle, w_idle, 0.0, w, t_c, brake, rules.CLUTCH_SLIPPING, moving
+    return p, u_idle, w_idle, 0.0, w, t_c, brake, rules.CLUTCH_SLIPPING, moving, True
 
 
 @kernel
@@ -304,7 +339,7 @@ def invert_points(v, dv, ddv, gear, ratios, coef, extended, c, rows):
             return False
     for k in range(v.size):
         g = gear[k] - 1
-        p, u, w_e, dw_e, w, t_cr, brake, clutch, moving = invert_point(
+        p, u, w_e, dw_e, w, t_cr, brake, clutch, moving, fired = invert_point(
             v[k], dv[k], ddv[k], ratios[g], coef[g], extended, c
         )
         rows[R_P, k] = p
@@ -313,10 +348,11 @@ def invert_points(v, dv, ddv, gear, ratios, coef, extended, c, rows):
         rows[R_DWENG, k] = dw_e
         rows[R_W, k] = w
         rows[R_TCR, k] = t_cr
-        rows[R_MDOT, k] = en.fuel_flow(p, w_e, c)
+        rows[R_MDOT, k] = en.fuel_flow(p, w_e, c) if fired else 0.0
         rows[R_BRAKE, k] = brake
         rows[R_CLUTCH, k] = clutch
         rows[R_MOVING, k] = 1.0 if moving else 0.0
+        rows[R_FIRED, k] = 1.0 if fired else 0.0
     return True
 
 
@@ -329,9 +365,12 @@ def gear_coefficients(params) -> np.ndarray:
 def _gear_coefficients(params) -> np.ndarray:
     c = record(params)
     r = total_ratios(params.transmission)
-    coef = np.empty((r.size, 5))
+    coef = np.empty((r.size, 6))
     coef[:, :4] = np.column_stack(np.broadcast_arrays(*vh.statespace_coefficients(r, c)[:4]))
-    coef[:, 4] = c.rolling_force / vh.equivalent_mass(r, c)
+    m_eq = vh.equivalent_mass(r, c)
+    coef[:, 4] = c.rolling_force / m_eq
+    # the part of the road load linear in v (a coast-down B), not in the paper's affine form (21)
+    coef[:, 5] = -(vh.rolling_force(1.0, c) - vh.rolling_force(1e-300, c)) / m_eq
     coef.flags.writeable = False
     return coef
 
@@ -343,8 +382,7 @@ def invert(v, dv, ddv, gear, params, mode: str = "paper") -> dict[str, np.ndarra
     crank torque, fuel flow, brake force, clutch state and the moving flag. ``mode`` as in the module
     docstring.
     """
-    if mode not in ("paper", "extended"):
-        raise VpsimError(f"unknown mode {mode!r}; expected paper or extended")
+    mode = rules.canonical_mode(mode)
     v, dv, ddv = (np.ascontiguousarray(x, dtype=float) for x in (v, dv, ddv))
     gear = np.ascontiguousarray(gear, dtype=np.int64)
     rows = np.empty((N_ROWS, v.size))
@@ -355,7 +393,7 @@ def invert(v, dv, ddv, gear, params, mode: str = "paper") -> dict[str, np.ndarra
         gear,
         total_ratios(params.transmission),
         gear_coefficients(params),
-        mode == "extended",
+        mode == "realistic",
         record(params),
         rows,
     )
@@ -378,7 +416,7 @@ N_ACC = _A_FUEL + 12
 
 
 @kernel
-def account(v, dv, vc, rows, left, right, dt, c, band, weight, acc, extra):
+def account(v, dv, vc, rows, left, right, dt, c, realistic, band, weight, acc, extra):
     """Fuel, distance, energy terms (trapezoid), infeasible and standstill seconds and the tracking figures
     of the grid's points in one pass; ``extra`` (3 x n samples): engine torque (1), throttle area (u_d
     clipped to [A_min, A_max]) and the fuel flow booked (idle floor) at the first points.
@@ -407,7 +445,8 @@ def account(v, dv, vc, rows, left, right, dt, c, band, weight, acc, extra):
         mdot = rows[R_MDOT, k]
         brake = rows[R_BRAKE, k]
         moving = rows[R_MOVING, k] != 0.0
-        used = rules.fuel_with_idle_floor(mdot, c)
+        fired = rows[R_FIRED, k] != 0.0
+        used = rules.fuel_with_idle_floor(mdot, c) if fired else 0.0
         pw = rules.powers(
             rows[R_P, k],
             rows[R_WENG, k],
@@ -419,6 +458,8 @@ def account(v, dv, vc, rows, left, right, dt, c, band, weight, acc, extra):
             dv[k],
             brake,
             clutch,
+            fired,
+            rules.accessories_torque(rows[R_WENG, k], realistic, c),
             c,
         )
         acc[0] += wk * pw[0]
@@ -432,6 +473,7 @@ def account(v, dv, vc, rows, left, right, dt, c, band, weight, acc, extra):
         acc[8] += wk * pw[8]
         acc[9] += wk * pw[9]
         acc[10] += wk * pw[10]
+        acc[11] += wk * pw[11]
         acc[_A_FUEL] += wk * used
         acc[_A_DIST] += wk * x
         u = rows[R_U, k]
@@ -479,8 +521,7 @@ def run(
     keep_series: bool = True,
 ) -> Result:
     """Run the IDM on ``cycle`` with the smoothing driver ``driver`` (half-width ``a`` overrides it)."""
-    if mode not in ("paper", "extended"):
-        raise VpsimError(f"unknown mode {mode!r}; expected paper or extended")
+    mode = rules.canonical_mode(mode)
     driver = str(driver)
     a = params.driver(driver).inverse_a if a is None else float(a)
     if not (math.isfinite(a) and a > 0.0):
@@ -492,7 +533,7 @@ def run(
     c = record(params)
     ratios = total_ratios(params.transmission)
     coef = gear_coefficients(params)
-    extended = mode == "extended"
+    extended = mode == "realistic"
     n_s = cycle.time_s.size
 
     def passes(time_s, speed, keep):
@@ -514,7 +555,7 @@ def run(
             raise VpsimError(f"gear numbers must be 1..{params.transmission.n_gears}")
         acc = np.empty(N_ACC)
         extra = np.empty((3, time_s.size if keep else 0))
-        account(v, dv, v_c, rows, left, right, dt, c, BAND_KMH / 3.6, np.empty(t.size), acc, extra)
+        account(v, dv, v_c, rows, left, right, dt, c, extended, BAND_KMH / 3.6, np.empty(t.size), acc, extra)
         return t, v, dv, ddv, gear_s, v_c, rows, acc, extra
 
     if not (invert_points.overloads and account.overloads):  # compile (or load) outside the timing
@@ -599,4 +640,5 @@ def run(
         energy=energy,
         vehicle=params.name,
         notes=tuple(notes),
+        limits=limits_of(params),
     )

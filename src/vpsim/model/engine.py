@@ -147,15 +147,35 @@ def bmep_from_pressure(p_i, w_e, c):
 
 
 @equation
+def fmep_at_bmep(bmep, w_e, c):
+    """Friction mean effective pressure FMEP (5) at a given BMEP: Soltic's law with the factor xi_aux."""
+    return speed_friction(w_e, c) + c.friction_factor * 0.0215 * bmep
+
+
+@equation
 def fmep(p_i, w_e, c):
-    """Friction mean effective pressure FMEP (5), Soltic's law with the auxiliary factor xi_aux."""
-    return speed_friction(w_e, c) + c.friction_factor * 0.0215 * bmep_from_pressure(p_i, w_e, c)
+    """FMEP (5) of the fired engine at (p_i, w_e)."""
+    return fmep_at_bmep(bmep_from_pressure(p_i, w_e, c), w_e, c)
 
 
 @equation
 def crank_torque(p_i, w_e, c):
     """T_cr = BMEP V_d / (2 pi n_r)   (2),(3)."""
     return bmep_from_pressure(p_i, w_e, c) * c.mep_to_torque
+
+
+@equation
+def motoring_torque(p_i, w_e, c):
+    """Crank torque with the fuel cut (IMEP = 0): the engine turned by the wheels brakes with its friction
+    and pumping, (2)-(6) without (4)."""
+    return crank_torque(p_i, w_e, c) - imep(p_i, c) / c.one_plus_kf * c.mep_to_torque
+
+
+@equation
+def accessory_torque(w_e, c):
+    """Torque the accessories (alternator, pumps) take from the crankshaft: their power over the engine
+    speed, the speed taken no lower than idle (a running engine)."""
+    return c.accessory_power / (w_e if w_e > c.idle_speed else c.idle_speed)
 
 
 @equation
@@ -404,3 +424,11 @@ def manifold_pressure_rate_array(p_i, a_eff, w_e, c):
     jac = np.empty(p.size)
     _rate_loop(p, a, w, recs, out, jac)
     return out.reshape(shape), jac.reshape(shape)
+
+
+@equation
+def accessory_torque_rate(w_e, dw_e, c):
+    """d/dt of :func:`accessory_torque` along dw_e/dt (constant power: -P / w_e^2 dw_e/dt above idle)."""
+    if w_e > c.idle_speed:
+        return -c.accessory_power / (w_e * w_e) * dw_e
+    return 0.0

@@ -30,6 +30,9 @@ _PARAMETER_FIELDS = {
         "air_density",
         "gravity",
         "wheel_radius",
+        "road_load_a",
+        "road_load_b",
+        "road_load_c",
     ),
     "transmission": ("efficiency", "final_drive"),
     "engine": (
@@ -55,8 +58,9 @@ _PARAMETER_FIELDS = {
         "boost_layout",
         "max_throttle_area",
         "min_throttle_area",
+        "accessory_power",
     ),
-    "simulation": ("idle_fuel_flow", "fuel_density"),
+    "simulation": ("idle_fuel_flow", "fuel_density", "fuel_cutoff_speed"),
 }
 # model constants that are not (yet) parameters, and values derived from the parameters by the model
 MODEL_FIELDS = ("idle_speed",)
@@ -72,8 +76,8 @@ DERIVED_FIELDS = (
     "sqrt_rt_ambient",  # sqrt(R T_a) of (10)
     "critical_ratio",  # p_r* of (11)
     "psi_choked",  # Psi in the choked region (12)
-    "rolling_force",  # m g c_r of (18)
-    "aero_coefficient",  # 1/2 c_d rho A of (18)
+    "rolling_force",  # m g c_r of (18), or the coast-down A
+    "aero_coefficient",  # 1/2 c_d rho A of (18), or the coast-down C
 )
 FIELDS = tuple(f for fs in _PARAMETER_FIELDS.values() for f in fs) + (
     "map_speed_low",
@@ -167,16 +171,25 @@ def record(params):
     return memo(params, "record_0", lambda p: record_array(p)[0])
 
 
-def engine_record(engine, vehicle=None, transmission=None, simulation=None):
-    """The record of an engine alone (for maps): the other sections default to the baseline preset's."""
-    if vehicle is None or transmission is None or simulation is None:
-        from ..params import load_parameters
+def engine_record(engine):
+    """The record of an engine alone (maps, checks of an engine): the other sections are neutral values the
+    engine's equations never read."""
+    from ..params import Simulation, Transmission, Vehicle
 
-        base = load_parameters("hofman2011")
-        vehicle = vehicle or base.vehicle
-        transmission = transmission or base.transmission
-        simulation = simulation or base.simulation
-    return _record_of(vehicle, transmission, engine, simulation)[0]
+    neutral = (
+        Vehicle(
+            mass=1.0,
+            frontal_area=1.0,
+            drag_coefficient=0.0,
+            rolling_resistance=0.0,
+            air_density=1.2,
+            gravity=9.81,
+            wheel_radius=0.3,
+        ),
+        Transmission(efficiency=1.0, gearbox_ratios=(1.0,), final_drive=1.0),
+        Simulation(idle_fuel_flow=0.0, fuel_density=0.745, ode_relative_tolerance=1e-3, inverse_max_step=1.0),
+    )
+    return _record_of(neutral[0], neutral[1], engine, neutral[2])[0]
 
 
 def ratios(transmission) -> np.ndarray:

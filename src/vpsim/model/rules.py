@@ -1,7 +1,8 @@
 """The rules of the realistic car (``extended`` mode) and the fuel and energy bookkeeping, written once.
 
 The paper's model is a stiff driveline without brakes; its fuel is the model's flow floored at the idle
-flow (section 5). The ``extended`` mode adds what a real car has, and every method applies the same rules:
+flow (section 5). The ``realistic`` mode (the default; ``extended`` is its earlier name) adds what a real
+car has, and every method applies the same rules:
 
 * **clutch**: below the idle speed (``c.idle_speed``) the engine cannot follow the wheels. With traction
   demanded the clutch slips: the engine is held at idle speed and the clutch passes the engine's torque if it
@@ -21,6 +22,21 @@ from __future__ import annotations
 from . import engine as en
 from . import vehicle as vh
 from .engine import equation
+
+# the two modes every method offers: the realistic car (clutch, idle, brakes) and the paper's model
+MODES = ("realistic", "paper")
+_MODE_ALIASES = {"extended": "realistic"}  # the realistic mode's earlier name
+
+
+def canonical_mode(mode) -> str:
+    """``"realistic"`` or ``"paper"`` for a mode name (``"extended"`` is the realistic mode's earlier name)."""
+    m = _MODE_ALIASES.get(mode, mode)
+    if m not in MODES:
+        from ..errors import VpsimError
+
+        raise VpsimError(f"unknown mode {mode!r}; expected realistic or paper")
+    return m
+
 
 CLUTCH_OPEN, CLUTCH_ENGAGED, CLUTCH_SLIPPING = 0, 1, 2
 
@@ -44,6 +60,13 @@ def slipping_clutch_torque(t_cr):
 
 
 @equation
+def accessories_torque(w_e, realistic, c):
+    """The accessories' torque on the crank: the realistic car's (:func:`vpsim.model.engine.accessory_torque`);
+    the paper's model has none."""
+    return en.accessory_torque(w_e, c) if realistic else 0.0
+
+
+@equation
 def brake_force(t_demand, t_closed, ratio, c):
     """Friction-brake force taking what engine braking cannot: (T_closed - T_demand)+ i eta / r  (15),(16)."""
     excess = t_closed - t_demand
@@ -54,27 +77,45 @@ def brake_force(t_demand, t_closed, ratio, c):
 def operating_point(v, a, ratio, t_closed, extended, c):
     """Engine operating point that speed v and acceleration a impose through gear ratio ``ratio``.
 
-    Paper mode: the stiff driveline (1),(14)-(18). Extended mode: brakes below the closed-throttle torque
-    ``t_closed`` (the FQM at A_min at the wheel-side speed), and the clutch below idle speed.
-    Returns (w_e, dw_e/dt, w_wheel, T_cr demanded, brake force, clutch state, wheel force); the clutch state is
-    CLUTCH_ENGAGED, CLUTCH_SLIPPING or CLUTCH_OPEN.
+    Paper mode: the stiff driveline (1),(14)-(18). Realistic (extended) mode: brakes below the closed-throttle
+    torque ``t_closed`` (the FQM at A_min at the wheel-side speed), the clutch below idle speed, the
+    accessories' torque on the crank, and fuel cut-off in overrun: above ``c.fuel_cutoff_speed`` (if set) a
+    demand at or below the motoring torque (the unfired engine at closed throttle) cuts the fuel; the engine
+    then brakes with its motoring torque and the brakes take the rest.
+    Returns (w_e, dw_e/dt, w_wheel, T_cr demanded, brake force, clutch state, fired, wheel force); the clutch
+    state is CLUTCH_ENGAGED, CLUTCH_SLIPPING or CLUTCH_OPEN.
     """
     f_wheel = vh.wheel_force(v, a, c)  # (18)
     w_wheel = vh.engine_speed(v, ratio, c)  # (14),(17)
     dw = vh.engine_speed(a, ratio, c)
     t_cr = vh.crank_torque_demand(f_wheel, ratio, dw, c)  # (1),(15),(16)
     if not extended:
-        return w_wheel, dw, w_wheel, t_cr, 0.0, CLUTCH_ENGAGED, f_wheel
-    brake = brake_force(t_cr, t_closed, ratio, c)
-    if t_cr < t_closed:
-        t_cr = t_closed
+        return w_wheel, dw, w_wheel, t_cr, 0.0, CLUTCH_ENGAGED, True, f_wheel
     if clutch_engaged(w_wheel, c):
-        return w_wheel, dw, w_wheel, t_cr, brake, CLUTCH_ENGAGED, f_wheel
+        t_cr = t_cr + en.accessory_torque(w_wheel, c)
+        if c.fuel_cutoff_speed > 0.0 and w_wheel >= c.fuel_cutoff_speed and t_cr < t_closed:
+            p_closed = en.intake_pressure_for_torque(t_closed, w_wheel, c)
+            t_motor = en.motoring_torque(p_closed, w_wheel, c)
+            if t_cr <= t_motor:  # overrun: fuel cut, the unfired engine brakes, the brakes the rest
+                return (
+                    w_wheel,
+                    dw,
+                    w_wheel,
+                    t_motor,
+                    brake_force(t_cr, t_motor, ratio, c),
+                    CLUTCH_ENGAGED,
+                    False,
+                    f_wheel,
+                )
+        brake = brake_force(t_cr, t_closed, ratio, c)
+        if t_cr < t_closed:
+            t_cr = t_closed
+        return w_wheel, dw, w_wheel, t_cr, brake, CLUTCH_ENGAGED, True, f_wheel
     if f_wheel > 0.0:  # slipping: the engine at idle passes the wheel torque, its inertia decoupled
-        t_clutch = vh.wheel_to_engine_torque(f_wheel, ratio, c)
-        return c.idle_speed, 0.0, w_wheel, t_clutch, 0.0, CLUTCH_SLIPPING, f_wheel
-    # open: the engine idles, the brakes hold what the road load does not
-    return c.idle_speed, 0.0, w_wheel, 0.0, (-f_wheel if f_wheel < 0.0 else 0.0), CLUTCH_OPEN, f_wheel
+        t_clutch = vh.wheel_to_engine_torque(f_wheel, ratio, c) + en.accessory_torque(c.idle_speed, c)
+        return c.idle_speed, 0.0, w_wheel, t_clutch, 0.0, CLUTCH_SLIPPING, True, f_wheel
+    # open: the engine idles (accessories included in the idle flow), the brakes hold what the road load does not
+    return c.idle_speed, 0.0, w_wheel, 0.0, (-f_wheel if f_wheel < 0.0 else 0.0), CLUTCH_OPEN, True, f_wheel
 
 
 # indices of the energy terms returned by powers(), in EnergyBalance's order
@@ -90,30 +131,35 @@ ENERGY_TERMS = (
     "brake",
     "trace_miss",
     "idle_control",
+    "accessories",
 )
 N_TERMS = len(ENERGY_TERMS)
 
 
 @equation
-def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, c):
+def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired, t_acc, c):
     """Power (W) of every energy term at one instant, in the order of :data:`ENERGY_TERMS`.
 
     ``t_cr`` is the crank torque the engine makes and ``t_missing`` what the demand asked beyond it (trace
-    miss of a quasi-static method; 0 otherwise). With the clutch engaged the gearbox takes the flywheel
-    torque T_e = T_cr + missing - J_e dw_e (1) at w_e; while it slips, the clutch torque (the engine's, if
-    positive) at the wheel-side speed, and the slip dissipates T_clutch (w_e - w_wheel); an idealised idle
-    governor supplies what a negative crank torque of the declutched engine would take (``idle_control``).
-    With the clutch open (quasi-static methods at rest) the idling engine is outside the balance.
+    miss of a quasi-static method; 0 otherwise). The accessories take their torque from the crank; with the
+    clutch engaged the gearbox takes the rest of the flywheel torque T_e = T_cr + missing - J_e dw_e - T_acc
+    (1) at w_e; while it slips, the clutch torque (the engine's, if positive) at the wheel-side speed, and
+    the slip dissipates T_clutch (w_e - w_wheel); an idealised idle governor supplies what a negative crank
+    torque of the declutched engine would take (``idle_control``). With the clutch open (quasi-static methods
+    at rest) the idling engine is outside the balance. ``fired`` False: fuel cut, no indicated work.
+    ``t_acc``: the accessories' torque (:func:`accessories_torque`).
     """
     vv = v if v > 0.0 else 0.0
     road = (c.mass * vv * a, vh.aero_force(vv, c) * vv, vh.rolling_force(vv, c) * vv, brake * vv)
     if clutch == CLUTCH_OPEN:
-        return (0.0, 0.0, 0.0, 0.0, 0.0, road[0], road[1], road[2], road[3], 0.0, 0.0)
+        return (0.0, 0.0, 0.0, 0.0, 0.0, road[0], road[1], road[2], road[3], 0.0, 0.0, 0.0)
     cyc = en.cycles_per_second(w_e, c) * c.displacement  # MEP x this = power
-    indicated = en.fuel_flow(p_i, w_e, c) * c.fuel_heating_value * c.thermal_efficiency
-    friction = en.fmep(p_i, w_e, c) * cyc
+    indicated = en.fuel_flow(p_i, w_e, c) * c.fuel_heating_value * c.thermal_efficiency if fired else 0.0
+    friction = (
+        en.fmep_at_bmep(t_cr / c.mep_to_torque, w_e, c) * cyc
+    )  # (5) at the engine's BMEP (fired or not)
     pumping = en.pmep(p_i, c) * cyc
-    t_asked = t_cr + t_missing
+    t_asked = t_cr + t_missing - t_acc
     if clutch == CLUTCH_ENGAGED:
         engine_kinetic = c.inertia * w_e * dw_e
         driveline = (1.0 - c.efficiency) * (t_asked - c.inertia * dw_e) * w_e  # (1),(15)
@@ -135,4 +181,5 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, c):
         road[3],
         t_missing * w_e,
         idle,
+        t_acc * w_e,
     )

@@ -7,20 +7,26 @@ drive) of the engaged gear.
 
 from __future__ import annotations
 
+import numpy as np
+
 from . import engine as en
 from .engine import equation
 
 
-@equation
+def coastdown(c):
+    """Whether the road load is given as coast-down coefficients F = A + B v + C v^2 (any of them set)."""
+    return (c.road_load_a != 0.0) | (c.road_load_b != 0.0) | (c.road_load_c != 0.0)
+
+
 def aero_coefficient(c):
-    """1/2 c_d rho A_f of the aerodynamic drag in (18)."""
-    return 0.5 * c.drag_coefficient * c.air_density * c.frontal_area
+    """1/2 c_d rho A_f of the aerodynamic drag in (18); with a coast-down road load its C.
+    (Evaluated once per parameter set, by vpsim.model.record.)"""
+    return np.where(coastdown(c), c.road_load_c, 0.5 * c.drag_coefficient * c.air_density * c.frontal_area)
 
 
-@equation
 def rolling_force_moving(c):
-    """m g c_r of (18), while the vehicle moves."""
-    return c.mass * c.gravity * c.rolling_resistance
+    """m g c_r of (18), while the vehicle moves; with a coast-down road load its A."""
+    return np.where(coastdown(c), c.road_load_a, c.mass * c.gravity * c.rolling_resistance)
 
 
 @equation
@@ -31,8 +37,9 @@ def aero_force(v, c):
 
 @equation
 def rolling_force(v, c):
-    """m g c_r while moving (v > 0); at rest rolling resistance is static friction and pushes nothing."""
-    return c.rolling_force * (v > 0.0)
+    """m g c_r while moving (v > 0) (with a coast-down road load A + B v); at rest rolling resistance is
+    static friction and pushes nothing."""
+    return (c.rolling_force + c.road_load_b * v) * (v > 0.0)
 
 
 @equation
