@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ParameterError
+from .textio import read_text
 from .units import FIELD_DIMENSIONS, to_si
 
 PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l")
@@ -517,52 +518,6 @@ def _preset(name: str) -> Parameters:
     data = tomllib.loads(text)
     data.setdefault("name", name)
     return _from_mapping(data, f"preset {name}", _preset(data["base"]) if data.get("base") else None)
-
-
-MAX_TOML_BYTES = 16 * 1024 * 1024  # a parameter file or sweep spec larger than this is refused
-
-
-def read_text(path: Path, error: type[Exception], *, limit: int = MAX_TOML_BYTES, what: str = "file") -> str:
-    """The text of a UTF-8 file (with or without BOM; CRLF/CR newlines become LF); one-line ``error``
-    when it is missing, a folder, a symlink loop, unreadable, too large, binary or not UTF-8."""
-    import errno
-
-    path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            raw = fh.read(limit + 1)
-    except FileNotFoundError:
-        if path.is_symlink():
-            raise error(f"{path}: dangling symbolic link (its target does not exist)") from None
-        raise error(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise error(f"{path}: is a folder, expected a {what}") from None
-    except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise error(f"{path}: symbolic link loop (too many levels of symbolic links)") from None
-        raise error(f"{path}: cannot read ({exc.strerror or exc})") from None
-    if len(raw) > limit:
-        raise error(f"{path}: file is larger than the {limit}-byte limit for a {what}")
-    return decode_text(raw, path, error)
-
-
-def decode_text(raw: bytes, where: Any, error: type[Exception]) -> str:
-    """``raw`` decoded as UTF-8 (a BOM is dropped), newlines normalised; one-line ``error`` otherwise."""
-    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
-        raise error(f"{where}: the file is UTF-16 text; save it as UTF-8")
-    nul = raw.find(b"\x00")
-    if nul >= 0:
-        line = raw.count(b"\n", 0, nul) + 1
-        raise error(f"{where}:{line}: NUL byte: a binary file, expected UTF-8 text")
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = raw.count(b"\n", 0, exc.start) + 1
-        raise error(
-            f"{where}:{line}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start}); "
-            "save the file as UTF-8"
-        ) from None
-    return text.replace("\r\n", "\n").replace("\r", "\n")
 
 
 def read_toml(path: Path, error: type[Exception]) -> dict[str, Any]:

@@ -2,13 +2,32 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
 
 from ..errors import VpsimError
+from ._output import dumps, number
 from .main import cli
+
+
+def _ok(text: str) -> bool:
+    return not text.startswith("undefined")
+
+
+def _out_dir(out: str) -> Path:
+    """The --out folder, created; one line when it cannot be (a file there, no permission)."""
+    path = Path(out)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / ".vpsim-write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except FileExistsError:
+        raise VpsimError(f"--out {out}: a file is in the way, expected a folder") from None
+    except OSError as exc:
+        raise VpsimError(f"--out {out}: cannot write there ({exc.strerror or exc})") from None
+    return path
 
 
 @cli.command()
@@ -62,6 +81,8 @@ from .main import cli
 def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, out):
     """Simulate a vehicle on a drive cycle and report its fuel consumption."""
     from ..cycles import load_cycle
+    from ..gears import load_schedule
+    from ..params import load_parameters
     from ..simulation import simulate as run
 
     if driver is not None and method == "backward":
@@ -69,13 +90,17 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
             "--driver applies to --method forward or inverse; the backward method tracks exactly"
         )
     cyc = load_cycle(cycle, speed_unit=speed_unit)
-    result = run(cyc, method=method, params=vehicle, driver=driver, mode=mode, gears=gears)
+    params = load_parameters(vehicle)
+    schedule = None
+    if gears is not None:  # read here so that gear times are checked against the cycle
+        schedule = load_schedule(gears, params.transmission.n_gears, cycle=cyc)
+    if out:
+        path = _out_dir(out)
+    result = run(cyc, method=method, params=params, driver=driver, mode=mode, gears=schedule)
     summary = result.summary()
     if out:
-        path = Path(out)
-        path.mkdir(parents=True, exist_ok=True)
         result.to_dataframe().to_csv(path / "timeseries.csv", index=False)
-        (path / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        (path / "summary.json").write_text(dumps(summary, indent=2) + "\n")
         import matplotlib
 
         matplotlib.use("Agg")
@@ -85,21 +110,21 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         fig.savefig(path / "timeseries.png", dpi=110)
         plt.close(fig)
     if as_json:
-        click.echo(json.dumps(summary))
+        click.echo(dumps(summary))
         return
     click.echo(
         f"{method} on {result.cycle} ({mode} mode, vehicle {result.vehicle}"
         f"{'' if result.driver is None else ', driver ' + result.driver})"
     )
-    click.echo(f"  fuel consumption  {result.fuel_l_per_100km:8.3f} L/100 km")
-    click.echo(f"  fuel              {result.fuel_kg * 1e3:8.1f} g")
-    click.echo(f"  distance          {result.distance_km:8.3f} km")
+    lp100 = number(summary["fuel_l_per_100km"], "8.3f", "fuel_l_per_100km")
+    click.echo(f"  fuel consumption  {lp100}{' L/100 km' if _ok(lp100) else ''}")
+    click.echo(f"  fuel              {number(result.fuel_kg * 1e3, '8.1f', 'fuel_kg')} g")
+    click.echo(f"  distance          {number(result.distance_km, '8.3f', 'distance_km')} km")
     click.echo(f"  CPU time          {result.cpu_time_s * 1e3:8.2f} ms ({result.steps} steps)")
     click.echo(f"  trace miss        {result.trace_miss}")
     if result.energy is not None:
-        click.echo(
-            f"  energy balance    residual {result.energy.relative_residual:.1e} of the indicated work"
-        )
+        res = number(summary["energy_relative_residual"], ".1e", "energy_relative_residual")
+        click.echo(f"  energy balance    residual {res}{' of the indicated work' if _ok(res) else ''}")
     for note in result.notes:
         click.echo(f"  note: {note}")
     if out:
