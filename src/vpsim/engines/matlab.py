@@ -1691,8 +1691,10 @@ def read_m_file(path: str | Path) -> dict[str, MValue]:
     if nul >= 0:
         line = raw.count(b"\n", 0, nul) + 1
         raise EngineFileError(f"{p}:{line}: NUL byte: this is a binary file, not a MATLAB text file")
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise EngineFileError(f"{p}:1: not a text file in UTF-8 (UTF-16 byte-order mark); save it as UTF-8")
     try:
-        text = raw.decode("utf-8")
+        text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         text = raw.decode("latin-1")  # old ADVISOR files are ISO-8859-1; only comments hold such bytes
     return evaluate_m_text(text, str(p))
