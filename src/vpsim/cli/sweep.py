@@ -160,6 +160,11 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
         )
         raise
     bar.close()
+    if run.damaged:
+        click.echo(
+            f"found {len(run.damaged)} damaged result part(s) in {out} and computed their rows again: "
+            f"{run.damaged[0]}" + (f" (and {len(run.damaged) - 1} more)" if len(run.damaged) > 1 else "")
+        )
     click.echo(
         f"{run.n_rows} rows: {run.n_computed} computed now, {run.n_skipped} already present, "
         f"{run.n_failed} failed (see the error column); {run.elapsed_s:.1f} s"

@@ -559,6 +559,8 @@ class SweepRun:
     # chunks lost to the infrastructure (a worker that kept dying): not stored, --resume retries them
     chunk_errors: list[str] = field(default_factory=list)
     n_chunks: int = 0  # chunks this run sent out
+    # damaged result parts/blocks found when resuming (one line each); their rows were computed again
+    damaged: list[str] = field(default_factory=list)
 
 
 def run_sweep(
@@ -654,6 +656,7 @@ def run_sweep(
         store.path,
         chunk_errors,
         n_chunks,
+        list(getattr(store, "damaged", [])),
     )
 
 
