@@ -540,6 +540,10 @@ def load_parameters(source: str | Path = "hofman2011") -> Parameters:
     """
     if isinstance(source, str) and source in PRESETS:
         return _preset(source)
+    if not str(source).strip():
+        raise ParameterError(
+            f"empty parameter set name; available presets: {', '.join(PRESETS)} (or a .toml file)"
+        )
     path = Path(source)
     if not path.suffix and not path.exists():
         raise ParameterError(

@@ -9,7 +9,9 @@ from pathlib import Path
 import click
 
 from ..errors import VpsimError
+from ._output import number
 from .main import cli
+from .simulate import _out_dir
 
 
 @cli.command()
@@ -39,6 +41,7 @@ def paper(out, vehicle, advisor_dir, repeats):
         _scaling_function()  # fail before the long run if engine scaling is missing
         if not Path(advisor_dir).is_dir():
             raise VpsimError(f"--advisor-dir {advisor_dir}: no such folder")
+    _out_dir(out)  # fail before the long run if --out cannot be written
     start = time.perf_counter()
     with click.progressbar(length=1, label="vpsim paper", file=sys.stderr, show_pos=True) as bar:
         state = {"done": 0}
@@ -53,7 +56,8 @@ def paper(out, vehicle, advisor_dir, repeats):
     for row in result.table2:
         click.echo(
             f"  {row['method']:<9} driver {row['driver']:<4} {row['cycle']:<6} "
-            f"{row['fuel_l_per_100km']:8.3f} L/100 km  {row['diff_vs_bqm_pct']:+7.2f} %"
+            f"{number(row['fuel_l_per_100km'], '8.3f', 'fuel_l_per_100km')} L/100 km  "
+            f"{number(row['diff_vs_bqm_pct'], '+7.2f', 'diff_vs_bqm_pct')} %"
         )
     click.echo(
         f"wrote {len(result.files)} files into {out} in {time.perf_counter() - start:.1f} s (see report.md)"

@@ -20,6 +20,19 @@ def _names(text: str, what: str) -> list[str]:
     return names
 
 
+def _check_cycles(names: list[str], what: str) -> None:
+    """Each cycle loads and drives some distance (fuel per distance is undefined otherwise)."""
+    from ..cycles import load_cycle
+
+    for name in names:
+        cyc = load_cycle(name)
+        if not cyc.distance_m > 0:
+            raise VpsimError(
+                f"{what}: cycle {name} drives no distance, so its fuel per 100 km is undefined; "
+                "give a cycle that moves"
+            )
+
+
 @cli.command()
 @click.option(
     "--measured",
@@ -90,6 +103,9 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
 
     cycle_names = _names(cycles, "--cycles")
     cal_cycles = _names(calibration_cycles, "--calibration-cycles")
+    _check_cycles(cycle_names, "--cycles")
+    if calibrate:
+        _check_cycles(cal_cycles, "--calibration-cycles")
     eng = load_engine(measured)
     base = load_parameters(vehicle)
     eng.check_gasoline(base.simulation.fuel_density)  # litres of gasoline only compare with gasoline

@@ -162,6 +162,8 @@ def load_cycle(name_or_path: str | Path, *, speed_unit: str | None = None) -> Cy
             cyc.speed_mps,
             source=f"vpsim standard cycle {name} (see cycles/data/SOURCES.md)",
         )
+    if not str(name_or_path).strip():
+        raise CycleError(f"empty cycle name; standard cycles: {', '.join(STANDARD_CYCLES)} (or a CSV file)")
     path = Path(name_or_path)
     if not path.exists() and not path.is_symlink() and path.suffix == "":
         raise CycleError(
