@@ -280,8 +280,7 @@ def _convert(key: str, value: Any, unit: Any, where: str) -> Any:
         if isinstance(value, tuple):
             return tuple(to_si(v, unit, dim) for v in value)
         if isinstance(value, int) and not isinstance(value, bool):
-            to_si(1.0, unit, dim)  # counts: only dimensionless units, value unchanged
-            if to_si(1.0, unit, dim) != 1.0:
+            if to_si(1.0, unit, dim) != 1.0:  # counts take only dimensionless units
                 raise ValueError(f"unit {unit!r} cannot scale a whole number")
             return value
         return to_si(value, unit, dim)
