@@ -230,8 +230,20 @@ class ResultStore:
 
     def open(self, *, resume: bool, meta: dict) -> None:
         """Create or reopen the folder; take the writer's lock; on resume check it is the same sweep."""
-        self.dir.mkdir(parents=True, exist_ok=True)
+        try:
+            self.dir.mkdir(parents=True, exist_ok=True)
+        except FileExistsError:
+            raise SpecError(f"{self.dir}: a file is in the way, expected the output folder") from None
+        except OSError as exc:
+            raise SpecError(f"{self.dir}: cannot create the output folder ({exc.strerror or exc})") from None
         self._lock()
+        try:
+            self._open_locked(resume, meta)
+        except BaseException:
+            self.close()
+            raise
+
+    def _open_locked(self, resume: bool, meta: dict) -> None:
         meta_path = self.dir / META_NAME
         if self.exists():
             if not resume:
