@@ -26,7 +26,8 @@ SPEC_CASES = [
         "list of gear",
     ),
     (
-        '[parameters]\n"engine.bore" = { range = [0.08, 0.09], n = 3000 }\n"vehicle.mass" = { range = [1000, 2000], n = 3000 }\n',
+        '[parameters]\n"engine.bore" = { range = [0.08, 0.09], n = 3000 }\n'
+        '"vehicle.mass" = { range = [1000, 2000], n = 3000 }\n',
         "more than the limit",
     ),
     ('sampling = "lhs"\nsamples = 0\n', "samples = 0"),

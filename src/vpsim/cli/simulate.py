@@ -98,6 +98,8 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         path = _out_dir(out)
     result = run(cyc, method=method, params=params, driver=driver, mode=mode, gears=schedule)
     summary = result.summary()
+    if not cyc.distance_m > 0:  # the cycle asks for no distance: a method's creep is no basis for L/100 km
+        summary["fuel_l_per_100km"] = float("nan")
     if out:
         result.to_dataframe().to_csv(path / "timeseries.csv", index=False)
         (path / "summary.json").write_text(dumps(summary, indent=2) + "\n")

@@ -14,8 +14,9 @@ from .main import cli
 class _Progress:
     """A one-line progress bar on stderr with rate and ETA (a line every few seconds when not a terminal)."""
 
-    def __init__(self, enabled: bool = True, width: int = 28):
+    def __init__(self, enabled: bool = True, width: int = 28, banner: str = ""):
         self.enabled = enabled
+        self.banner = banner  # printed when the work starts, so that an error before it stays one line
         self.width = width
         self.tty = sys.stderr.isatty()
         self.t0 = None
@@ -23,6 +24,9 @@ class _Progress:
         self.total = 0
 
     def __call__(self, done: int, total: int) -> None:
+        if self.enabled and self.banner:
+            click.echo(self.banner, err=True)
+            self.banner = ""
         if not self.enabled or total == 0:
             return
         self.total = total
@@ -115,8 +119,13 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
         raise VpsimError("--scheduler and --local-cluster exclude each other")
     if workers is not None and (scheduler is not None or local_cluster is not None):
         raise VpsimError("--workers applies to local processes; with a Dask cluster its workers do the work")
+    if workers is not None and workers < 1:
+        raise VpsimError(f"--workers {workers}: give at least 1")
+    if local_cluster is not None and local_cluster < 1:
+        raise VpsimError(f"--local-cluster {local_cluster}: give at least 1")
+    if chunk_size is not None and chunk_size < 1:
+        raise VpsimError(f"--chunk-size {chunk_size}: give at least 1 row")
     sp = load_spec(spec)
-    bar = _Progress(enabled=not quiet)
     where = (
         f"Dask scheduler {scheduler}"
         if scheduler
@@ -132,13 +141,12 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
             )
         )
     )
-    if not quiet:
-        extra = " (resuming)" if resume else ""
-        click.echo(
-            f"sweep {sp.name!r}: {sp.n_designs} design points{' and the baseline' if sp.baseline else ''} "
-            f"x {len(sp.combos)} cycle/method/driver combinations on {where}{extra}",
-            err=True,
-        )
+    extra = " (resuming)" if resume else ""
+    bar = _Progress(
+        enabled=not quiet,
+        banner=f"sweep {sp.name!r}: {sp.n_designs} design points{' and the baseline' if sp.baseline else ''} "
+        f"x {len(sp.combos)} cycle/method/driver combinations on {where}{extra}",
+    )
     try:
         run = run_sweep(
             sp,
