@@ -161,8 +161,8 @@ def load_schedule(path: str | Path, n_gears: int, *, cycle: Cycle | None = None)
 
     path = Path(path)
     text = read_text(path, CycleError, limit=MAX_GEAR_FILE_BYTES, what="gear schedule CSV file")
-    lines = list(_uncommented(io.StringIO(text, newline=None)))
-    reader = csv.reader(lines, delimiter=_sniff_delimiter(lines))
+    delim = _sniff_delimiter(io.StringIO(text))
+    reader = csv.reader(_uncommented(io.StringIO(text)), delimiter=delim)
     times: list[float] = []
     gears: list[int] = []
     header = None

@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+from array import array
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -29,7 +30,7 @@ _ALIASES = {"wltc": "wltc3b", "wltc_class3b": "wltc3b", "ftp": "ftp75", "ftp-75"
 
 _SPEED_UNITS = {"m/s": 1.0, "mps": 1.0, "km/h": 1.0 / 3.6, "kmh": 1.0 / 3.6, "kph": 1.0 / 3.6, "mph": 0.44704}
 _TIME_COLUMNS = ("time_s", "time", "t", "t_s")
-MAX_CYCLE_BYTES = 256 * 1024 * 1024  # a cycle CSV larger than this is refused (days of 10 Hz samples fit)
+MAX_CYCLE_BYTES = 64 * 1024 * 1024  # a cycle CSV larger than this is refused (a month of 1 Hz samples fits)
 MAX_SPEED_MPS = 200.0  # 720 km/h: faster is a unit slip (speed in km/h declared as m/s) or a broken file
 MAX_TIME_S = 1.0e9  # about 32 years: larger times are not a drive cycle
 _DELIMITERS = (",", ";", "\t")
@@ -171,7 +172,7 @@ def load_cycle(name_or_path: str | Path, *, speed_unit: str | None = None) -> Cy
             "(or a CSV file)"
         )
     text = read_text(path, CycleError, limit=MAX_CYCLE_BYTES, what="cycle CSV file")
-    return _read_csv(io.StringIO(text, newline=None), str(path), speed_unit=speed_unit, name=path.stem)
+    return _read_csv(text, str(path), speed_unit=speed_unit, name=path.stem)
 
 
 def _uncommented(fh):
@@ -180,7 +181,7 @@ def _uncommented(fh):
         yield "\n" if line.lstrip().startswith("#") else line
 
 
-def _sniff_delimiter(lines: list[str]) -> str:
+def _sniff_delimiter(lines) -> str:
     """The delimiter of the first non-comment line: ``,``, else ``;`` or tab if that line holds one."""
     for line in lines:
         if line.strip() and not line.lstrip().startswith("#"):
@@ -206,13 +207,13 @@ def _clip(text: str, limit: int = 40) -> str:
 def _read_csv(fh, where: str, *, speed_unit: str | None, name: str) -> Cycle:
     if speed_unit is not None and speed_unit not in _SPEED_UNITS:
         raise CycleError(f"speed unit {speed_unit!r} is not one of {', '.join(_SPEED_UNITS)}")
-    lines = list(_uncommented(fh))
-    delim = _sniff_delimiter(lines)
+    text = fh if isinstance(fh, str) else fh.read()
+    delim = _sniff_delimiter(io.StringIO(text))
     decimal_comma = delim == ";"  # "1,5" is 1.5 in a semicolon-separated file (European spreadsheets)
-    reader = csv.reader(lines, delimiter=delim)
+    reader = csv.reader(_uncommented(io.StringIO(text)), delimiter=delim)  # streamed: no list of lines
     header = None
-    times: list[float] = []
-    speeds: list[float] = []
+    times = array("d")
+    speeds = array("d")
     t_col = v_col = -1
     scale = 1.0
     rows = iter(reader)
@@ -299,7 +300,7 @@ def _read_csv(fh, where: str, *, speed_unit: str | None, name: str) -> Cycle:
         raise CycleError(
             f"{where}:{last}: {len(times)} sample(s) at the end of the file, a cycle needs at least two"
         )
-    return Cycle(name, np.array(times), np.array(speeds), source=where)
+    return Cycle(name, np.frombuffer(times, dtype=float), np.frombuffer(speeds, dtype=float), source=where)
 
 
 def _check_header(header: list[str], where: str, lineno: int) -> None:
