@@ -413,7 +413,8 @@ def _check_engine(eng: Engine, where: str) -> None:
             f"{where}: the engine cannot idle: zero torque at {IDLE_CHECK_SPEED:g} rad/s needs an intake "
             f"pressure of {p_idle:.4g} Pa with ambient {pa:.4g} Pa (engine.air_charge_slope "
             f"{eng.air_charge_slope:g}, air_charge_intercept {eng.air_charge_intercept:g} Pa, "
-            f"exhaust_pressure {eng.exhaust_pressure:.4g} Pa); the throttle cannot let that much air in"
+            f"exhaust_pressure {eng.exhaust_pressure:.4g} Pa), which the throttle cannot hold between 0 and "
+            "the ambient pressure"
         )
 
 

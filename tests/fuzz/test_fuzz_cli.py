@@ -285,3 +285,24 @@ def test_broken_stdout_pipe_is_not_a_traceback(tmp_path):
         timeout=120,
     )
     assert "Traceback" not in p.stderr
+
+
+def test_python_warnings_are_one_line(capsys, monkeypatch, tmp_path):
+    import warnings
+
+    from vpsim.cli import simulate as sim
+
+    real = sim._out_dir
+
+    def warn_then_create(out):
+        warnings.warn("overflow encountered in multiply", RuntimeWarning, stacklevel=1)
+        return real(out)
+
+    monkeypatch.setattr(sim, "_out_dir", warn_then_create)
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")
+        code = cli_main.main(["simulate", "--out", str(tmp_path / "o"), "--cycle", "nedc"])
+    out, err = capsys.readouterr()
+    assert code == 0
+    assert err.count("\n") == 1
+    assert err.startswith("vpsim: warning: RuntimeWarning: overflow encountered in multiply (test_fuzz_cli")

@@ -6,6 +6,7 @@ wires them and turns every exception into one line on stderr:
 * :class:`~vpsim.errors.VpsimError` (bad input, infeasible request), a usage error of the command line, an
   operating-system error (unwritable ``--out``, disk full): ``vpsim: error: ...``, exit status 2;
 * Ctrl-C: ``vpsim: interrupted``, exit status 130;
+* a Python warning (a numerical one from the model, say): ``vpsim: warning: ...`` on one line;
 * anything else is a bug of vpsim: ``vpsim: internal error: <type>: <message> (please report; ...)``, exit
   status 3. With the environment variable ``VPSIM_DEBUG=1`` the traceback is printed as well.
 """
@@ -16,6 +17,8 @@ import importlib
 import importlib.util
 import os
 import sys
+import warnings
+from pathlib import Path
 
 import click
 
@@ -60,12 +63,19 @@ def _debug() -> bool:
 
 def main(argv=None) -> int:
     """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit status."""
-    try:
-        _load_commands()
-        return _run(argv)
-    except KeyboardInterrupt:
-        click.echo("vpsim: interrupted", err=True)
-        return EXIT_INTERRUPTED
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning  # a Python warning is one line too, not a source excerpt
+        try:
+            _load_commands()
+            return _run(argv)
+        except KeyboardInterrupt:
+            click.echo("vpsim: interrupted", err=True)
+            return EXIT_INTERRUPTED
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    where = Path(filename).name if filename else "?"
+    _say("warning", f"{category.__name__}: {message} ({where}:{lineno})")
 
 
 def _run(argv) -> int:
