@@ -168,6 +168,7 @@ CASES = [
     ["bench", "--json", "/proc/1/x.json", "--tiny", "--no-peer"],
     ["paper", "--out", "/proc/1/x", "--repeats", "1"],
     ["paper", "--out", "{d}/p", "--repeats", "0"],
+    ["paper", "--out", "{d}/p", "--repeats", "1", "--vehicle", "{d}/bad.toml"],
     ["paper", "--out", "{d}/p", "--advisor-dir", "{d}/none", "--repeats", "1"],
     ["sweep", "{d}/missing.toml", "--out", "{d}/o"],
     ["sweep", "{d}", "--out", "{d}/o"],
@@ -181,6 +182,7 @@ CASES = [
 def d(tmp_path):
     (tmp_path / "afile").write_text("x")
     (tmp_path / "still.csv").write_text(STILL)
+    (tmp_path / "bad.toml").write_text("[engine]\ncylinders = 0\n")
     (tmp_path / "s.toml").write_text('[parameters]\n"engine.bore" = [0.08, 0.09]\n')
     (tmp_path / "e.json").write_text(
         json.dumps(

@@ -41,7 +41,10 @@ def paper(out, vehicle, advisor_dir, repeats):
         _scaling_function()  # fail before the long run if engine scaling is missing
         if not Path(advisor_dir).is_dir():
             raise VpsimError(f"--advisor-dir {advisor_dir}: no such folder")
-    _out_dir(out)  # fail before the long run if --out cannot be written
+    from ..params import load_parameters
+
+    load_parameters(vehicle)  # fail before the progress bar starts if the vehicle is invalid
+    _out_dir(out)  # and if --out cannot be written
     start = time.perf_counter()
     with click.progressbar(length=1, label="vpsim paper", file=sys.stderr, show_pos=True) as bar:
         state = {"done": 0}
