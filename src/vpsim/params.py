@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from importlib import resources
@@ -238,15 +239,19 @@ def _coerce(sec: str, name: str, value: Any, where: str, unit: Any = None) -> An
 
 
 def _is_number(v: Any) -> bool:
-    return isinstance(v, int | float) and not isinstance(v, bool)
+    """A real number (Python or NumPy), not a boolean."""
+    return isinstance(v, numbers.Real) and not isinstance(v, bool | np.bool_)
 
 
 def _typed(typ: str, value: Any) -> Any:
     """``value`` as the field type ``typ`` ("int", "float", "tuple[...]"), or None if it is not one."""
     if typ == "int":
-        if isinstance(value, float) and value.is_integer():
+        if not _is_number(value):
+            return None
+        if isinstance(value, numbers.Integral):
             return int(value)
-        return value if isinstance(value, int) and not isinstance(value, bool) else None
+        f = float(value)
+        return int(f) if f.is_integer() else None
     if typ == "float":
         if not _is_number(value):
             return None
@@ -255,6 +260,8 @@ def _typed(typ: str, value: Any) -> Any:
         except OverflowError:  # an integer beyond the float range: reported by the range check
             return math.inf if value > 0 else -math.inf
     if typ.startswith("tuple"):
+        if isinstance(value, np.ndarray) and value.ndim == 1:
+            value = value.tolist()
         if not isinstance(value, list | tuple) or not value or not all(_is_number(v) for v in value):
             return None
         if len(value) > _MAX_LIST:
