@@ -123,6 +123,13 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
         raise VpsimError(f"--workers {workers}: give at least 1")
     if local_cluster is not None and local_cluster < 1:
         raise VpsimError(f"--local-cluster {local_cluster}: give at least 1")
+    from ..sweep.runner import max_local_workers
+
+    for opt, n in (("--workers", workers), ("--local-cluster", local_cluster)):
+        if n is not None and n > max_local_workers():
+            raise VpsimError(
+                f"{opt} {n}: at most {max_local_workers()} local processes (4 per core of this machine)"
+            )
     if chunk_size is not None and chunk_size < 1:
         raise VpsimError(f"--chunk-size {chunk_size}: give at least 1 row")
     sp = load_spec(spec)

@@ -544,6 +544,11 @@ def _kernel_threads(n: int | None):
 # --- running ------------------------------------------------------------------------------------------------
 
 
+def max_local_workers() -> int:
+    """The most local worker processes a sweep starts: 4 per core (more only costs memory)."""
+    return 4 * (os.cpu_count() or 1)
+
+
 @dataclass
 class SweepRun:
     """Outcome of :func:`run_sweep`: all results (stored before plus computed now) and counts for this run."""
@@ -593,6 +598,12 @@ def run_sweep(
         raise VpsimError(f"local cluster size must be at least 1, got {local_cluster}")
     if workers is not None and workers < 1:
         raise VpsimError(f"workers must be at least 1, got {workers}")
+    limit = max_local_workers()
+    for what, n in (("workers", workers), ("local cluster size", local_cluster)):
+        if n is not None and n > limit:
+            raise VpsimError(
+                f"{what} {n} is more than {limit} (4 per core of this machine); each is a process"
+            )
     if fmt is not None and fmt not in ("parquet", "csv"):
         raise VpsimError(f"format must be parquet or csv, got {fmt!r}")
     schema = result_schema(spec)
