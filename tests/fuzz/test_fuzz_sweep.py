@@ -33,6 +33,7 @@ SPEC_CASES = [
     ('sampling = "lhs"\nsamples = 0\n', "samples = 0"),
     ("cycles = []\n", "non-empty list"),
     ('cycles = ["missing.csv"]\n', "no such file"),
+    ('cycles = ["still.csv"]\n', "still.csv drives no distance"),
     ('methods = ["sideways"]\n', "unknown method"),
     ("drivers = [7]\n", "driver '7' is not defined"),
     ('base = "missing.toml"\n', "base: "),
@@ -48,6 +49,7 @@ SPEC_CASES = [
 
 @pytest.mark.parametrize(("text", "match"), SPEC_CASES, ids=[f"spec{k}" for k in range(len(SPEC_CASES))])
 def test_hostile_spec(tmp_path, text, match):
+    (tmp_path / "still.csv").write_text("time_s,speed_kmh\n0,0\n10,0\n")
     p = tmp_path / "s.toml"
     p.write_text(text)
     with pytest.raises(SpecError) as exc:

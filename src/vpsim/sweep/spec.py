@@ -432,9 +432,13 @@ def _cycle_ref(name: str, where: str, root: Path | None) -> str:
     if name.lower().endswith(".csv") and root is not None and not Path(name).is_absolute():
         ref = str(root / name)
     try:
-        load_cycle(ref)
+        cyc = load_cycle(ref)
     except VpsimError as exc:
         raise SpecError(f"{where}: cycles: {exc}") from None
+    if not cyc.distance_m > 0:
+        raise SpecError(
+            f"{where}: cycles: {name} drives no distance, so fuel per 100 km is undefined for every design"
+        )
     return ref
 
 
