@@ -64,7 +64,7 @@ def import_engine(file, out, as_json):
     )
     if s["min_bsfc_g_per_kwh"] is not None:
         click.echo(
-            f"  min BSFC       {s['min_bsfc_g_per_kwh']:.1f} g/kWh at {s['min_bsfc_torque_nm']:.1f} N m, "
+            f"  min BSFC       {s['min_bsfc_g_per_kwh']:.5g} g/kWh at {s['min_bsfc_torque_nm']:.1f} N m, "
             f"{s['min_bsfc_speed_radps']:.1f} rad/s"
         )
     if s["full_load_above_grid"]:

@@ -221,8 +221,8 @@ class MeasuredEngine:
         eff = self.peak_efficiency()
         if eff is not None and eff > 1.0:
             raise bad(
-                f"the map gives a brake efficiency of {eff:.0%} (fuel power below shaft power) at some node; "
-                "fc_fuel_map must be fuel flow in g/s and fc_fuel_lhv in J/g"
+                f"the map gives a brake efficiency of {eff * 100:.4g} % (fuel power below shaft power) at a "
+                "node; fc_fuel_map must be fuel flow in g/s and fc_fuel_lhv in J/g"
             )
 
     # ------------------------------------------------------------------ sanity against the metadata
@@ -233,8 +233,10 @@ class MeasuredEngine:
         t_node, w_node = np.meshgrid(self.torque_grid, self.speed_grid)
         usable = (t_node > 0) & (w_node > 0) & (t_node <= self.max_torque_at(w_node) + 1e-9)
         usable &= self.fuel_flow > 0
-        bsfc = self.fuel_flow[usable] * 1e3 / (t_node[usable] * w_node[usable] / 1e3) * 3600.0
-        return bsfc, t_node[usable], w_node[usable]
+        with np.errstate(all="ignore"):  # extreme grids: a non-finite BSFC is left out below
+            bsfc = self.fuel_flow[usable] * 1e3 / (t_node[usable] * w_node[usable] / 1e3) * 3600.0
+        ok = np.isfinite(bsfc) & (bsfc > 0)
+        return bsfc[ok], t_node[usable][ok], w_node[usable][ok]
 
     def peak_efficiency(self) -> float | None:
         """Largest brake efficiency T w / (mdot_f LHV) over the measured operating nodes (None if none)."""
@@ -275,7 +277,7 @@ class MeasuredEngine:
             b = float(np.min(bsfc))
             if not lo <= b <= hi:
                 out.append(
-                    f"minimum BSFC {b:.0f} g/kWh is outside the {lo:g}-{hi:g} g/kWh of piston engines "
+                    f"minimum BSFC {b:.4g} g/kWh is outside the {lo:g}-{hi:g} g/kWh of piston engines "
                     "(fc_fuel_map not in g/s, or fc_map_trq / fc_map_spd not in N*m and rad/s?)"
                 )
         return out
