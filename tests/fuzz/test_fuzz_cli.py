@@ -311,3 +311,12 @@ def test_python_warnings_are_one_line(capsys, monkeypatch, tmp_path):
     assert code == 0
     assert err.count("\n") == 1
     assert err.startswith("vpsim: warning: RuntimeWarning: overflow encountered in multiply (test_fuzz_cli")
+
+
+def test_standard_error_text_nan_becomes_null_with_a_reason():
+    from vpsim.cli._output import dumps
+
+    data = check_json(dumps({"parameters": {"eta": {"value": 0.25, "std_error": "nan"}}, "name": "nan"}))
+    assert data["parameters"]["eta"]["std_error"] is None
+    assert "bound" in data["parameters"]["eta"]["std_error_undefined"]
+    assert data["name"] == "nan"  # a name is text, not a figure

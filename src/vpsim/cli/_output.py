@@ -16,7 +16,11 @@ _REASONS = {
     "fuel_l_per_100km": "the cycle drives no distance, so fuel per distance is undefined",
     "energy_relative_residual": "no indicated work, so a residual relative to it is undefined",
     "diff_vs_bqm_pct": "the backward method's figure it is compared with is undefined",
+    "std_error": "the fit ended at a bound of this parameter, so it has no standard error",
 }
+# figures some result objects hold as the text "nan" (vpsim.calibration's std_error): treated as numbers
+_TEXT_NUMBER_KEYS = ("std_error",)
+_NON_FINITE_TEXT = ("nan", "inf", "-inf", "infinity", "-infinity")
 
 
 def reason(key: str, value: Any) -> str:
@@ -35,6 +39,8 @@ def json_safe(obj: Any, *, reasons: dict | None = None, key: str = "") -> Any:
     if isinstance(obj, dict):
         out: dict = {}
         for k, v in obj.items():
+            if k in _TEXT_NUMBER_KEYS and isinstance(v, str) and v.strip().lower() in _NON_FINITE_TEXT:
+                v = float(v)
             if isinstance(v, float | int) and not isinstance(v, bool) and not _finite(float(v)):
                 out[k] = None
                 out[f"{k}_undefined"] = reason(str(k), float(v))

@@ -174,7 +174,8 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
         click.echo(line + f"; {outside} % of the time outside the measured map")
     if cal is not None:
         for k, n in enumerate(cal.names):
-            click.echo(f"  fitted {n} = {number(cal.values[k], '.4g')} +- {number(cal.std_errors[k], '.2g')}")
+            err = number(cal.std_errors[k], ".2g", "std_error")
+            click.echo(f"  fitted {n} = {number(cal.values[k], '.4g')} +- {err}")
         if cal.message:
             click.echo(f"  note: {cal.message}")
     for w in warnings:
