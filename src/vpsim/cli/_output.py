@@ -27,7 +27,9 @@ def reason(key: str, value: Any) -> str:
     """Why ``value`` of figure ``key`` has no meaning."""
     if key in _REASONS and isinstance(value, float) and math.isnan(value):
         return _REASONS[key]
-    return f"not a finite number ({value!r})"
+    if isinstance(value, float) and math.isinf(value):
+        return "not a finite number (it overflows)"
+    return "not a number (undefined for this input)"
 
 
 def _finite(value: Any) -> bool:
