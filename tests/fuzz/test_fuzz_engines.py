@@ -255,3 +255,28 @@ def test_scaled_displacement_contradicting_fc_disp_is_flagged(capsys, tmp_path):
 def test_real_engine_has_no_warnings(capsys):
     code, out, _ = run_cli(capsys, "engine", "import", GEO_JSON, "--json")
     assert code == 0 and json.loads(out)["warnings"] == []
+
+
+def test_displacement_and_bsfc_flagged_without_reference_data(capsys, tmp_path):
+    p = tmp_path / "toy.json"
+    p.write_text(json.dumps(JSON_BASE))  # fc_disp 1.9 L; its BSFC is 1080 g/kWh at best
+    code, out, _ = run_cli(
+        capsys,
+        "scaling",
+        "--measured",
+        p,
+        "--bore",
+        0.074,
+        "--stroke",
+        0.077,
+        "--cylinders",
+        3,
+        "--cycles",
+        "nedc",
+        "--out",
+        tmp_path / "o",
+    )
+    assert code == 0
+    assert "warning: the scaled displacement 0.993 L (B 0.074 m, S 0.077 m, z 3) differs from" in out
+    assert "fc_disp 1.900 L by -48 %" in out
+    assert "warning: minimum BSFC 1080 g/kWh is outside the 150-1000 g/kWh" in out
