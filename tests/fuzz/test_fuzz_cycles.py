@@ -46,6 +46,7 @@ CASES = [
     ("negative_speed", HEADER + b"0,0\n1,-1\n", "negative"),
     ("time_backwards", HEADER + b"0,0\n2,1\n1,1\n", "does not increase"),
     ("time_repeats", HEADER + b"0,0\n1,1\n1,1\n", "does not increase"),
+    ("step_1e-7", HEADER + b"0,0\n0.0000001,1\n0.0000002,0\n", "closer than the 0.001 s"),
     ("text_value", HEADER + b"0,0\n1,fast\n", "is not a number"),
     ("short_row", HEADER + b"0,0\n1\n", "expected 2 fields"),
     ("bool_value", HEADER + b"0,0\n1,true\n", "is not a number"),

@@ -33,6 +33,7 @@ _TIME_COLUMNS = ("time_s", "time", "t", "t_s")
 MAX_CYCLE_BYTES = 64 * 1024 * 1024  # a cycle CSV larger than this is refused (a month of 1 Hz samples fits)
 MAX_SPEED_MPS = 200.0  # 720 km/h: faster is a unit slip (speed in km/h declared as m/s) or a broken file
 MAX_TIME_S = 1.0e9  # about 32 years: larger times are not a drive cycle
+MIN_STEP_S = 1.0e-3  # samples closer than 1 ms (1 kHz) are not a drive cycle's: times in ms, or noise
 _DELIMITERS = (",", ";", "\t")
 _SPEED_COLUMNS = {
     "speed_mps": "m/s",
@@ -282,6 +283,11 @@ def _read_csv(fh, where: str, *, speed_unit: str | None, name: str) -> Cycle:
             raise CycleError(f"{where}:{lineno}: time {t:g} s is beyond +-{MAX_TIME_S:g} s")
         if times and t <= times[-1]:
             raise CycleError(f"{where}:{lineno}: time {t:g} does not increase (previous {times[-1]:g})")
+        if times and t - times[-1] < MIN_STEP_S:
+            raise CycleError(
+                f"{where}:{lineno}: time {t:.10g} s is {t - times[-1]:.3g} s after the previous sample, "
+                f"closer than the {MIN_STEP_S:g} s a drive cycle is sampled at (times in ms?)"
+            )
         if v < 0:
             raise CycleError(f"{where}:{lineno}: speed {v:g} is negative, expected >= 0")
         if v * scale > MAX_SPEED_MPS:
