@@ -150,3 +150,20 @@ def test_out_is_a_file(capsys, tmp_path):
     (tmp_path / "file").write_text("x")
     code, _, err = run_cli(capsys, "sweep", spec, "--out", tmp_path / "file", "--quiet")
     assert code == 2
+
+
+def test_csv_store_of_an_earlier_version_is_kept_when_resumed_twice(capsys, tmp_path):
+    """A results.csv without the block manifest: verified by reading it, then recorded, so that the rows
+    appended by a resume (and a second resume) follow it instead of being taken for damage."""
+    spec = tmp_path / "s.toml"
+    spec.write_text(SPEC)
+    assert _sweep(capsys, tmp_path, "--format", "csv")[0] == 0
+    out = tmp_path / "o"
+    (out / ".results.csv.sums").unlink()  # as written before the manifest existed
+    lines = (out / "results.csv").read_bytes().split(b"\n")
+    (out / "results.csv").write_bytes(b"\n".join(lines[:3]) + b"\n")  # header + 2 of the 3 rows
+    code, out_text, _ = _sweep(capsys, tmp_path, "--resume")
+    assert code == 0 and "1 computed now, 2 already present" in out_text and "damaged" not in out_text
+    code, out_text, _ = _sweep(capsys, tmp_path, "--resume")
+    assert code == 0 and "0 computed now, 3 already present" in out_text and "damaged" not in out_text
+    assert len(load_results(out)) == 3

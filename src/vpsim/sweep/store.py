@@ -393,11 +393,17 @@ class ResultStore:
                 _atomic_write(sums, ("\n".join(lines) + "\n").encode())
             return
         self._repair_csv_tail()
+        data = self.path.read_bytes() if self.path.exists() else b""
         try:
-            _read_csv_bytes(self.path.read_bytes(), self.schema)
+            df = _read_csv_bytes(data, self.schema)
         except Exception as exc:  # noqa: BLE001 - any parse failure means the file cannot be trusted
             self.damaged.append(f"{self.path.name}: {_reason(exc)}")
             os.replace(self.path, self.dir / f".damaged-{self.path.name}")
+            return
+        # it reads: record it as it is (header, then its rows as one block), so blocks appended now follow
+        cut = data.find(b"\n") + 1
+        records = [_block(0, data[:cut], 0)] + ([_block(cut, data[cut:], len(df))] if data[cut:] else [])
+        _atomic_write(sums, "".join(json.dumps(r) + "\n" for r in records).encode())
 
     def _repair_csv_tail(self) -> None:
         if not self.path.exists():
