@@ -318,6 +318,17 @@ class ResultStore:
 
     def completed(self) -> set[str]:
         """point_id of every row on disk."""
+        if self.fmt == "parquet":  # only the intact parts, and only their point_id column
+            import pyarrow.parquet as pq
+
+            good, damaged = _verify_parts(self.path)
+            if damaged:
+                part, why = damaged[0]
+                raise SpecError(f"{part}: damaged sweep result part ({why}); resume the sweep to recompute")
+            ids: set[str] = set()
+            for part in good:
+                ids.update(pq.read_table(part, columns=["point_id"]).column(0).to_pylist())
+            return ids
         df = _read_dir(self.dir, self.fmt, self.schema)
         return set() if df is None or "point_id" not in df else set(df["point_id"].dropna().astype(str))
 
