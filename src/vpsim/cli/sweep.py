@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import sys
 import time
 
@@ -61,6 +62,9 @@ def _hms(s: float) -> str:
         return "--:--"
     s = int(round(s))
     return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60:02d}:{s % 60:02d}"
+
+
+_ADDRESS = r"([a-z][a-z0-9+.-]*://)?\[?[\w.:-]+\]?:\d{1,5}"  # a Dask scheduler: [proto://]host:port
 
 
 @cli.command()
@@ -132,6 +136,8 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
             )
     if chunk_size is not None and chunk_size < 1:
         raise VpsimError(f"--chunk-size {chunk_size}: give at least 1 row")
+    if scheduler is not None and not re.fullmatch(_ADDRESS, scheduler):
+        raise VpsimError(f"--scheduler {scheduler!r}: expected an address such as tcp://host:8786")
     sp = load_spec(spec)
     where = (
         f"Dask scheduler {scheduler}"

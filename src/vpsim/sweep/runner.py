@@ -773,7 +773,7 @@ class _DaskExecutor:
         else:
             try:
                 self.client = Client(self.scheduler, timeout="20s")
-            except (OSError, TimeoutError) as exc:
+            except (OSError, TimeoutError, ValueError, TypeError) as exc:  # ValueError: a malformed address
                 raise VpsimError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from None
             self.n_workers = max(len(self.client.scheduler_info().get("workers", {})), 1)
         return self
