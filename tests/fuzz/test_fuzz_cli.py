@@ -174,6 +174,7 @@ CASES = [
     ["sweep", "{d}", "--out", "{d}/o"],
     ["sweep", "{d}/s.toml", "--out", "{d}/o", "--workers", "0"],
     ["sweep", "{d}/s.toml", "--out", "{d}/o", "--workers", "100000"],
+    ["sweep", "{d}/s.toml", "--out", "{d}/o", "--scheduler", "nonsense"],
     ["sweep", "{d}/s.toml", "--out", "{d}/o", "--local-cluster", "100000"],
     ["sweep", "{d}/s.toml", "--out", "{d}/o", "--chunk-size", "-5"],
     ["sweep", "{d}/s.toml", "--out", "{d}/o", "--scheduler", "x", "--local-cluster", "1"],
