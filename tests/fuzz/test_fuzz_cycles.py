@@ -155,3 +155,14 @@ def test_random_bytes_give_a_cycle_or_one_line(tmp_path, data):
         load_cycle(p)
     except CycleError as exc:
         assert "\n" not in str(exc)
+
+
+def test_micrometre_cycle_has_no_fuel_per_distance(capsys, tmp_path):
+    """Three samples 1 ms apart drive 3 micrometres: tens of millions of L/100 km would be noise."""
+    import json
+
+    p = tmp_path / "tiny.csv"
+    p.write_bytes(HEADER + b"0,0\n0.001,0.01\n0.002,0\n")
+    for method in ("backward", "forward", "inverse"):
+        code, out, _ = run_cli(capsys, "simulate", "--cycle", p, "--method", method, "--json")
+        assert code == 0 and json.loads(out)["fuel_l_per_100km"] is None

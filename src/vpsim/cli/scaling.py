@@ -22,13 +22,14 @@ def _names(text: str, what: str) -> list[str]:
 
 def _check_cycles(names: list[str], what: str) -> None:
     """Each cycle loads and drives some distance (fuel per distance is undefined otherwise)."""
-    from ..cycles import load_cycle
+    from ..cycles import MIN_CONSUMPTION_DISTANCE_M, load_cycle
 
     for name in names:
         cyc = load_cycle(name)
-        if not cyc.distance_m > 0:
+        if not cyc.distance_m >= MIN_CONSUMPTION_DISTANCE_M:
             raise VpsimError(
-                f"{what}: cycle {name} drives no distance, so its fuel per 100 km is undefined; "
+                f"{what}: cycle {name} drives no distance ({cyc.distance_m:.3g} m), so its fuel per 100 km "
+                "is undefined; "
                 "give a cycle that moves"
             )
 

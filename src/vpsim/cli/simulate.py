@@ -80,7 +80,7 @@ def _out_dir(out: str) -> Path:
 )
 def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, out):
     """Simulate a vehicle on a drive cycle and report its fuel consumption."""
-    from ..cycles import load_cycle
+    from ..cycles import MIN_CONSUMPTION_DISTANCE_M, load_cycle
     from ..gears import load_schedule
     from ..params import load_parameters
     from ..simulation import simulate as run
@@ -98,7 +98,7 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         path = _out_dir(out)
     result = run(cyc, method=method, params=params, driver=driver, mode=mode, gears=schedule)
     summary = result.summary()
-    if not cyc.distance_m > 0:  # the cycle asks for no distance: a method's creep is no basis for L/100 km
+    if not cyc.distance_m >= MIN_CONSUMPTION_DISTANCE_M:  # a method's creep is no basis for L/100 km
         summary["fuel_l_per_100km"] = float("nan")
     if out:
         result.to_dataframe().to_csv(path / "timeseries.csv", index=False)

@@ -35,6 +35,8 @@ MAX_SPEED_MPS = 200.0  # 720 km/h: faster is a unit slip (speed in km/h declared
 MAX_TIME_S = 1.0e9  # about 32 years: larger times are not a drive cycle
 MIN_STEP_S = 1.0e-3  # samples closer than 1 ms (1 kHz) are not a drive cycle's: times in ms, or noise
 _DELIMITERS = (",", ";", "\t")
+# fuel per distance (L/100 km) is reported for cycles that drive at least this far; on less it is noise
+MIN_CONSUMPTION_DISTANCE_M = 1.0
 _SPEED_COLUMNS = {
     "speed_mps": "m/s",
     "speed_m_per_s": "m/s",
@@ -324,4 +326,4 @@ def _check_header(header: list[str], where: str, lineno: int) -> None:
             )
 
 
-__all__ = ["STANDARD_CYCLES", "Cycle", "load_cycle"]
+__all__ = ["MIN_CONSUMPTION_DISTANCE_M", "STANDARD_CYCLES", "Cycle", "load_cycle"]

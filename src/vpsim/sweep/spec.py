@@ -426,7 +426,7 @@ def _str_list(value, key, where) -> list[str]:
 
 
 def _cycle_ref(name: str, where: str, root: Path | None) -> str:
-    from ..cycles import load_cycle
+    from ..cycles import MIN_CONSUMPTION_DISTANCE_M, load_cycle
 
     ref = name
     if name.lower().endswith(".csv") and root is not None and not Path(name).is_absolute():
@@ -435,9 +435,10 @@ def _cycle_ref(name: str, where: str, root: Path | None) -> str:
         cyc = load_cycle(ref)
     except VpsimError as exc:
         raise SpecError(f"{where}: cycles: {exc}") from None
-    if not cyc.distance_m > 0:
+    if not cyc.distance_m >= MIN_CONSUMPTION_DISTANCE_M:
         raise SpecError(
-            f"{where}: cycles: {name} drives no distance, so fuel per 100 km is undefined for every design"
+            f"{where}: cycles: {name} drives no distance ({cyc.distance_m:.3g} m), so fuel per 100 km is "
+            "undefined for every design"
         )
     return ref
 
