@@ -9,7 +9,7 @@ import subprocess
 import sys
 
 import pytest
-from _fuzz import check_answer, check_json, run_cli
+from _fuzz import NAN_WORD, check_answer, check_json, run_cli
 
 from vpsim.cli import main as cli_main
 
@@ -221,9 +221,13 @@ def test_json_is_always_valid(capsys, tmp_path, method, cycle):
     s = check_json(out)
     if cycle == "still":
         assert s["fuel_l_per_100km"] is None and s["fuel_l_per_100km_undefined"]
-    code, out, _ = run_cli(capsys, "simulate", "--cycle", p, "--method", method, "--out", tmp_path / "o")
+    code, out, _ = run_cli(
+        capsys, "simulate", "--cycle", p, "--method", method, "--mode", "extended", "--out", tmp_path / "o"
+    )
     assert code == 0
     check_json((tmp_path / "o" / "summary.json").read_text())
+    csv_text = (tmp_path / "o" / "timeseries.csv").read_text()
+    assert not NAN_WORD.search(csv_text)
 
 
 def test_output_helper_never_prints_nan():

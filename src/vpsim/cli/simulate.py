@@ -101,7 +101,9 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
     if not cyc.distance_m >= MIN_CONSUMPTION_DISTANCE_M:  # a method's creep is no basis for L/100 km
         summary["fuel_l_per_100km"] = float("nan")
     if out:
-        result.to_dataframe().to_csv(path / "timeseries.csv", index=False)
+        # an undefined sample (intake pressure with the engine decoupled, say) is an empty cell, never nan/inf
+        df = result.to_dataframe().replace([float("inf"), float("-inf")], float("nan"))
+        df.to_csv(path / "timeseries.csv", index=False, na_rep="")
         (path / "summary.json").write_text(dumps(summary, indent=2) + "\n")
         import matplotlib
 
