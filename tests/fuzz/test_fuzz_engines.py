@@ -280,3 +280,12 @@ def test_displacement_and_bsfc_flagged_without_reference_data(capsys, tmp_path):
     assert "warning: the scaled displacement 0.993 L (B 0.074 m, S 0.077 m, z 3) differs from" in out
     assert "fc_disp 1.900 L by -48 %" in out
     assert "warning: minimum BSFC 1080 g/kWh is outside the 150-1000 g/kWh" in out
+
+
+def test_engine_file_symlink_loop_is_named(tmp_path):
+    for suffix in (".m", ".json"):
+        a, b = tmp_path / f"a{suffix}", tmp_path / f"b{suffix}"
+        a.symlink_to(b)
+        b.symlink_to(a)
+        with pytest.raises(EngineFileError, match="symbolic link loop"):
+            load_engine(a)

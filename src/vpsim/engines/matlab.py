@@ -57,6 +57,7 @@ array -> ``tuple``; ``inline`` -> :class:`InlineFunction`.
 
 from __future__ import annotations
 
+import errno
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -1684,6 +1685,8 @@ def read_m_file(path: str | Path) -> dict[str, MValue]:
         with p.open("rb") as f:
             raw = f.read(MAX_FILE_BYTES + 1)
     except OSError as e:
+        if e.errno == errno.ELOOP:
+            raise EngineFileError(f"{p}: symbolic link loop (too many levels of symbolic links)") from None
         raise EngineFileError(f"{p}:1: cannot read file ({e.strerror or e})") from None
     if len(raw) > MAX_FILE_BYTES:
         raise EngineFileError(f"{p}:1: file is more than the {MAX_FILE_BYTES}-byte limit")
