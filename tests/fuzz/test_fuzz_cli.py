@@ -10,6 +10,8 @@ import sys
 
 import pytest
 from _fuzz import NAN_WORD, check_answer, check_json, run_cli
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from vpsim.cli import main as cli_main
 
@@ -325,3 +327,32 @@ def test_standard_error_text_nan_becomes_null_with_a_reason():
     assert data["parameters"]["eta"]["std_error"] is None
     assert "bound" in data["parameters"]["eta"]["std_error_undefined"]
     assert data["name"] == "nan"  # a name is text, not a figure
+
+
+_OPTION_VALUES = {
+    "--cycle": ["nedc", "{d}/short.csv", "{d}/still.csv", "{d}", "", "nope", "{d}/afile", "NEDC", "wltc"],
+    "--method": ["backward", "forward", "inverse", "x", ""],
+    "--driver": ["1", "2", "0", "x"],
+    "--mode": ["paper", "extended", ""],
+    "--vehicle": ["hofman2011", "geo_metro_1l", "{d}/bad.toml", "{d}", "{d}/still.csv", "x"],
+    "--gears": ["{d}/g.csv", "{d}/still.csv", "{d}/afile", "{d}"],
+    "--speed-unit": ["m/s", "km/h", "mph", "knots"],
+    "--out": ["{d}/o", "{d}/afile", "/proc/1/x"],
+}
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    options=st.dictionaries(st.sampled_from(sorted(_OPTION_VALUES)), st.integers(0, 100), max_size=4),
+    as_json=st.booleans(),
+)
+def test_random_simulate_options(capsys, d, options, as_json):
+    (d / "short.csv").write_text(SHORT)
+    (d / "g.csv").write_text("time_s,gear\n0,1\n1,2\n")
+    args = ["simulate"]
+    for opt, k in options.items():
+        pool = _OPTION_VALUES[opt]
+        args += [opt, pool[k % len(pool)].format(d=d)]
+    if as_json:
+        args.append("--json")
+    run_cli(capsys, *args)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 from _fuzz import run_cli
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from vpsim.sweep import SpecError, load_results, load_spec
 
@@ -167,3 +169,88 @@ def test_csv_store_of_an_earlier_version_is_kept_when_resumed_twice(capsys, tmp_
     code, out_text, _ = _sweep(capsys, tmp_path, "--resume")
     assert code == 0 and "0 computed now, 3 already present" in out_text and "damaged" not in out_text
     assert len(load_results(out)) == 3
+
+
+_num = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.integers(-(10**20), 10**20),
+    st.booleans(),
+    st.text(max_size=4),
+)
+_param = st.sampled_from(
+    [
+        "engine.bore",
+        "engine.cylinders",
+        "vehicle.mass",
+        "transmission.gearbox_ratios[2]",
+        "engine.lambda",
+        "engine.map_speed_range",
+        "drivers.1.inverse_a",
+        "nonsense.x",
+        "transmission.gearbox_ratios",
+    ]
+)
+_axis = st.one_of(
+    st.lists(_num, max_size=4),
+    st.fixed_dictionaries({"range": st.lists(_num, max_size=3)}, optional={"n": _num}),
+    st.fixed_dictionaries({"values": st.lists(st.one_of(_num, st.lists(_num, max_size=5)), max_size=3)}),
+    _num,
+)
+_top = st.fixed_dictionaries(
+    {},
+    optional={
+        "sampling": st.sampled_from(["factorial", "lhs", "grid", ""]),
+        "samples": _num,
+        "seed": _num,
+        "cycles": st.one_of(st.lists(st.sampled_from(["nedc", "udds", "nope", "", 3]), max_size=3), _num),
+        "methods": st.lists(st.sampled_from(["backward", "forward", "inverse", "sideways"]), max_size=3),
+        "drivers": st.lists(st.one_of(st.integers(-1, 4), st.text(max_size=2)), max_size=3),
+        "mode": st.sampled_from(["paper", "extended", "x"]),
+        "gears": st.sampled_from(["baseline", "per_design", "x"]),
+        "baseline": _num,
+        "acceleration": st.one_of(
+            st.booleans(),
+            st.dictionaries(
+                st.sampled_from(["enabled", "shift_speed", "shift_fraction", "launch_speed", "x"]),
+                _num,
+                max_size=3,
+            ),
+        ),
+    },
+)
+
+
+def _toml_value(v) -> str:
+    import json
+    import math
+
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf") if math.isinf(v) else repr(v)
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + " }"
+    raise TypeError(v)
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(top=_top, params=st.dictionaries(_param, _axis, max_size=3))
+def test_random_specs_are_valid_or_one_line(tmp_path, top, params):
+    text = "".join(f"{k} = {_toml_value(v)}\n" for k, v in top.items())
+    text += "[parameters]\n" + "".join(f'"{k}" = {_toml_value(v)}\n' for k, v in params.items())
+    p = tmp_path / "r.toml"
+    p.write_text(text)
+    try:
+        spec = load_spec(p)
+    except SpecError as exc:
+        assert "\n" not in str(exc) and len(str(exc)) < 1000
+        return
+    assert 1 <= spec.n_designs <= 5_000_000
+    if spec.n_designs <= 1000:
+        assert len(spec.designs()) == spec.n_designs + (1 if spec.baseline else 0)
