@@ -18,6 +18,7 @@ from pathlib import Path
 from vpsim.cli.main import main
 
 REPO = Path(__file__).resolve().parents[2]
+SHARED = Path(os.environ.get("VPSIM_SHARED", REPO.parent / "shared"))  # as tests/conftest.py
 NAN_WORD = re.compile(r"(?<![\w.])-?(nan|inf|infinity)(?![\w])", re.IGNORECASE)
 MEMORY_LIMIT_BYTES = 4 * 1024**3  # the stated bound for any single command on hostile input
 

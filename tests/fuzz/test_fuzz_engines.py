@@ -6,7 +6,8 @@ import json
 import time
 
 import pytest
-from _fuzz import REPO, run_cli, run_limited
+from _fuzz import SHARED as SHARED_ROOT
+from _fuzz import run_cli, run_limited
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -14,7 +15,7 @@ from vpsim.engines import load_engine
 from vpsim.engines.matlab import evaluate_m_text
 from vpsim.errors import EngineFileError
 
-SHARED = REPO.parent / "shared" / "data"
+SHARED = SHARED_ROOT / "data"
 GEO_M = SHARED / "raw" / "advisor" / "FC_SI41_emis.m"
 GEO_JSON = SHARED / "engines" / "FC_SI41_emis.json"
 
