@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ParameterError
-from .textio import read_text
+from .textio import check_path, read_text
 from .units import FIELD_DIMENSIONS, to_si
 
 PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l")
@@ -551,7 +551,7 @@ def load_parameters(source: str | Path = "hofman2011") -> Parameters:
         raise ParameterError(
             f"empty parameter set name; available presets: {', '.join(PRESETS)} (or a .toml file)"
         )
-    path = Path(source)
+    path = check_path(source, ParameterError, "parameter file")
     if not path.suffix and not path.exists():
         raise ParameterError(
             f"unknown preset {str(source)!r}; available presets: {', '.join(PRESETS)} (or a .toml file)"

@@ -15,10 +15,31 @@ from typing import Any
 MAX_TEXT_BYTES = 16 * 1024 * 1024  # a parameter file, sweep spec or gear schedule larger than this is refused
 
 
+MAX_PATH_CHARS = 4096  # PATH_MAX on Linux
+
+
+def check_path(name: Any, error: type[Exception], what: str = "file") -> Path:
+    """``name`` as a Path, or one-line ``error`` if it cannot name a file (NUL character, too long)."""
+    text = str(name)
+    if "\x00" in text:
+        raise error(f"{short_name(text)}: a {what} name cannot hold a NUL character")
+    if len(text) > MAX_PATH_CHARS:
+        raise error(
+            f"{short_name(text)}: a {what} name of {len(text)} characters, more than {MAX_PATH_CHARS}"
+        )
+    return Path(name)
+
+
+def short_name(text: Any, limit: int = 120) -> str:
+    """A file name cut for a one-line message."""
+    s = str(text).replace("\x00", "\\0")
+    return s if len(s) <= limit else s[: limit - 3] + "..."
+
+
 def read_text(path: Path, error: type[Exception], *, limit: int = MAX_TEXT_BYTES, what: str = "file") -> str:
     """The text of a UTF-8 file (with or without BOM; CRLF/CR newlines become LF); one-line ``error``
     when it is missing, a folder, a symlink loop, unreadable, too large, binary or not UTF-8."""
-    path = Path(path)
+    path = check_path(path, error, what)
     try:
         st = path.stat()
         if stat.S_ISDIR(st.st_mode):
@@ -63,4 +84,4 @@ def decode_text(raw: bytes, where: Any, error: type[Exception]) -> str:
     return text.replace("\r\n", "\n").replace("\r", "\n")
 
 
-__all__ = ["MAX_TEXT_BYTES", "decode_text", "read_text"]
+__all__ = ["MAX_TEXT_BYTES", "check_path", "decode_text", "read_text", "short_name"]

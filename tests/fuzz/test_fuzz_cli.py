@@ -356,3 +356,25 @@ def test_random_simulate_options(capsys, d, options, as_json):
     if as_json:
         args.append("--json")
     run_cli(capsys, *args)
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ('cycles = ["a\\u0000b.csv"]\n', "cannot hold a NUL character"),
+        ('base = "a\\u0000b.toml"\n', "cannot hold a NUL character"),
+        ('cycles = ["' + "a" * 5000 + '.csv"]\n', "more than 4096"),
+    ],
+)
+def test_file_names_that_cannot_be_files(capsys, tmp_path, text, match):
+    spec = tmp_path / "s.toml"
+    spec.write_text(text)
+    code, _, err = run_cli(capsys, "sweep", spec, "--out", tmp_path / "o")
+    assert code == 2 and match in err
+
+
+def test_very_long_out_folder(capsys, tmp_path):
+    spec = tmp_path / "s.toml"
+    spec.write_text("[parameters]\n")
+    code, _, err = run_cli(capsys, "sweep", spec, "--out", tmp_path / ("a" * 300) / ("b" * 300), "--quiet")
+    assert code == 2 and "File name too long" in err

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CycleError
-from ..textio import read_text
+from ..textio import check_path, read_text
 
 STANDARD_CYCLES = ("nedc", "ftp75", "udds", "hwfet", "us06", "wltc3b")
 _ALIASES = {"wltc": "wltc3b", "wltc_class3b": "wltc3b", "ftp": "ftp75", "ftp-75": "ftp75", "wltc3": "wltc3b"}
@@ -168,7 +168,7 @@ def load_cycle(name_or_path: str | Path, *, speed_unit: str | None = None) -> Cy
         )
     if not str(name_or_path).strip():
         raise CycleError(f"empty cycle name; standard cycles: {', '.join(STANDARD_CYCLES)} (or a CSV file)")
-    path = Path(name_or_path)
+    path = check_path(name_or_path, CycleError, "cycle file")
     if not path.exists() and not path.is_symlink() and path.suffix == "":
         raise CycleError(
             f"unknown cycle {str(name_or_path)!r}; standard cycles: {', '.join(STANDARD_CYCLES)} "

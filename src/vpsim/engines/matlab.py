@@ -1675,7 +1675,9 @@ def read_m_file(path: str | Path) -> dict[str, MValue]:
     defaults (``fc_spd_scale = fc_trq_scale = 1``, as the files themselves assign). Any problem raises
     :class:`~vpsim.errors.EngineFileError` with the message ``FILE:LINE: what is wrong``.
     """
-    p = Path(path)
+    from ..textio import check_path
+
+    p = check_path(path, EngineFileError, "engine file")
     try:
         size = p.stat().st_size
         if not p.is_file():

@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import EngineFileError
-from ..textio import read_text
+from ..textio import check_path, read_text
 from .matlab import MAX_FILE_BYTES, read_m_file
 
 __all__ = ["MeasuredEngine", "MeasuredEngineMap", "load_engine"]
@@ -641,7 +641,7 @@ class MeasuredEngineMap:
 
 def load_engine(path: str | Path) -> MeasuredEngine:
     """Load a measured engine from an ADVISOR ``.m`` file or its ``.json`` form (chosen by suffix)."""
-    p = Path(path)
+    p = check_path(path, EngineFileError, "engine file")
     suffix = p.suffix.lower()
     if suffix == ".m":
         return MeasuredEngine.from_advisor_m(p)
