@@ -9,6 +9,18 @@ default) and override only what differs.
     >>> p = load_parameters("hofman2011")
     >>> round(p.engine.displacement * 1e3, 2)   # litres
     2.29
+
+A value in a file is a plain number (SI) or a table ``{ value = 3000, unit = "lb", confidence = "..." }``;
+a known unit of the field's dimension is converted to SI (:mod:`vpsim.units`), any other is refused. Files
+are UTF-8 (with or without BOM). Every value must lie in its plausible range, and the engine as a whole must
+be one that exists, which also bounds the work of the generated map (its grid grows with the torque span,
+(peak BMEP - motoring BMEP) x V_d / (2 pi n_r)):
+
+* 1 to 16 cylinders, two- or four-stroke, displacement 0.04 to 16 L (:data:`DISPLACEMENT_RANGE`);
+* full-load BMEP at ambient pressure at most 40 bar, motoring BMEP at 1.25 x the top map speed not below
+  -60 bar (:data:`MAX_FULL_LOAD_BMEP`, :data:`MIN_MOTORING_BMEP`);
+* it can idle: zero torque at 80 rad/s needs an intake pressure between 0 and ambient that the throttle
+  (at most ``max_throttle_area``) can hold; otherwise the forward method's idle throttle is undefined.
 """
 
 from __future__ import annotations
