@@ -318,7 +318,7 @@ def test_missing_file_and_unknown_name(tmp_path):
 def test_binary_file(tmp_path):
     p = tmp_path / "x.csv"
     p.write_bytes(b"\xff\xfe\x00\x81\x00")
-    assert "not a text CSV" in _error(p)
+    assert "not a text file" in _error(p)
 
 
 # ------------------------------------------------------------------------------------------------------------

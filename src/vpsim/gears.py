@@ -20,6 +20,8 @@ The default rule (documented in docs/methods.md):
 from __future__ import annotations
 
 import csv
+import io
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +31,7 @@ from .cycles import Cycle
 from .errors import CycleError
 from .model import vehicle as vh
 from .model.record import record
+from .textio import read_text
 
 
 @dataclass(frozen=True)
@@ -153,47 +156,82 @@ def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | Non
     return GearSchedule(cycle.time_s.copy(), full, source="default rule")
 
 
-def load_schedule(path: str | Path, n_gears: int) -> GearSchedule:
+MAX_GEAR_FILE_BYTES = 64 * 1024 * 1024  # a gear schedule larger than this is refused
+
+
+def load_schedule(path: str | Path, n_gears: int, *, cycle: Cycle | None = None) -> GearSchedule:
     """Read a gear schedule CSV with columns ``time_s,gear`` (gear 0 = neutral, 1..n_gears engaged).
 
     The stiff-driveline model of the paper has no clutch: a neutral sample (0) keeps the gear engaged
-    before it (or gear 1 at the start). Errors name the line.
+    before it (or gear 1 at the start). The file is read like a cycle CSV: UTF-8 with or without BOM, any
+    newline convention, ``#`` comment lines, ``,`` ``;`` or tab as delimiter. With ``cycle`` given, every
+    time must lie within the cycle. Errors name the line.
     """
+    from .cycles import _clip, _cut, _sniff_delimiter, _uncommented
+
     path = Path(path)
-    if not path.exists():
-        raise CycleError(f"{path}: no such file")
+    text = read_text(path, CycleError, limit=MAX_GEAR_FILE_BYTES, what="gear schedule CSV file")
+    delim = _sniff_delimiter(io.StringIO(text))
+    reader = csv.reader(_uncommented(io.StringIO(text)), delimiter=delim)
     times: list[float] = []
     gears: list[int] = []
-    with path.open(newline="") as fh:
-        header = None
-        for lineno, row in enumerate(csv.reader(fh), 1):
-            if not row or row[0].lstrip().startswith("#"):
-                continue
-            if header is None:
-                header = [h.strip().lower() for h in row]
-                if "time_s" not in header or "gear" not in header:
-                    raise CycleError(
-                        f"{path}:{lineno}: header must contain time_s and gear, got {','.join(header)}"
-                    )
-                ti, gi = header.index("time_s"), header.index("gear")
-                continue
-            try:
-                t = float(row[ti])
-                gf = float(row[gi])
-            except (ValueError, IndexError):
+    header = None
+    ti = gi = -1
+    rows = iter(reader)
+    while True:
+        try:
+            row = next(rows)
+        except StopIteration:
+            break
+        except csv.Error as exc:
+            raise CycleError(f"{path}:{reader.line_num}: malformed CSV ({exc})") from None
+        lineno = reader.line_num
+        if not row or not "".join(row).strip():
+            continue
+        if header is None:
+            header = [h.strip().lower() for h in row]
+            if "time_s" not in header or "gear" not in header:
                 raise CycleError(
-                    f"{path}:{lineno}: expected numeric time_s and gear, got {','.join(row)}"
-                ) from None
-            if not np.isfinite(t) or not gf.is_integer() or not 0 <= gf <= n_gears:
-                raise CycleError(
-                    f"{path}:{lineno}: gear {row[gi].strip()} is not a whole number in 0..{n_gears}"
+                    f"{path}:{lineno}: header must contain time_s and gear, got {_cut(','.join(header), 80)}"
                 )
-            if times and t <= times[-1]:
-                raise CycleError(f"{path}:{lineno}: time {t:g} does not increase (previous {times[-1]:g})")
-            times.append(t)
-            gears.append(int(gf))
+            for col in ("time_s", "gear"):
+                if header.count(col) > 1:
+                    raise CycleError(f"{path}:{lineno}: column {col!r} appears twice in the header")
+            ti, gi = header.index("time_s"), header.index("gear")
+            continue
+        if len(row) <= max(ti, gi):
+            raise CycleError(f"{path}:{lineno}: expected {len(header)} fields, got {len(row)}")
+        t_text, g_text = row[ti].strip(), row[gi].strip()
+        try:
+            t = float(t_text)
+        except ValueError:
+            raise CycleError(f"{path}:{lineno}: time_s {_cut(t_text)} is not a number") from None
+        if not math.isfinite(t):
+            raise CycleError(f"{path}:{lineno}: time_s is {_clip(t_text)}, expected a finite number")
+        try:
+            gf = float(g_text)
+        except ValueError:
+            raise CycleError(f"{path}:{lineno}: gear {_cut(g_text)} is not a number") from None
+        if not math.isfinite(gf):
+            raise CycleError(
+                f"{path}:{lineno}: gear is {_clip(g_text)}, expected a whole number in 0..{n_gears}"
+            )
+        if not gf.is_integer() or not 0 <= gf <= n_gears:
+            raise CycleError(f"{path}:{lineno}: gear {_clip(g_text)} is not a whole number in 0..{n_gears}")
+        if times and t <= times[-1]:
+            raise CycleError(f"{path}:{lineno}: time {t:g} does not increase (previous {times[-1]:g})")
+        if cycle is not None:
+            t0, t1 = float(cycle.time_s[0]), float(cycle.time_s[-1])
+            if not t0 <= t <= t1:
+                raise CycleError(
+                    f"{path}:{lineno}: time {t:g} s is outside the cycle {cycle.name} ({t0:g} to {t1:g} s)"
+                )
+        times.append(t)
+        gears.append(int(gf))
+    if header is None:
+        raise CycleError(f"{path}: empty file, expected a header time_s,gear and gear samples")
     if len(times) < 1:
-        raise CycleError(f"{path}: no gear samples")
+        raise CycleError(f"{path}: no gear samples after the header")
     g = np.array(gears)
     for k in range(len(g)):
         if g[k] == 0:

@@ -9,19 +9,36 @@ default) and override only what differs.
     >>> p = load_parameters("hofman2011")
     >>> round(p.engine.displacement * 1e3, 2)   # litres
     2.29
+
+A value in a file is a plain number (SI) or a table ``{ value = 3000, unit = "lb", confidence = "..." }``;
+a known unit of the field's dimension is converted to SI (:mod:`vpsim.units`), any other is refused. Files
+are UTF-8 (with or without BOM). Every value must lie in its plausible range, and the engine as a whole must
+be one that exists, which also bounds the work of the generated map (its grid grows with the torque span,
+(peak BMEP - motoring BMEP) x V_d / (2 pi n_r)):
+
+* 1 to 16 cylinders, two- or four-stroke, displacement 0.04 to 16 L (:data:`DISPLACEMENT_RANGE`);
+* full-load BMEP at ambient pressure at most 40 bar, motoring BMEP at 1.25 x the top map speed not below
+  -60 bar (:data:`MAX_FULL_LOAD_BMEP`, :data:`MIN_MOTORING_BMEP`);
+* it can idle: zero torque at 80 rad/s needs an intake pressure between 0 and ambient that the throttle
+  (at most ``max_throttle_area``) can hold; otherwise the forward method's idle throttle is undefined.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .errors import ParameterError
+from .textio import check_path, read_text
+from .units import FIELD_DIMENSIONS, to_si
 
 PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l")
 
@@ -199,16 +216,29 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "engine.min_throttle_area": (0.0, 0.1, True),
     "simulation.idle_fuel_flow": (0.0, 0.1, True),
     "simulation.fuel_density": (0.3, 2.0, False),
-    "simulation.ode_relative_tolerance": (0.0, 0.5, False),
-    "simulation.inverse_max_step": (0.0, 100.0, False),
+    "simulation.ode_relative_tolerance": (1e-10, 0.5, True),
+    "simulation.inverse_max_step": (1e-3, 100.0, True),
     "simulation.fuel_cutoff_speed": (0.0, 2000.0, True),
     "vehicle.road_load_a": (0.0, 1.0e4, True),
     "vehicle.road_load_b": (-1.0e3, 1.0e3, True),
     "vehicle.road_load_c": (0.0, 100.0, True),
     "engine.accessory_power": (0.0, 1.0e5, True),
 }
+# Whole numbers: (low, high). Production piston engines have 1 to 16 cylinders and are two-stroke (1
+# revolution per cycle) or four-stroke (2); Newton converges in a handful of iterations or not at all.
+_INT_RANGES: dict[str, tuple[int, int]] = {
+    "engine.cylinders": (1, 16),
+    "engine.revolutions_per_cycle": (1, 2),
+}
+_MAX_LIST = 20  # gears of a gearbox (heavy trucks have up to 18)
+_LIST_LENGTHS = {"engine.map_speed_range": 2}
+# Derived engine limits (SI), from real engines; together they bound the generated map's grid (its torque
+# span is (peak BMEP - motoring BMEP) x V_d / (2 pi n_r)), so memory and time cannot grow with a typo.
+DISPLACEMENT_RANGE = (0.04e-3, 16.0e-3)  # m^3: a 40 cc moped engine to a 16 L truck engine
+MAX_FULL_LOAD_BMEP = 40.0e5  # Pa: production SI engines reach about 25-30 bar (turbocharged)
+MIN_MOTORING_BMEP = -60.0e5  # Pa: friction + pumping at the top of the map, real engines -2 to -6 bar
+IDLE_CHECK_SPEED = 80.0  # rad/s: the idle speed of the methods (vpsim.model.record.IDLE_SPEED)
 _EFFICIENCIES = ("transmission.efficiency", "engine.thermal_efficiency")
-_POSITIVE_INTS = ("engine.cylinders", "engine.revolutions_per_cycle")
 # fields of earlier versions that no longer exist: read and ignored, with the reason
 _RETIRED = {
     "simulation.newton_max_iterations": "the FQM's Newton solve always converges to 1e-12 (at most 30 iterations)",
@@ -221,32 +251,90 @@ def _fmt_range(key: str) -> str:
     return f"{'[' if inc else '('}{lo:g}, {hi:g}]"
 
 
-def _coerce(sec: str, name: str, value: Any, where: str) -> Any:
-    """Turn a TOML value into the field's Python type, with a clear error."""
-    key = f"{sec}.{name}"
+def _coerce(sec: str, name: str, value: Any, where: str, unit: Any = None) -> Any:
+    """Turn a TOML value into the field's Python type (in SI, converting ``unit``), with a clear error."""
+    key = f"{sec}.{_FIELD_NAMES.get(name, name)}"
     typ = {f.name: f.type for f in fields(_SECTIONS[sec])}[_ATTR_ALIASES.get(name, name)]
-    try:
-        if typ == "int":
-            if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
-                raise TypeError
+    out = _typed(typ, value)
+    if out is not None and key in _LIST_LENGTHS and len(out) != _LIST_LENGTHS[key]:
+        out = None
+    if out is None:
+        raise ParameterError(f"{where}: {key} = {_short(value)} is not a {_describe(typ, key)}")
+    if unit is not None:
+        out = _convert(key, out, unit, where)
+    return out
+
+
+def _is_number(v: Any) -> bool:
+    """A real number (Python or NumPy), not a boolean."""
+    return isinstance(v, numbers.Real) and not isinstance(v, bool | np.bool_)
+
+
+def _typed(typ: str, value: Any) -> Any:
+    """``value`` as the field type ``typ`` ("int", "float", "tuple[...]"), or None if it is not one."""
+    if typ == "int":
+        if not _is_number(value):
+            return None
+        if isinstance(value, numbers.Integral):
             return int(value)
-        if typ == "float":
-            if isinstance(value, bool):
-                raise TypeError
+        f = float(value)
+        return int(f) if f.is_integer() else None
+    if typ == "float":
+        if not _is_number(value):
+            return None
+        try:
             return float(value)
-        if typ.startswith("tuple"):
-            if not isinstance(value, list | tuple) or not value:
-                raise TypeError
-            return tuple(float(v) for v in value if not isinstance(v, bool))
-    except (TypeError, ValueError):
-        pass
-    else:
-        return value
-    raise ParameterError(f"{where}: {key} = {value!r} is not a {_describe(typ)}")
+        except OverflowError:  # an integer beyond the float range: reported by the range check
+            return math.inf if value > 0 else -math.inf
+    if typ.startswith("tuple"):
+        if isinstance(value, np.ndarray) and value.ndim == 1:
+            value = value.tolist()
+        if not isinstance(value, list | tuple) or not value or not all(_is_number(v) for v in value):
+            return None
+        if len(value) > _MAX_LIST:
+            return None
+        out = []
+        for v in value:
+            try:
+                out.append(float(v))
+            except OverflowError:
+                out.append(math.inf if v > 0 else -math.inf)
+        return tuple(out)
+    return None
 
 
-def _describe(typ: str) -> str:
-    return {"int": "whole number", "float": "number"}.get(typ, "non-empty list of numbers")
+def _convert(key: str, value: Any, unit: Any, where: str) -> Any:
+    """``value`` given in ``unit`` converted to the SI unit of field ``key``."""
+    dim = FIELD_DIMENSIONS.get(key if not key.startswith("drivers.") else "drivers." + key.rsplit(".", 1)[1])
+    if not isinstance(unit, str):
+        raise ParameterError(f'{where}: {key}: unit = {_short(unit)} must be a text such as "kg"')
+    if dim is None:
+        raise ParameterError(f"{where}: {key}: this field takes no unit")
+    try:
+        if isinstance(value, tuple):
+            return tuple(to_si(v, unit, dim) for v in value)
+        if isinstance(value, int) and not isinstance(value, bool):
+            if to_si(1.0, unit, dim) != 1.0:  # counts take only dimensionless units
+                raise ValueError(f"unit {unit!r} cannot scale a whole number")
+            return value
+        return to_si(value, unit, dim)
+    except ValueError as exc:
+        raise ParameterError(f"{where}: {key}: {exc}") from None
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    """A value's repr for a one-line message, cut to ``limit`` characters."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _describe(typ: str, key: str = "") -> str:
+    if key in _LIST_LENGTHS:
+        n = _LIST_LENGTHS[key]
+        return f"list of {n} numbers ([low, high])" if n == 2 else f"list of {n} numbers"
+    if typ.startswith("tuple"):
+        return f"non-empty list of at most {_MAX_LIST} numbers (true/false and text are not numbers)"
+    return {"int": "whole number", "float": "number"}.get(typ, "number")
 
 
 def validate(p: Parameters, where: str = "parameters") -> None:
@@ -261,10 +349,14 @@ def validate(p: Parameters, where: str = "parameters") -> None:
         v = flat[key]
         if not 0.0 < v <= 1.0:
             raise ParameterError(f"{where}: {key} = {v:g} is outside (0, 1]; an efficiency is a fraction")
-    for key in _POSITIVE_INTS:
+    for key, (lo, hi) in _INT_RANGES.items():
         v = flat[key]
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise ParameterError(f"{where}: {key} = {_short(v)} is not a whole number")
         if v < 1:
             raise ParameterError(f"{where}: {key} = {v} must be a positive whole number")
+        if v > hi:
+            raise ParameterError(f"{where}: {key} = {_short(v)} is outside the plausible range [{lo}, {hi}]")
     for key, (lo, hi, inc) in _RANGES.items():
         v = flat[key]
         ok = (v >= lo if inc else v > lo) and v <= hi
@@ -279,9 +371,19 @@ def validate(p: Parameters, where: str = "parameters") -> None:
             raise ParameterError(
                 f"{where}: {key} = {v:g} is outside the plausible range {_fmt_range(key)}{hint}"
             )
+    if len(p.transmission.gearbox_ratios) > _MAX_LIST:
+        raise ParameterError(
+            f"{where}: transmission.gearbox_ratios has {len(p.transmission.gearbox_ratios)} gears, "
+            f"more than {_MAX_LIST}"
+        )
     for i, g in enumerate(p.transmission.gearbox_ratios, 1):
         if not 0.0 < g <= 20.0:
             raise ParameterError(f"{where}: transmission.gearbox_ratios[{i}] = {g:g} is outside (0, 20]")
+    if len(p.engine.map_speed_range) != 2:
+        raise ParameterError(
+            f"{where}: engine.map_speed_range has {len(p.engine.map_speed_range)} values, "
+            "expected [low, high]"
+        )
     lo, hi = p.engine.map_speed_range
     if not 0.0 < lo < hi <= 2000.0:
         raise ParameterError(
@@ -291,6 +393,7 @@ def validate(p: Parameters, where: str = "parameters") -> None:
         raise ParameterError(
             f"{where}: engine.min_throttle_area must be smaller than engine.max_throttle_area"
         )
+    _check_engine(p.engine, where)
     for k, d in p.drivers.items():
         for f in fields(d):
             v = getattr(d, f.name)
@@ -298,15 +401,77 @@ def validate(p: Parameters, where: str = "parameters") -> None:
                 raise ParameterError(f"{where}: drivers.{k}.{f.name} = {v!r} must be a positive number")
 
 
-def _raw_value(entry: Any) -> tuple[Any, str]:
+_ENTRY_KEYS = ("value", "unit", "confidence", "note")
+
+
+def _check_engine(eng: Engine, where: str) -> None:
+    """The engine as a whole: displacement, peak and motoring BMEP, and that it can idle (module limits)."""
+    from .model import engine as en
+    from .model.record import engine_record
+
+    vd = eng.displacement
+    lo, hi = DISPLACEMENT_RANGE
+    if not lo <= vd <= hi:
+        raise ParameterError(
+            f"{where}: displacement {vd * 1e3:.4g} L (engine.cylinders {eng.cylinders} x pi/4 x "
+            f"engine.bore {eng.bore:g}^2 x engine.stroke {eng.stroke:g} m) is outside the plausible range "
+            f"[{lo * 1e3:g}, {hi * 1e3:g}] L"
+        )
+    w_top = 1.25 * eng.map_speed_range[1]
+    with np.errstate(all="ignore"):
+        c = engine_record(eng)
+        peak = float(en.bmep_from_pressure(eng.ambient_pressure, 0.0, c))
+        motoring = float(en.bmep_from_pressure(0.0, w_top, c))
+        p_idle = float(en.intake_pressure_for_torque(0.0, IDLE_CHECK_SPEED, c))
+    if not math.isfinite(peak) or peak > MAX_FULL_LOAD_BMEP:
+        raise ParameterError(
+            f"{where}: the engine's full-load BMEP would be {peak / 1e5:.4g} bar at ambient pressure, more "
+            f"than the {MAX_FULL_LOAD_BMEP / 1e5:g} bar of any production engine; check engine."
+            "fuel_heating_value, thermal_efficiency, stoich_air_fuel_ratio, lambda, air_charge_slope"
+        )
+    if not math.isfinite(motoring) or motoring < MIN_MOTORING_BMEP:
+        raise ParameterError(
+            f"{where}: the engine's motoring BMEP would be {motoring / 1e5:.4g} bar at {w_top:g} rad/s "
+            f"(friction and pumping), below {MIN_MOTORING_BMEP / 1e5:g} bar; check engine."
+            f"friction_coefficient {eng.friction_coefficient:g}, boost_layout {eng.boost_layout:g}, "
+            f"stroke {eng.stroke:g} m and map_speed_range"
+        )
+    pa = eng.ambient_pressure
+    ok = math.isfinite(p_idle) and 0.0 < p_idle < pa
+    if ok:
+        with np.errstate(all="ignore"):
+            flow = float(en.cylinder_air_flow(p_idle, IDLE_CHECK_SPEED, c))
+            unit = float(en.throttle_mass_flow(1.0, p_idle, c))
+        area = flow / unit if unit > 0 else math.inf
+        ok = math.isfinite(area) and 0.0 < area <= eng.max_throttle_area
+    if not ok:
+        raise ParameterError(
+            f"{where}: the engine cannot idle: zero torque at {IDLE_CHECK_SPEED:g} rad/s needs an intake "
+            f"pressure of {p_idle:.4g} Pa with ambient {pa:.4g} Pa (engine.air_charge_slope "
+            f"{eng.air_charge_slope:g}, air_charge_intercept {eng.air_charge_intercept:g} Pa, "
+            f"exhaust_pressure {eng.exhaust_pressure:.4g} Pa), which the throttle cannot hold between 0 and "
+            "the ambient pressure"
+        )
+
+
+def _raw_value(entry: Any, key: str = "", where: str = "") -> tuple[Any, str, Any]:
+    """(value, provenance note, unit or None) of a plain value or a ``{ value = ..., unit = ... }`` table."""
     if isinstance(entry, dict):
         if "value" not in entry:
-            raise KeyError("value")
+            raise ParameterError(f"{where}: {key} is a table without a 'value'")
+        extra = sorted(set(entry) - set(_ENTRY_KEYS))
+        if extra:
+            raise ParameterError(
+                f"{where}: {key}: unknown key {extra[0]!r} in the table; expected {', '.join(_ENTRY_KEYS)}"
+            )
+        for k in ("confidence", "note"):
+            if k in entry and not isinstance(entry[k], str):
+                raise ParameterError(f"{where}: {key}: {k} = {_short(entry[k])} must be a text")
         note = entry.get("confidence", "user")
         if "note" in entry:
             note += f" ({entry['note']})"
-        return entry["value"], note
-    return entry, "user"
+        return entry["value"], note, entry.get("unit")
+    return entry, "user", None
 
 
 def _from_mapping(data: dict[str, Any], where: str, base: Parameters | None) -> Parameters:
@@ -336,11 +501,8 @@ def _from_mapping(data: dict[str, Any], where: str, base: Parameters | None) -> 
                     f"{where}: unknown field {sec}.{name}; expected one of "
                     f"{', '.join(sorted(_FIELD_NAMES.get(a, a) for a in attrs))}"
                 )
-            try:
-                value, note = _raw_value(entry)
-            except KeyError:
-                raise ParameterError(f"{where}: {sec}.{name} is a table without a 'value'") from None
-            kw[attr] = _coerce(sec, name, value, where)
+            value, note, unit = _raw_value(entry, f"{sec}.{name}", where)
+            kw[attr] = _coerce(sec, name, value, where, unit)
             provenance[f"{sec}.{name}"] = note
         if base is not None:
             sections[sec] = replace(getattr(base, sec), **kw)
@@ -364,10 +526,15 @@ def _from_mapping(data: dict[str, Any], where: str, base: Parameters | None) -> 
                 raise ParameterError(
                     f"{where}: unknown field drivers.{k}.{name}; expected {', '.join(sorted(dnames))}"
                 )
-            value, note = _raw_value(e)
+            value, note, unit = _raw_value(e, f"drivers.{k}.{name}", where)
             if isinstance(value, bool) or not isinstance(value, int | float):
-                raise ParameterError(f"{where}: drivers.{k}.{name} = {value!r} is not a number")
-            kw[name] = float(value)
+                raise ParameterError(f"{where}: drivers.{k}.{name} = {_short(value)} is not a number")
+            try:
+                kw[name] = float(value)
+            except OverflowError:
+                kw[name] = math.inf
+            if unit is not None:
+                kw[name] = _convert(f"drivers.{k}.{name}", kw[name], unit, where)
             provenance[f"drivers.{k}.{name}"] = note
         if str(k) in drivers:
             drivers[str(k)] = replace(drivers[str(k)], **kw)
@@ -396,17 +563,14 @@ def _preset(name: str) -> Parameters:
 
 
 def read_toml(path: Path, error: type[Exception]) -> dict[str, Any]:
-    """Parse a TOML file; a missing, unreadable or malformed file raises ``error`` with a one-line message."""
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise error(f"{path}: no such file") from None
-    except OSError as exc:
-        raise error(f"{path}: cannot read ({exc.strerror})") from None
+    """Parse a TOML file; a missing, unreadable, non-UTF-8 or malformed file raises ``error`` (one line)."""
+    text = read_text(path, error, what="TOML file")
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise error(f"{path}: not valid TOML ({exc})") from None
+    except RecursionError:
+        raise error(f"{path}: not valid TOML (arrays or tables nested too deeply)") from None
 
 
 def load_parameters(source: str | Path = "hofman2011") -> Parameters:
@@ -418,7 +582,11 @@ def load_parameters(source: str | Path = "hofman2011") -> Parameters:
     """
     if isinstance(source, str) and source in PRESETS:
         return _preset(source)
-    path = Path(source)
+    if not str(source).strip():
+        raise ParameterError(
+            f"empty parameter set name; available presets: {', '.join(PRESETS)} (or a .toml file)"
+        )
+    path = check_path(source, ParameterError, "parameter file")
     if not path.suffix and not path.exists():
         raise ParameterError(
             f"unknown preset {str(source)!r}; available presets: {', '.join(PRESETS)} (or a .toml file)"

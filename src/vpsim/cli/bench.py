@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-import json
+import math
 from pathlib import Path
 
 import click
 
 from ..errors import VpsimError
+from ._output import dumps
 from .main import cli
 
 
@@ -44,7 +45,7 @@ def bench(quick, json_path, no_peer, tiny):
         profile, peer=not no_peer, progress=lambda line: click.echo(f"  {line}", err=True)
     )
     if json_path:
-        path.write_text(json.dumps(report, indent=2, default=_jsonable) + "\n")
+        path.write_text(dumps(report, indent=2, default=_jsonable) + "\n")
     click.echo(format_report(report))
     if json_path:
         click.echo(f"wrote {json_path}")
@@ -52,6 +53,7 @@ def bench(quick, json_path, no_peer, tiny):
 
 def _jsonable(obj):
     try:
-        return float(obj)
+        x = float(obj)
     except (TypeError, ValueError):
         return str(obj)
+    return x if math.isfinite(x) else None

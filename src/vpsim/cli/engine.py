@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import math
 
 import click
 
+from ..errors import VpsimError
+from ._output import dumps
 from .main import cli
 
 
@@ -39,9 +40,12 @@ def import_engine(file, out, as_json):
     e = load_engine(file)
     s = e.summary()
     if out:
-        e.write_json(out)
+        try:
+            e.write_json(out)
+        except OSError as exc:
+            raise VpsimError(f"--out {out}: cannot write ({exc.strerror or exc})") from None
     if as_json:
-        click.echo(json.dumps({**s, "written": out}))
+        click.echo(dumps({**s, "written": out}))
         return
     w_lo, w_hi, n_w = s["speed_grid_radps"]
     t_lo, t_hi, n_t = s["torque_grid_nm"]
@@ -60,10 +64,12 @@ def import_engine(file, out, as_json):
     )
     if s["min_bsfc_g_per_kwh"] is not None:
         click.echo(
-            f"  min BSFC       {s['min_bsfc_g_per_kwh']:.1f} g/kWh at {s['min_bsfc_torque_nm']:.1f} N m, "
+            f"  min BSFC       {s['min_bsfc_g_per_kwh']:.5g} g/kWh at {s['min_bsfc_torque_nm']:.1f} N m, "
             f"{s['min_bsfc_speed_radps']:.1f} rad/s"
         )
     if s["full_load_above_grid"]:
         click.echo("  note: the full-load curve rises above the highest torque column (extrapolated there)")
+    for w in s["warnings"]:
+        click.echo(f"  warning: {w}")
     if out:
         click.echo(f"  wrote {out}")

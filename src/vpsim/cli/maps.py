@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import click
 
 from .main import cli
+from .simulate import _out_dir
 
 
 @cli.command()
@@ -24,6 +23,6 @@ def maps(out, vehicle):
     from ..plots import write_map_figures
 
     params = load_parameters(vehicle)
-    written = write_map_figures(params.engine, Path(out))
+    written = write_map_figures(params.engine, _out_dir(out))
     for p in written:
         click.echo(f"wrote {p}")

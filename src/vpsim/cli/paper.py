@@ -9,7 +9,9 @@ from pathlib import Path
 import click
 
 from ..errors import VpsimError
+from ._output import number
 from .main import cli
+from .simulate import _out_dir
 
 
 @cli.command()
@@ -49,6 +51,7 @@ def paper(out, vehicle, advisor_dir, repeats):
     from ..params import load_parameters
 
     params = load_parameters(vehicle)  # bad input: one line, before anything is announced
+    _out_dir(out)  # and if --out cannot be written
     start = time.perf_counter()
     before = _files(out)
     echo(
@@ -74,7 +77,8 @@ def paper(out, vehicle, advisor_dir, repeats):
     for row in result.table2:
         click.echo(
             f"  {row['method']:<9} driver {row['driver']:<4} {row['cycle']:<6} "
-            f"{row['fuel_l_per_100km']:8.3f} L/100 km  {row['diff_vs_bqm_pct']:+7.2f} %"
+            f"{number(row['fuel_l_per_100km'], '8.3f', 'fuel_l_per_100km')} L/100 km  "
+            f"{number(row['diff_vs_bqm_pct'], '+7.2f', 'diff_vs_bqm_pct')} %"
         )
     after = _files(out)
     written = {p for p, stamp in after.items() if before.get(p) != stamp} | {Path(p) for p in result.files}

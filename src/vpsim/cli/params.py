@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import json
-
 import click
 
+from ._output import dumps
 from .main import cli
 
 
@@ -21,9 +20,7 @@ def params_cmd(vehicle, as_json):
     p = load_parameters(vehicle)
     flat = p.flat()
     if as_json:
-        click.echo(
-            json.dumps({k: {"value": v, "provenance": p.provenance.get(k, "")} for k, v in flat.items()})
-        )
+        click.echo(dumps({k: {"value": v, "provenance": p.provenance.get(k, "")} for k, v in flat.items()}))
         return
     click.echo(f"parameter set {p.name}" + (f"\n  {p.citation}" if p.citation else ""))
     click.echo(

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
 
 from ..errors import VpsimError
+from ._output import dumps, number
 from .main import cli
+from .simulate import _out_dir
+
+# a scaled engine whose displacement differs more than this from the measured file's fc_disp is flagged
+DISPLACEMENT_TOLERANCE = 0.10
 
 
 def _names(text: str, what: str) -> list[str]:
@@ -16,6 +20,20 @@ def _names(text: str, what: str) -> list[str]:
     if not names:
         raise VpsimError(f"{what}: give at least one cycle name, e.g. nedc,ftp75")
     return names
+
+
+def _check_cycles(names: list[str], what: str) -> None:
+    """Each cycle loads and drives some distance (fuel per distance is undefined otherwise)."""
+    from ..cycles import MIN_CONSUMPTION_DISTANCE_M, load_cycle
+
+    for name in names:
+        cyc = load_cycle(name)
+        if not cyc.distance_m >= MIN_CONSUMPTION_DISTANCE_M:
+            raise VpsimError(
+                f"{what}: cycle {name} drives no distance ({cyc.distance_m:.3g} m), so its fuel per 100 km "
+                "is undefined; "
+                "give a cycle that moves"
+            )
 
 
 @cli.command()
@@ -91,16 +109,30 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
     announce_compilation()
     cycle_names = _names(cycles, "--cycles")
     cal_cycles = _names(calibration_cycles, "--calibration-cycles")
+    _check_cycles(cycle_names, "--cycles")
+    if calibrate:
+        _check_cycles(cal_cycles, "--calibration-cycles")
     eng = load_engine(measured)
+    base = load_parameters(vehicle)
+    eng.check_gasoline(base.simulation.fuel_density)  # litres of gasoline only compare with gasoline
     params = scaled_parameters(
-        load_parameters(vehicle),
+        base,
         bore=bore,
         stroke=stroke,
         cylinders=cylinders,
         inertia=eng.inertia if inertia is None else inertia,
     )
+    warnings = eng.sanity_warnings()
+    vd = params.engine.displacement
+    if abs(vd / eng.displacement - 1.0) > DISPLACEMENT_TOLERANCE:
+        warnings.append(
+            f"the scaled displacement {vd * 1e3:.3f} L (B {bore:g} m, S {stroke:g} m, z {cylinders}) differs "
+            f"from the measured engine's fc_disp {eng.displacement * 1e3:.3f} L by "
+            f"{100 * (vd / eng.displacement - 1.0):+.0f} %"
+        )
     for c in dict.fromkeys(cycle_names + (cal_cycles if calibrate else [])):
         load_cycle(c)  # bad input is one line and nothing else, before any announcement
+    path = _out_dir(out)
     echo(
         f"vpsim scaling: {Path(measured).name} against the scaled model, fuel on {', '.join(cycle_names)}"
         + (f", calibrating on {', '.join(cal_cycles)}" if calibrate else "")
@@ -114,8 +146,6 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
         for c in cycle_names
     ]
 
-    path = Path(out)
-    path.mkdir(parents=True, exist_ok=True)
     fig = plot_figure7(
         [cmp],
         path / "figure7.png",
@@ -128,9 +158,9 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
     extra = [k for k in rows[0] if k not in TABLE4_COLUMNS]
     write_csv(path / "fuel.csv", rows, list(TABLE4_COLUMNS) + extra)
     stats = {"nodes": cmp.stats(), **{f"time_on_{c.cycle}": c.point_stats for c in cells}}
-    (path / "map_stats.json").write_text(json.dumps(stats, indent=2) + "\n")
+    (path / "map_stats.json").write_text(dumps(stats, indent=2) + "\n")
     if cal is not None:
-        (path / "calibration.json").write_text(json.dumps(cal.as_dict(), indent=2) + "\n")
+        (path / "calibration.json").write_text(dumps(cal.as_dict(), indent=2) + "\n")
 
     e = params.engine
     click.echo(
@@ -139,22 +169,30 @@ def scaling(measured, bore, stroke, cylinders, inertia, vehicle, cycles, calibra
     )
     s = cmp.stats()
     click.echo(
-        f"  map: |generated/measured - 1| median {s['median_abs_pct']:.1f} %, "
-        f"90th percentile {s['p90_abs_pct']:.1f} % over {s['n']} measured nodes"
+        f"  map: |generated/measured - 1| median {number(s['median_abs_pct'], '.1f')} %, "
+        f"90th percentile {number(s['p90_abs_pct'], '.1f')} % over {s['n']} measured nodes"
     )
     for c in cells:
         line = (
-            f"  {c.cycle:8s} measured {c.measured_l_per_100km:6.3f}  "
-            f"generated {c.generated_l_per_100km:6.3f} L/100 km ({c.error_pct:+.1f} %)"
+            f"  {c.cycle:8s} measured {number(c.measured_l_per_100km, '6.3f', 'fuel_l_per_100km')}  "
+            f"generated {number(c.generated_l_per_100km, '6.3f', 'fuel_l_per_100km')} L/100 km "
+            f"({number(c.error_pct, '+.1f')} %)"
         )
         if cal is not None:
-            line += f"  calibrated {c.calibrated_l_per_100km:6.3f} ({c.calibrated_error_pct:+.1f} %)"
-        click.echo(line + f"; {100 * c.coverage['outside']:.1f} % of the time outside the measured map")
+            line += (
+                f"  calibrated {number(c.calibrated_l_per_100km, '6.3f', 'fuel_l_per_100km')} "
+                f"({number(c.calibrated_error_pct, '+.1f')} %)"
+            )
+        outside = number(100 * c.coverage["outside"], ".1f")
+        click.echo(line + f"; {outside} % of the time outside the measured map")
     if cal is not None:
         for k, n in enumerate(cal.names):
-            click.echo(f"  fitted {n} = {cal.values[k]:.4g} +- {cal.std_errors[k]:.2g}")
+            err = number(cal.std_errors[k], ".2g", "std_error")
+            click.echo(f"  fitted {n} = {number(cal.values[k], '.4g')} +- {err}")
         if cal.message:
             click.echo(f"  note: {cal.message}")
+    for w in warnings:
+        click.echo(f"  warning: {w}")
     names = ["figure7.png", "map_comparison.csv", "map_stats.json", "fuel.csv"]
     names += ["calibration.json"] if cal is not None else []
     click.echo(f"  wrote {path / names[0]}, " + ", ".join(names[1:]))

@@ -2,13 +2,32 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
 
 from ..errors import VpsimError
+from ._output import dumps, number
 from .main import cli
+
+
+def _ok(text: str) -> bool:
+    return not text.startswith("undefined")
+
+
+def _out_dir(out: str) -> Path:
+    """The --out folder, created; one line when it cannot be (a file there, no permission)."""
+    path = Path(out)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / ".vpsim-write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except FileExistsError:
+        raise VpsimError(f"--out {out}: a file is in the way, expected a folder") from None
+    except OSError as exc:
+        raise VpsimError(f"--out {out}: cannot write there ({exc.strerror or exc})") from None
+    return path
 
 
 @cli.command()
@@ -63,7 +82,9 @@ from .main import cli
 )
 def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, out):
     """Simulate a vehicle on a drive cycle and report its fuel consumption."""
-    from ..cycles import load_cycle
+    from ..cycles import MIN_CONSUMPTION_DISTANCE_M, load_cycle
+    from ..gears import load_schedule
+    from ..params import load_parameters
     from ..simulation import simulate as run
     from .notices import announce_compilation
 
@@ -74,16 +95,22 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
             "--driver applies to --method forward or inverse; the backward method tracks exactly"
         )
     cyc = load_cycle(cycle, speed_unit=speed_unit)
-    result = run(cyc, method=method, params=vehicle, driver=driver, mode=mode, gears=gears)
+    params = load_parameters(vehicle)
+    schedule = None
+    if gears is not None:  # read here so that gear times are checked against the cycle
+        schedule = load_schedule(gears, params.transmission.n_gears, cycle=cyc)
+    if out:
+        path = _out_dir(out)
+    result = run(cyc, method=method, params=params, driver=driver, mode=mode, gears=schedule)
     summary = result.summary()
-    if summary.get("driver") is not None:  # the driver is a number (1 or 2), in JSON too
-        summary["driver"] = int(summary["driver"])
+    if not cyc.distance_m >= MIN_CONSUMPTION_DISTANCE_M:  # a method's creep is no basis for L/100 km
+        summary["fuel_l_per_100km"] = float("nan")
     written = []
     if out:
-        path = Path(out)
-        path.mkdir(parents=True, exist_ok=True)
-        result.to_dataframe().to_csv(path / "timeseries.csv", index=False, float_format="%.10g")
-        (path / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        # an undefined sample (intake pressure with the engine decoupled, say) is an empty cell, never nan/inf
+        df = result.to_dataframe().replace([float("inf"), float("-inf")], float("nan"))
+        df.to_csv(path / "timeseries.csv", index=False, na_rep="", float_format="%.10g")
+        (path / "summary.json").write_text(dumps(summary, indent=2) + "\n")
         import matplotlib
 
         matplotlib.use("Agg")  # the command line draws into files; the library leaves the backend alone
@@ -94,15 +121,16 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         plt.close(fig)
         written = [path / "timeseries.csv", path / "summary.json", path / "timeseries.png"]
     if as_json:
-        click.echo(json.dumps(summary))
+        click.echo(dumps(summary))
         return
     click.echo(
         f"{method} on {result.cycle} ({result.mode} mode, vehicle {result.vehicle}"
         f"{'' if result.driver is None else ', driver ' + result.driver})"
     )
-    click.echo(f"  fuel consumption  {result.fuel_l_per_100km:8.3f} L/100 km")
-    click.echo(f"  fuel              {result.fuel_kg * 1e3:8.1f} g")
-    click.echo(f"  distance          {result.distance_km:8.3f} km")
+    lp100 = number(summary["fuel_l_per_100km"], "8.3f", "fuel_l_per_100km")
+    click.echo(f"  fuel consumption  {lp100}{' L/100 km' if _ok(lp100) else ''}")
+    click.echo(f"  fuel              {number(result.fuel_kg * 1e3, '8.1f', 'fuel_kg')} g")
+    click.echo(f"  distance          {number(result.distance_km, '8.3f', 'distance_km')} km")
     click.echo(f"  CPU time          {result.cpu_time_s * 1e3:8.2f} ms ({result.steps} steps)")
     dev = result.deviations
     click.echo(
@@ -118,9 +146,8 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         + (f" ({_physics(dev)})" if dev.outside_physics_s else "")
     )
     if result.energy is not None:
-        click.echo(
-            f"  energy balance    residual {result.energy.relative_residual:.1e} of the indicated work"
-        )
+        res = number(summary["energy_relative_residual"], ".1e", "energy_relative_residual")
+        click.echo(f"  energy balance    residual {res}{' of the indicated work' if _ok(res) else ''}")
     for note in result.notes:
         click.echo(f"  note: {note}")
     for p in written:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import sys
 import time
 
@@ -14,8 +15,9 @@ from .main import cli
 class _Progress:
     """A one-line progress bar on stderr with rate and ETA (a line every few seconds when not a terminal)."""
 
-    def __init__(self, enabled: bool = True, width: int = 28):
+    def __init__(self, enabled: bool = True, width: int = 28, banner: str = ""):
         self.enabled = enabled
+        self.banner = banner  # printed when the work starts, so that an error before it stays one line
         self.width = width
         self.tty = sys.stderr.isatty()
         self.t0 = None
@@ -23,6 +25,9 @@ class _Progress:
         self.total = 0
 
     def __call__(self, done: int, total: int) -> None:
+        if self.enabled and self.banner:
+            click.echo(self.banner, err=True)
+            self.banner = ""
         if not self.enabled or total == 0:
             return
         self.total = total
@@ -101,6 +106,9 @@ def _announce_compilation(methods, quiet: bool) -> None:
         announce_compilation()  # anything compiled in this process after all is announced when it starts
 
 
+_ADDRESS = r"([a-z][a-z0-9+.-]*://)?\[?[\w.:-]+\]?:\d{1,5}"  # a Dask scheduler: [proto://]host:port
+
+
 @cli.command()
 @click.argument("spec", type=click.Path(dir_okay=False))
 @click.option(
@@ -157,9 +165,23 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
         raise VpsimError("--scheduler and --local-cluster exclude each other")
     if workers is not None and (scheduler is not None or local_cluster is not None):
         raise VpsimError("--workers applies to local processes; with a Dask cluster its workers do the work")
+    if workers is not None and workers < 1:
+        raise VpsimError(f"--workers {workers}: give at least 1")
+    if local_cluster is not None and local_cluster < 1:
+        raise VpsimError(f"--local-cluster {local_cluster}: give at least 1")
+    from ..sweep.runner import max_local_workers
+
+    for opt, n in (("--workers", workers), ("--local-cluster", local_cluster)):
+        if n is not None and n > max_local_workers():
+            raise VpsimError(
+                f"{opt} {n}: at most {max_local_workers()} local processes (4 per core of this machine)"
+            )
+    if chunk_size is not None and chunk_size < 1:
+        raise VpsimError(f"--chunk-size {chunk_size}: give at least 1 row")
+    if scheduler is not None and not re.fullmatch(_ADDRESS, scheduler):
+        raise VpsimError(f"--scheduler {scheduler!r}: expected an address such as tcp://host:8786")
     sp = load_spec(spec)
     fmt = _check_requirements(out, fmt, resume, cluster=scheduler is not None or local_cluster is not None)
-    bar = _Progress(enabled=not quiet)
     where = (
         f"Dask scheduler {scheduler}"
         if scheduler
@@ -175,13 +197,12 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
             )
         )
     )
-    if not quiet:
-        extra = " (resuming)" if resume else ""
-        click.echo(
-            f"sweep {sp.name!r}: {sp.n_designs} design points{' and the baseline' if sp.baseline else ''} "
-            f"x {len(sp.combos)} cycle/method/driver combinations on {where}{extra}",
-            err=True,
-        )
+    extra = " (resuming)" if resume else ""
+    bar = _Progress(
+        enabled=not quiet,
+        banner=f"sweep {sp.name!r}: {sp.n_designs} design points{' and the baseline' if sp.baseline else ''} "
+        f"x {len(sp.combos)} cycle/method/driver combinations on {where}{extra}",
+    )
     _announce_compilation(sp.methods, quiet)
     try:
         run = run_sweep(
@@ -204,6 +225,11 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
         )
         raise
     bar.close()
+    if run.damaged:
+        click.echo(
+            f"found {len(run.damaged)} damaged result part(s) in {out} and computed their rows again: "
+            f"{run.damaged[0]}" + (f" (and {len(run.damaged) - 1} more)" if len(run.damaged) > 1 else "")
+        )
     click.echo(
         f"{run.n_rows} rows: {run.n_computed} computed now, {run.n_skipped} already present, "
         f"{run.n_failed} failed (see the error column); {run.elapsed_s:.1f} s"

@@ -13,7 +13,9 @@ where each number came from.
 from __future__ import annotations
 
 import csv
+import io
 import math
+from array import array
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -21,12 +23,20 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CycleError
+from ..textio import check_path, read_text
 
 STANDARD_CYCLES = ("nedc", "ftp75", "udds", "hwfet", "us06", "wltc3b")
 _ALIASES = {"wltc": "wltc3b", "wltc_class3b": "wltc3b", "ftp": "ftp75", "ftp-75": "ftp75", "wltc3": "wltc3b"}
 
 _SPEED_UNITS = {"m/s": 1.0, "mps": 1.0, "km/h": 1.0 / 3.6, "kmh": 1.0 / 3.6, "kph": 1.0 / 3.6, "mph": 0.44704}
 _TIME_COLUMNS = ("time_s", "time", "t", "t_s")
+MAX_CYCLE_BYTES = 64 * 1024 * 1024  # a cycle CSV larger than this is refused (a month of 1 Hz samples fits)
+MAX_SPEED_MPS = 200.0  # 720 km/h: faster is a unit slip (speed in km/h declared as m/s) or a broken file
+MAX_TIME_S = 1.0e9  # about 32 years: larger times are not a drive cycle
+MIN_STEP_S = 1.0e-3  # samples closer than 1 ms (1 kHz) are not a drive cycle's: times in ms, or noise
+_DELIMITERS = (",", ";", "\t")
+# fuel per distance (L/100 km) is reported for cycles that drive at least this far; on less it is noise
+MIN_CONSUMPTION_DISTANCE_M = 1.0
 _SPEED_COLUMNS = {
     "speed_mps": "m/s",
     "speed_m_per_s": "m/s",
@@ -156,19 +166,16 @@ def load_cycle(name_or_path: str | Path, *, speed_unit: str | None = None) -> Cy
             cyc.speed_mps,
             source=f"vpsim standard cycle {name} (see cycles/data/SOURCES.md)",
         )
-    path = Path(name_or_path)
-    if not path.exists():
-        if path.suffix == "":
-            raise CycleError(
-                f"unknown cycle {str(name_or_path)!r}; standard cycles: {', '.join(STANDARD_CYCLES)} "
-                "(or a CSV file)"
-            )
-        raise CycleError(f"{path}: no such file")
-    try:
-        with path.open(newline="", encoding="utf-8-sig") as fh:
-            return _read_csv(fh, str(path), speed_unit=speed_unit, name=path.stem)
-    except UnicodeDecodeError:
-        raise CycleError(f"{path}: not a text CSV file") from None
+    if not str(name_or_path).strip():
+        raise CycleError(f"empty cycle name; standard cycles: {', '.join(STANDARD_CYCLES)} (or a CSV file)")
+    path = check_path(name_or_path, CycleError, "cycle file")
+    if not path.exists() and not path.is_symlink() and path.suffix == "":
+        raise CycleError(
+            f"unknown cycle {str(name_or_path)!r}; standard cycles: {', '.join(STANDARD_CYCLES)} "
+            "(or a CSV file)"
+        )
+    text = read_text(path, CycleError, limit=MAX_CYCLE_BYTES, what="cycle CSV file")
+    return _read_csv(text, str(path), speed_unit=speed_unit, name=path.stem)
 
 
 def _uncommented(fh):
@@ -177,21 +184,55 @@ def _uncommented(fh):
         yield "\n" if line.lstrip().startswith("#") else line
 
 
+def _sniff_delimiter(lines) -> str:
+    """The delimiter of the first non-comment line: ``,``, else ``;`` or tab if that line holds one."""
+    for line in lines:
+        if line.strip() and not line.lstrip().startswith("#"):
+            if "," in line:
+                return ","
+            for d in (";", "\t"):
+                if d in line:
+                    return d
+            return ","
+    return ","
+
+
+def _cut(text: str, limit: int = 40) -> str:
+    """A field of a file as a short repr for a one-line message."""
+    return repr(_clip(text, limit))
+
+
+def _clip(text: str, limit: int = 40) -> str:
+    """A field of a file cut to ``limit`` characters for a one-line message."""
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
 def _read_csv(fh, where: str, *, speed_unit: str | None, name: str) -> Cycle:
     if speed_unit is not None and speed_unit not in _SPEED_UNITS:
         raise CycleError(f"speed unit {speed_unit!r} is not one of {', '.join(_SPEED_UNITS)}")
-    reader = csv.reader(_uncommented(fh))
+    text = fh if isinstance(fh, str) else fh.read()
+    delim = _sniff_delimiter(io.StringIO(text))
+    decimal_comma = delim == ";"  # "1,5" is 1.5 in a semicolon-separated file (European spreadsheets)
+    reader = csv.reader(_uncommented(io.StringIO(text)), delimiter=delim)  # streamed: no list of lines
     header = None
-    times: list[float] = []
-    speeds: list[float] = []
+    times = array("d")
+    speeds = array("d")
     t_col = v_col = -1
     scale = 1.0
-    for row in reader:
+    rows = iter(reader)
+    while True:
+        try:
+            row = next(rows)
+        except StopIteration:
+            break
+        except csv.Error as exc:
+            raise CycleError(f"{where}:{reader.line_num}: malformed CSV ({exc})") from None
         lineno = reader.line_num
         if not row or not "".join(row).strip():
             continue
         if header is None:
             header = [h.strip().lower() for h in row]
+            _check_header(header, where, lineno)
             t_col = next((header.index(c) for c in _TIME_COLUMNS if c in header), -1)
             if t_col < 0:
                 raise CycleError(
@@ -233,17 +274,29 @@ def _read_csv(fh, where: str, *, speed_unit: str | None, name: str) -> Cycle:
         for col, label in ((t_col, "time"), (v_col, "speed")):
             text = row[col].strip()
             try:
-                x = float(text)
+                x = float(text.replace(",", ".") if decimal_comma else text)
             except ValueError:
-                raise CycleError(f"{where}:{lineno}: {label} {text!r} is not a number") from None
+                raise CycleError(f"{where}:{lineno}: {label} {_cut(text)} is not a number") from None
             if not math.isfinite(x):
-                raise CycleError(f"{where}:{lineno}: {label} is {text}, expected a finite number")
+                raise CycleError(f"{where}:{lineno}: {label} is {_clip(text)}, expected a finite number")
             vals.append(x)
         t, v = vals
+        if abs(t) > MAX_TIME_S:
+            raise CycleError(f"{where}:{lineno}: time {t:g} s is beyond +-{MAX_TIME_S:g} s")
         if times and t <= times[-1]:
             raise CycleError(f"{where}:{lineno}: time {t:g} does not increase (previous {times[-1]:g})")
+        if times and t - times[-1] < MIN_STEP_S:
+            raise CycleError(
+                f"{where}:{lineno}: time {t:.10g} s is {t - times[-1]:.3g} s after the previous sample, "
+                f"closer than the {MIN_STEP_S:g} s a drive cycle is sampled at (times in ms?)"
+            )
         if v < 0:
             raise CycleError(f"{where}:{lineno}: speed {v:g} is negative, expected >= 0")
+        if v * scale > MAX_SPEED_MPS:
+            raise CycleError(
+                f"{where}:{lineno}: speed {v:g} {unit} is {v * scale * 3.6:.4g} km/h, more than "
+                f"{MAX_SPEED_MPS * 3.6:g} km/h (wrong unit?)"
+            )
         times.append(t)
         speeds.append(v * scale)
     last = max(reader.line_num, 1)
@@ -255,7 +308,22 @@ def _read_csv(fh, where: str, *, speed_unit: str | None, name: str) -> Cycle:
         raise CycleError(
             f"{where}:{last}: {len(times)} sample(s) at the end of the file, a cycle needs at least two"
         )
-    return Cycle(name, np.array(times), np.array(speeds), source=where)
+    return Cycle(name, np.frombuffer(times, dtype=float), np.frombuffer(speeds, dtype=float), source=where)
 
 
-__all__ = ["STANDARD_CYCLES", "Cycle", "load_cycle"]
+def _check_header(header: list[str], where: str, lineno: int) -> None:
+    """One time column and one speed column, each named once (otherwise the file is ambiguous)."""
+    seen = set()
+    for h in header:
+        if h and h in seen and (h in _TIME_COLUMNS or h in _SPEED_COLUMNS or h == "speed"):
+            raise CycleError(f"{where}:{lineno}: column {h!r} appears twice in the header")
+        seen.add(h)
+    for group, what in ((_TIME_COLUMNS, "time"), ((*_SPEED_COLUMNS, "speed"), "speed")):
+        present = [h for h in group if h in seen]
+        if len(present) > 1:
+            raise CycleError(
+                f"{where}:{lineno}: {len(present)} {what} columns ({', '.join(present)}); keep one"
+            )
+
+
+__all__ = ["MIN_CONSUMPTION_DISTANCE_M", "STANDARD_CYCLES", "Cycle", "load_cycle"]

@@ -46,7 +46,9 @@ Refused (EngineFileError)
     arithmetic, number literals that overflow (``1e400``), any NaN, any operation that overflows or divides
     by zero, complex results, files over 5 MB, arrays over 1e6 elements (ranges such as ``1:1e12`` are
     checked before they are made), more than 1e8 array elements computed in total, more than 1e6
-    statements executed, and expressions nested more than 32 deep.
+    statements executed, expressions nested more than 32 deep, cell arrays holding more than 1e6 values
+    (nested cells counted in full: ``c = {c c}`` doubles the count, so a shared cell tree cannot grow
+    exponentially) or nested more than 32 deep, and more than 1e7 values left in the variables at the end.
 
 Values returned by :func:`read_m_file`: numeric 1x1 -> ``float``; 1xN or Nx1 -> 1-D ``np.ndarray``;
 other numeric -> 2-D ``np.ndarray`` (float64; MATLAB logicals become 0.0/1.0); text -> ``str``; cell
@@ -55,6 +57,7 @@ array -> ``tuple``; ``inline`` -> :class:`InlineFunction`.
 
 from __future__ import annotations
 
+import errno
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -82,6 +85,9 @@ MAX_NESTING = 32  # parentheses / brackets / unary operators nested in one expre
 MAX_TREE_DEPTH = 200  # depth of one expression's syntax tree (long chains such as 1+1+...+1)
 MAX_EVAL_CHARS = 10_000  # longest text accepted by eval(...)
 MAX_NAME_CHARS = 63  # MATLAB's namelengthmax
+MAX_CELL_ELEMENTS = MAX_ELEMENTS  # values held by one cell array, counted through nested cells and arrays
+MAX_CELL_DEPTH = 32  # cell arrays nested in cell arrays
+MAX_EXPORT_ELEMENTS = 10 * MAX_ELEMENTS  # values returned for all variables together (each is a copy)
 
 _EPS = float(np.finfo(float).eps)
 
@@ -848,6 +854,38 @@ def _int_arg(v: Any, line: int, what: str, minimum: int = 0) -> int:
     return int(x)
 
 
+class _Cell(tuple):
+    """A cell array with the size of its expanded contents: ``count`` values (array elements, texts and
+    inner cells' values; a shared inner cell counts once per occurrence, as the export copies it) and
+    ``depth`` (cells nested), both bounded so that nothing built from a small file can blow up."""
+
+    count: int
+    depth: int
+
+
+def _make_cell(items, line: int) -> _Cell:
+    count, depth = 0, 0
+    for x in items:
+        if isinstance(x, _Cell):
+            count += x.count
+            depth = max(depth, x.depth)
+        elif isinstance(x, np.ndarray):
+            count += max(int(x.size), 1)
+        else:
+            count += 1
+    cell = _Cell(items)
+    cell.count, cell.depth = count, depth + 1
+    if cell.depth > MAX_CELL_DEPTH:
+        raise _MError(line, f"cell arrays nested {cell.depth} deep, more than the limit of {MAX_CELL_DEPTH}")
+    if count > MAX_CELL_ELEMENTS:
+        raise _MError(
+            line,
+            f"cell array would hold {count} values (nested cells counted in full), more than the limit of "
+            f"{MAX_CELL_ELEMENTS}",
+        )
+    return cell
+
+
 def _check_size(count: int, line: int, what: str) -> None:
     if count > MAX_ELEMENTS:
         raise _MError(line, f"{what} would have {count} elements, more than the limit of {MAX_ELEMENTS}")
@@ -1089,7 +1127,7 @@ class _Interp:
                 return base
             pos = self.positions(args[0], node.line, len(base), node.name)
             picked = [base[int(p)] for p in pos]
-            return "".join(picked) if isinstance(base, str) else tuple(picked)
+            return "".join(picked) if isinstance(base, str) else _make_cell(picked, node.line)
         if not node.args:
             return base
         if len(args) == 1:
@@ -1227,7 +1265,7 @@ class _Interp:
     def cell(self, node: _Matrix) -> tuple:
         if len(node.rows) > 1 and any(len(r) > 1 for r in node.rows):
             raise _MError(node.line, "only one-row or one-column cell arrays are supported")
-        return tuple(self.value(e) for row in node.rows for e in row)
+        return _make_cell([self.value(e) for row in node.rows for e in row], node.line)
 
     def range(self, node: _Range) -> np.ndarray:
         def scalar(n: _Node, what: str) -> float:
@@ -1613,7 +1651,21 @@ def evaluate_m_text(text: str, source: str = "<text>") -> dict[str, MValue]:
     except (RecursionError, MemoryError):
         line = parser.peek().line if parser is not None else ip.line
         raise EngineFileError(f"{source}:{line}: input too complex to read safely") from None
+    total = sum(_exported_size(v) for v in ip.vars.values())
+    if total > MAX_EXPORT_ELEMENTS:
+        raise EngineFileError(
+            f"{source}:{ip.line}: the variables left at the end hold {total} values, more than the limit "
+            f"of {MAX_EXPORT_ELEMENTS}"
+        )
     return {name: _export(v) for name, v in ip.vars.items()}
+
+
+def _exported_size(v: Any) -> int:
+    if isinstance(v, _Cell):
+        return v.count
+    if isinstance(v, np.ndarray):
+        return int(v.size)
+    return 1
 
 
 def read_m_file(path: str | Path) -> dict[str, MValue]:
@@ -1623,7 +1675,9 @@ def read_m_file(path: str | Path) -> dict[str, MValue]:
     defaults (``fc_spd_scale = fc_trq_scale = 1``, as the files themselves assign). Any problem raises
     :class:`~vpsim.errors.EngineFileError` with the message ``FILE:LINE: what is wrong``.
     """
-    p = Path(path)
+    from ..textio import check_path
+
+    p = check_path(path, EngineFileError, "engine file")
     try:
         size = p.stat().st_size
         if not p.is_file():
@@ -1633,6 +1687,8 @@ def read_m_file(path: str | Path) -> dict[str, MValue]:
         with p.open("rb") as f:
             raw = f.read(MAX_FILE_BYTES + 1)
     except OSError as e:
+        if e.errno == errno.ELOOP:
+            raise EngineFileError(f"{p}: symbolic link loop (too many levels of symbolic links)") from None
         raise EngineFileError(f"{p}:1: cannot read file ({e.strerror or e})") from None
     if len(raw) > MAX_FILE_BYTES:
         raise EngineFileError(f"{p}:1: file is more than the {MAX_FILE_BYTES}-byte limit")
@@ -1640,8 +1696,10 @@ def read_m_file(path: str | Path) -> dict[str, MValue]:
     if nul >= 0:
         line = raw.count(b"\n", 0, nul) + 1
         raise EngineFileError(f"{p}:{line}: NUL byte: this is a binary file, not a MATLAB text file")
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise EngineFileError(f"{p}:1: not a text file in UTF-8 (UTF-16 byte-order mark); save it as UTF-8")
     try:
-        text = raw.decode("utf-8")
+        text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         text = raw.decode("latin-1")  # old ADVISOR files are ISO-8859-1; only comments hold such bytes
     return evaluate_m_text(text, str(p))

@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import EngineFileError
+from ..textio import check_path, read_text
 from .matlab import MAX_FILE_BYTES, read_m_file
 
 __all__ = ["MeasuredEngine", "MeasuredEngineMap", "load_engine"]
@@ -66,6 +67,48 @@ _JSON_UNITS = {
     "fc_ct_trq": "N*m",
 }
 JSON_FORMAT = "vpsim-engine/1"  # the "format" tag of the JSON that MeasuredEngine.write_json writes
+
+
+# Plausibility of a measured engine's metadata (SI; fuel density in kg/L). Hard limits (an error): values no
+# fuel or engine has, which signal wrong units. Per-fuel ranges and the BSFC range give warnings.
+FUEL_DENSITY_RANGE = (0.0005, 1.5)  # kg/L: compressed natural gas at 1 bar (0.0007) to heavy oils
+FUEL_LHV_RANGE = (5.0e6, 1.5e8)  # J/kg: methanol-water blends to hydrogen (120 MJ/kg)
+DISPLACEMENT_RANGE = (0.01e-3, 30.0e-3)  # m^3
+PLAUSIBLE_MIN_BSFC = (150.0, 1000.0)  # g/kWh: best brake efficiency about 55 % (large Diesel) to 8 %
+FUELS: dict[str, tuple[tuple[float, float], tuple[float, float]]] = {
+    # fuel: ((density kg/L), (lower heating value J/kg))
+    "gasoline": ((0.69, 0.79), (40.0e6, 44.5e6)),
+    "diesel": ((0.80, 0.89), (41.5e6, 43.5e6)),
+    "cng": ((0.0006, 0.3), (44.0e6, 50.5e6)),
+    "lpg": ((0.49, 0.58), (45.0e6, 47.0e6)),
+    "e85": ((0.76, 0.80), (28.0e6, 30.5e6)),
+    "hydrogen": ((0.00007, 0.08), (118.0e6, 121.0e6)),
+}
+_FUEL_ALIASES = {
+    "gas": "gasoline",
+    "gasoline": "gasoline",
+    "petrol": "gasoline",
+    "si": "gasoline",
+    "diesel": "diesel",
+    "ci": "diesel",
+    "natural gas": "cng",
+    "cng": "cng",
+    "lng": "cng",
+    "lpg": "lpg",
+    "propane": "lpg",
+    "e85": "e85",
+    "ethanol": "e85",
+    "hydrogen": "hydrogen",
+    "h2": "hydrogen",
+}
+
+
+def _fuel_type(value: Any, p: Path) -> str | None:
+    if value is None:
+        return None
+    if not isinstance(value, str) or len(value) > 100:
+        raise EngineFileError(f"{p}: fc_fuel_type must be a short text such as 'Gasoline'")
+    return value
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -99,6 +142,7 @@ class MeasuredEngine:
     fuel_lhv: float
     source: str
     closed_throttle_torque: np.ndarray | None = None
+    fuel_type: str | None = None  # ADVISOR's fc_fuel_type ("Gasoline", "Diesel", "CNG", ...) where given
 
     def __post_init__(self) -> None:
         where = self.source or self.name
@@ -161,6 +205,100 @@ class MeasuredEngine:
                 kind = "positive" if positive else "non-negative"
                 raise bad(f"{field_name} must be a finite {kind} number")
             object.__setattr__(self, field_name, x)
+        if self.fuel_type is not None and not isinstance(self.fuel_type, str):
+            raise bad(f"fuel_type = {self.fuel_type!r} must be a text such as 'Gasoline'")
+        for field_name, (lo, hi), unit, scale in (
+            ("fuel_density", FUEL_DENSITY_RANGE, "kg/L", 1.0),
+            ("fuel_lhv", FUEL_LHV_RANGE, "MJ/kg", 1e-6),
+            ("displacement", DISPLACEMENT_RANGE, "L", 1e3),
+        ):
+            x = getattr(self, field_name)
+            if not lo <= x <= hi:
+                raise bad(
+                    f"{field_name} = {x * scale:g} {unit} is outside the plausible range "
+                    f"[{lo * scale:g}, {hi * scale:g}] {unit} (fc_fuel_den g/L, fc_fuel_lhv J/g, fc_disp L)"
+                )
+        eff = self.peak_efficiency()
+        if eff is not None and eff > 1.0:
+            raise bad(
+                f"the map gives a brake efficiency of {eff * 100:.4g} % (fuel power below shaft power) at a "
+                "node; fc_fuel_map must be fuel flow in g/s and fc_fuel_lhv in J/g"
+            )
+
+    # ------------------------------------------------------------------ sanity against the metadata
+
+    def _bsfc_nodes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(BSFC g/kWh, torque, speed) at the measured nodes with positive torque and speed on or below the
+        full-load curve and positive fuel flow (nodes above it are fill-in, not operating points)."""
+        t_node, w_node = np.meshgrid(self.torque_grid, self.speed_grid)
+        usable = (t_node > 0) & (w_node > 0) & (t_node <= self.max_torque_at(w_node) + 1e-9)
+        usable &= self.fuel_flow > 0
+        with np.errstate(all="ignore"):  # extreme grids: a non-finite BSFC is left out below
+            bsfc = self.fuel_flow[usable] * 1e3 / (t_node[usable] * w_node[usable] / 1e3) * 3600.0
+        ok = np.isfinite(bsfc) & (bsfc > 0)
+        return bsfc[ok], t_node[usable][ok], w_node[usable][ok]
+
+    def peak_efficiency(self) -> float | None:
+        """Largest brake efficiency T w / (mdot_f LHV) over the measured operating nodes (None if none)."""
+        bsfc, _, _ = self._bsfc_nodes()
+        if bsfc.size == 0:
+            return None
+        return float(3.6e9 / (float(np.min(bsfc)) * self.fuel_lhv))  # g/kWh -> efficiency
+
+    def fuel(self) -> str | None:
+        """The fuel as a key of :data:`FUELS` ("gasoline", "diesel", ...), None when the file names none,
+        "unknown" when it names one vpsim does not know."""
+        if self.fuel_type is None:
+            return None
+        key = self.fuel_type.strip().lower()
+        return _FUEL_ALIASES.get(key, key if key in FUELS else "unknown")
+
+    def sanity_warnings(self) -> list[str]:
+        """What looks wrong against the file's own metadata: fuel density and heating value for its fuel
+        type, and a BSFC range plausible for a piston engine. One line each; empty when all is plausible."""
+        out = []
+        fuel = self.fuel()
+        if fuel == "unknown":
+            out.append(f"fuel type {self.fuel_type!r} is not one vpsim knows ({', '.join(FUELS)})")
+        elif fuel is not None:
+            (d_lo, d_hi), (l_lo, l_hi) = FUELS[fuel]
+            if not d_lo <= self.fuel_density <= d_hi:
+                out.append(
+                    f"fuel density {self.fuel_density:g} kg/L is not that of {fuel} ({d_lo:g}-{d_hi:g} kg/L)"
+                )
+            if not l_lo <= self.fuel_lhv <= l_hi:
+                out.append(
+                    f"fuel heating value {self.fuel_lhv / 1e6:g} MJ/kg is not that of {fuel} "
+                    f"({l_lo / 1e6:g}-{l_hi / 1e6:g} MJ/kg)"
+                )
+        bsfc, _, _ = self._bsfc_nodes()
+        if bsfc.size:
+            lo, hi = PLAUSIBLE_MIN_BSFC
+            b = float(np.min(bsfc))
+            if not lo <= b <= hi:
+                out.append(
+                    f"minimum BSFC {b:.4g} g/kWh is outside the {lo:g}-{hi:g} g/kWh of piston engines "
+                    "(fc_fuel_map not in g/s, or fc_map_trq / fc_map_spd not in N*m and rad/s?)"
+                )
+        return out
+
+    def check_gasoline(self, fuel_density_kg_per_l: float | None = None) -> None:
+        """Refuse (EngineFileError) to stand for a gasoline engine: vpsim's model is a gasoline SI engine and
+        its fuel is counted in litres of gasoline, so a Diesel, CNG, ... map, or one whose fuel density
+        differs by more than 3 % from ``fuel_density_kg_per_l``, cannot be compared with it in litres."""
+        where = self.source or self.name
+        fuel = self.fuel()
+        if fuel is not None and fuel != "gasoline":
+            raise EngineFileError(
+                f"{where}: fuel type {self.fuel_type!r}: vpsim compares measured maps with its gasoline SI "
+                "engine in litres of gasoline; a map of another fuel cannot be compared"
+            )
+        d = fuel_density_kg_per_l
+        if d is not None and abs(self.fuel_density / d - 1.0) > 0.03:
+            raise EngineFileError(
+                f"{where}: fuel density {self.fuel_density:g} kg/L (fc_fuel_den) differs from the "
+                f"vehicle's simulation.fuel_density {d:g} kg/L by more than 3 %; litres would not compare"
+            )
 
     # ------------------------------------------------------------------ interpolation
 
@@ -239,6 +377,8 @@ class MeasuredEngine:
             "closed_throttle_torque": self.closed_throttle_torque is not None,
             "fuel_density_kg_per_l": self.fuel_density,
             "fuel_lhv_j_per_kg": self.fuel_lhv,
+            "fuel_type": self.fuel_type,
+            "warnings": self.sanity_warnings(),
         }
 
     def to_json_dict(self) -> dict[str, Any]:
@@ -260,6 +400,8 @@ class MeasuredEngine:
         }
         if self.closed_throttle_torque is not None:
             d["fc_ct_trq"] = self.closed_throttle_torque.tolist()
+        if self.fuel_type is not None:
+            d["fc_fuel_type"] = self.fuel_type
         return d
 
     def write_json(self, path: str | Path) -> Path:
@@ -317,6 +459,7 @@ class MeasuredEngine:
             fuel_lhv=get("fc_fuel_lhv", "scalar") * 1000.0,
             source=source,
             closed_throttle_torque=get("fc_ct_trq") if "fc_ct_trq" in v else None,
+            fuel_type=_fuel_type(v.get("fc_fuel_type"), p),
         )
 
     @classmethod
@@ -327,15 +470,7 @@ class MeasuredEngine:
         in g/L, ``fc_fuel_lhv`` in J/g); if it has a ``units`` table, it must state those units.
         """
         p = Path(path)
-        try:
-            size = p.stat().st_size
-            if size > MAX_FILE_BYTES:
-                raise EngineFileError(f"{p}: file is {size} bytes, more than the {MAX_FILE_BYTES}-byte limit")
-            text = p.read_text(encoding="utf-8")
-        except OSError as e:
-            raise EngineFileError(f"{p}: cannot read file ({e.strerror or e})") from None
-        except UnicodeDecodeError:
-            raise EngineFileError(f"{p}: not UTF-8 text") from None
+        text = read_text(p, EngineFileError, limit=MAX_FILE_BYTES, what="engine JSON file")
 
         def no_constants(token: str) -> Any:
             raise EngineFileError(f"{p}: {token} is not allowed in engine data")
@@ -346,6 +481,8 @@ class MeasuredEngine:
             raise EngineFileError(f"{p}:{e.lineno}: invalid JSON ({e.msg})") from None
         except RecursionError:
             raise EngineFileError(f"{p}: JSON nested too deeply") from None
+        except ValueError as e:  # e.g. an integer literal of more than 4300 digits
+            raise EngineFileError(f"{p}: invalid JSON ({e})") from None
         if not isinstance(data, dict):
             raise EngineFileError(f"{p}: expected a JSON object")
         units = data.get("units", {})
@@ -361,8 +498,8 @@ class MeasuredEngine:
             x = data[name]
             try:
                 a = np.array(x, dtype=float)
-            except (TypeError, ValueError):
-                raise EngineFileError(f"{p}: '{name}' must be numeric") from None
+            except (TypeError, ValueError, OverflowError):
+                raise EngineFileError(f"{p}: '{name}' must be numeric (finite numbers)") from None
             if np.any(np.isnan(a)):
                 raise EngineFileError(f"{p}: '{name}' holds null or non-numeric entries")
             if scalar:
@@ -388,6 +525,7 @@ class MeasuredEngine:
             fuel_lhv=get("fc_fuel_lhv", scalar=True) * 1000.0,
             source=source,
             closed_throttle_torque=get("fc_ct_trq") if "fc_ct_trq" in data else None,
+            fuel_type=_fuel_type(data.get("fc_fuel_type"), p),
         )
 
 
@@ -503,7 +641,7 @@ class MeasuredEngineMap:
 
 def load_engine(path: str | Path) -> MeasuredEngine:
     """Load a measured engine from an ADVISOR ``.m`` file or its ``.json`` form (chosen by suffix)."""
-    p = Path(path)
+    p = check_path(path, EngineFileError, "engine file")
     suffix = p.suffix.lower()
     if suffix == ".m":
         return MeasuredEngine.from_advisor_m(p)

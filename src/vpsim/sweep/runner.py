@@ -544,6 +544,11 @@ def _kernel_threads(n: int | None):
 # --- running ------------------------------------------------------------------------------------------------
 
 
+def max_local_workers() -> int:
+    """The most local worker processes a sweep starts: 4 per core (more only costs memory)."""
+    return 4 * (os.cpu_count() or 1)
+
+
 @dataclass
 class SweepRun:
     """Outcome of :func:`run_sweep`: all results (stored before plus computed now) and counts for this run."""
@@ -559,6 +564,8 @@ class SweepRun:
     # chunks lost to the infrastructure (a worker that kept dying): not stored, --resume retries them
     chunk_errors: list[str] = field(default_factory=list)
     n_chunks: int = 0  # chunks this run sent out
+    # damaged result parts/blocks found when resuming (one line each); their rows were computed again
+    damaged: list[str] = field(default_factory=list)
 
 
 def run_sweep(
@@ -591,6 +598,12 @@ def run_sweep(
         raise VpsimError(f"local cluster size must be at least 1, got {local_cluster}")
     if workers is not None and workers < 1:
         raise VpsimError(f"workers must be at least 1, got {workers}")
+    limit = max_local_workers()
+    for what, n in (("workers", workers), ("local cluster size", local_cluster)):
+        if n is not None and n > limit:
+            raise VpsimError(
+                f"{what} {n} is more than {limit} (4 per core of this machine); each is a process"
+            )
     if fmt is not None and fmt not in ("parquet", "csv"):
         raise VpsimError(f"format must be parquet or csv, got {fmt!r}")
     schema = result_schema(spec)
@@ -654,6 +667,7 @@ def run_sweep(
         store.path,
         chunk_errors,
         n_chunks,
+        list(getattr(store, "damaged", [])),
     )
 
 
@@ -759,7 +773,7 @@ class _DaskExecutor:
         else:
             try:
                 self.client = Client(self.scheduler, timeout="20s")
-            except (OSError, TimeoutError) as exc:
+            except (OSError, TimeoutError, ValueError, TypeError) as exc:  # ValueError: a malformed address
                 raise VpsimError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from None
             self.n_workers = max(len(self.client.scheduler_info().get("workers", {})), 1)
         return self

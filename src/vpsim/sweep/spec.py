@@ -184,7 +184,10 @@ class SweepSpec:
             )
         root = Path(root) if root is not None else None
         base = _base(data.get("base", "hofman2011"), where, root)
-        params = load_parameters(base)
+        try:
+            params = load_parameters(base)
+        except VpsimError as exc:
+            raise SpecError(f"{where}: base: {exc}") from None
         sampling = data.get("sampling", "factorial")
         if sampling not in SAMPLINGS:
             raise SpecError(f"{where}: sampling = {sampling!r}; expected one of {', '.join(SAMPLINGS)}")
@@ -229,6 +232,13 @@ class SweepSpec:
         if not isinstance(raw_params, dict):
             raise SpecError(f"{where}: [parameters] must be a table of parameter = values")
         axes = tuple(_axis(name, entry, params, where) for name, entry in _flatten(raw_params, where))
+        if sampling == "factorial":
+            for a in axes:
+                if a.values is None and a.n is None:
+                    raise SpecError(
+                        f"{where}: parameters.{a.name}: a factorial sweep needs n = N levels with range "
+                        '(or sampling = "lhs")'
+                    )
         names = [a.name for a in axes]
         _check_gear_axes(names, where)
         for a in axes:
@@ -275,7 +285,7 @@ class SweepSpec:
         """Number of sampled design points (without the baseline)."""
         if self.sampling == "lhs":
             return int(self.samples)
-        return math.prod(len(a.levels()) for a in self.axes)
+        return math.prod(len(a.values) if a.values is not None else a.n for a in self.axes)
 
     @property
     def combos(self) -> tuple[tuple[str, str, str], ...]:
@@ -416,15 +426,20 @@ def _str_list(value, key, where) -> list[str]:
 
 
 def _cycle_ref(name: str, where: str, root: Path | None) -> str:
-    from ..cycles import load_cycle
+    from ..cycles import MIN_CONSUMPTION_DISTANCE_M, load_cycle
 
     ref = name
     if name.lower().endswith(".csv") and root is not None and not Path(name).is_absolute():
         ref = str(root / name)
     try:
-        load_cycle(ref)
+        cyc = load_cycle(ref)
     except VpsimError as exc:
         raise SpecError(f"{where}: cycles: {exc}") from None
+    if not cyc.distance_m >= MIN_CONSUMPTION_DISTANCE_M:
+        raise SpecError(
+            f"{where}: cycles: {name} drives no distance ({cyc.distance_m:.3g} m), so fuel per 100 km is "
+            "undefined for every design"
+        )
     return ref
 
 
@@ -502,8 +517,8 @@ def _axis(name: str, entry, params: Parameters, where: str) -> Axis:
         if not (math.isfinite(lo) and math.isfinite(hi)) or not lo < hi:
             raise SpecError(f"{at}: range = [{lo:g}, {hi:g}] must have low < high")
         n = entry.get("n")
-        if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
-            raise SpecError(f"{at}: n = {n!r} must be a positive whole number of levels")
+        if n is not None and (isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_POINTS):
+            raise SpecError(f"{at}: n = {n!r} must be a whole number of levels in [1, {MAX_POINTS}]")
         axis = Axis(name, low=lo, high=hi, n=n, kind=kind)
     # each extreme on its own must be a valid parameter set: catches unit slips before anything runs
     ext = list(axis.values) if axis.values is not None else [axis._cast(axis.low), axis._cast(axis.high)]

@@ -15,6 +15,15 @@ absent; readers (this module, ``pandas.read_parquet(DIR / "results.parquet")``, 
 files. The CSV file is appended with one write per chunk followed by fsync; a write cut short by a kill leaves
 a last line without its newline, which is cut off when the store is opened again.
 
+Damage is detected, not trusted. Each Parquet part gets a hidden sidecar ``.part-<...>.parquet.sum`` (rows,
+bytes, SHA-256), written atomically before the part is renamed into place; the CSV file gets a hidden
+manifest ``DIR/.results.csv.sums`` with one line (offset, bytes, rows, SHA-256) per appended block, written
+after the block is on disk. When the store is opened to resume, a part or block that is truncated, emptied,
+garbled or unrecorded is named in :attr:`ResultStore.damaged` (one line each) and moved aside (Parquet:
+renamed ``.damaged-<name>``; CSV: the file is rewritten from its intact blocks), so its rows are computed
+again; nothing damaged counts as done. Reading a damaged store without resuming (:func:`load_results`) is an
+error naming the damaged file. Stores written before these records existed are checked by reading them.
+
 Every row carries ``point_id``, a hash of the design point's complete parameter set (the base with the
 changes applied, canonicalised), the cycle (name and samples), method, driver (with its tuning), mode, gear
 rule and the acceleration settings (:func:`point_identity`). It does not depend on the process, the run, the
@@ -42,6 +51,8 @@ PARQUET_NAME = "results.parquet"
 CSV_NAME = "results.csv"
 META_NAME = "sweep.json"
 LOCK_NAME = ".sweep.lock"
+CSV_SUMS_NAME = ".results.csv.sums"  # the CSV file's block manifest (JSON lines)
+SUM_SUFFIX = ".sum"  # a Parquet part's sidecar: .<part name>.sum
 FORMATS = ("parquet", "csv")
 _ID_LEN = 16
 
@@ -204,6 +215,7 @@ class ResultStore:
         self._lock_fh = None
         self._seq = 0
         self.run_id = ""
+        self.damaged: list[str] = []  # damaged parts/blocks found (and moved aside) when opened to resume
 
     @property
     def path(self) -> Path:
@@ -218,8 +230,20 @@ class ResultStore:
 
     def open(self, *, resume: bool, meta: dict) -> None:
         """Create or reopen the folder; take the writer's lock; on resume check it is the same sweep."""
-        self.dir.mkdir(parents=True, exist_ok=True)
+        try:
+            self.dir.mkdir(parents=True, exist_ok=True)
+        except FileExistsError:
+            raise SpecError(f"{self.dir}: a file is in the way, expected the output folder") from None
+        except OSError as exc:
+            raise SpecError(f"{self.dir}: cannot create the output folder ({exc.strerror or exc})") from None
         self._lock()
+        try:
+            self._open_locked(resume, meta)
+        except BaseException:
+            self.close()
+            raise
+
+    def _open_locked(self, resume: bool, meta: dict) -> None:
         meta_path = self.dir / META_NAME
         if self.exists():
             if not resume:
@@ -248,11 +272,26 @@ class ResultStore:
             _atomic_write(
                 meta_path, json.dumps(meta | {"format": self.fmt, "schema": self.schema}, indent=2).encode()
             )
+        self.damaged = []
         if self.fmt == "parquet":
+            if self.path.exists() and not self.path.is_dir():
+                self.close()
+                raise SpecError(f"{self.path}: expected the Parquet dataset folder, found a file")
             self.path.mkdir(exist_ok=True)
             for tmp in self.path.glob(".part-*.tmp"):
                 tmp.unlink()
+            _, damaged = _verify_parts(self.path)
+            for part, why in damaged:
+                self.damaged.append(f"{part.name}: {why}")
+                os.replace(part, part.with_name(f".damaged-{part.name}"))
+                _sidecar(part).unlink(missing_ok=True)
+            for orphan in self.path.glob(f".part-*{SUM_SUFFIX}"):
+                if not (self.path / orphan.name[1 : -len(SUM_SUFFIX)]).exists():
+                    orphan.unlink()
         else:
+            if self.path.exists() and not self.path.is_file():
+                self.close()
+                raise SpecError(f"{self.path}: expected the results CSV file, found a folder")
             self._repair_csv()
 
     def _lock(self) -> None:
@@ -279,16 +318,19 @@ class ResultStore:
 
     def completed(self) -> set[str]:
         """point_id of every row on disk."""
-        if self.fmt == "parquet":
+        if self.fmt == "parquet":  # only the intact parts, and only their point_id column
             import pyarrow.parquet as pq
 
+            good, damaged = _verify_parts(self.path)
+            if damaged:
+                part, why = damaged[0]
+                raise SpecError(f"{part}: damaged sweep result part ({why}); resume the sweep to recompute")
             ids: set[str] = set()
-            for part in self._parts():
+            for part in good:
                 ids.update(pq.read_table(part, columns=["point_id"]).column(0).to_pylist())
             return ids
-        if not self.path.exists():
-            return set()
-        return set(pd.read_csv(self.path, usecols=["point_id"], dtype=str)["point_id"])
+        df = _read_dir(self.dir, self.fmt, self.schema)
+        return set() if df is None or "point_id" not in df else set(df["point_id"].dropna().astype(str))
 
     def _parts(self) -> list[Path]:
         return sorted(p for p in self.path.glob("part-*.parquet"))
@@ -309,23 +351,72 @@ class ResultStore:
             table = pa.Table.from_pandas(df, schema=arrow_schema(self.schema), preserve_index=False)
             pq.write_table(table, tmp)
             _fsync_path(tmp)
+            data = tmp.read_bytes()
+            record = {"rows": len(df), "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
+            _atomic_write(_sidecar(self.path / name), json.dumps(record).encode())
             os.replace(tmp, self.path / name)
             _fsync_path(self.path)
         else:
+            sums = self.dir / CSV_SUMS_NAME
             if not self.path.exists():
-                _atomic_write(self.path, df.iloc[:0].to_csv(index=False).encode())
+                header = df.iloc[:0].to_csv(index=False).encode()
+                _atomic_write(self.path, header)
+                _atomic_write(sums, (json.dumps(_block(0, header, 0)) + "\n").encode())
             data = df.to_csv(header=False, index=False).encode()
             fd = os.open(self.path, os.O_WRONLY | os.O_APPEND)
             try:
+                offset = os.fstat(fd).st_size
                 view = memoryview(data)
                 while view:
                     view = view[os.write(fd, view) :]
                 os.fsync(fd)
             finally:
                 os.close(fd)
+            _append_line(sums, json.dumps(_block(offset, data, len(df))))
 
     def _repair_csv(self) -> None:
-        """Cut a last line left without its newline by a killed writer."""
+        """Keep only the intact, recorded blocks of the CSV file (module docstring); damaged ones are named
+        in :attr:`damaged`. A store without a manifest (older vpsim): cut a last line left without its
+        newline by a killed writer, and set the whole file aside if it does not parse."""
+        sums = self.dir / CSV_SUMS_NAME
+        if not self.path.exists():
+            sums.unlink(missing_ok=True)
+            return
+        if sums.exists():
+            good, damaged, _ = _verify_csv(self.path, sums)
+            self.damaged.extend(damaged)
+            size = self.path.stat().st_size
+            recorded = sum(b["bytes"] for _, b in good)
+            if damaged or recorded != size:
+                data = self.path.read_bytes()
+                if not good or good[0][1]["offset"] != 0 or good[0][1]["rows"] != 0:
+                    if data and not damaged:
+                        self.damaged.append(f"{self.path.name}: the header is not recorded")
+                    self.path.unlink()
+                    sums.unlink()
+                    return
+                body, lines, offset = [], [], 0
+                for chunk, b in good:
+                    body.append(chunk)
+                    lines.append(json.dumps(_block(offset, chunk, b["rows"])))
+                    offset += len(chunk)
+                _atomic_write(self.path, b"".join(body))
+                _atomic_write(sums, ("\n".join(lines) + "\n").encode())
+            return
+        self._repair_csv_tail()
+        data = self.path.read_bytes() if self.path.exists() else b""
+        try:
+            df = _read_csv_bytes(data, self.schema)
+        except Exception as exc:  # noqa: BLE001 - any parse failure means the file cannot be trusted
+            self.damaged.append(f"{self.path.name}: {_reason(exc)}")
+            os.replace(self.path, self.dir / f".damaged-{self.path.name}")
+            return
+        # it reads: record it as it is (header, then its rows as one block), so blocks appended now follow
+        cut = data.find(b"\n") + 1
+        records = [_block(0, data[:cut], 0)] + ([_block(cut, data[cut:], len(df))] if data[cut:] else [])
+        _atomic_write(sums, "".join(json.dumps(r) + "\n" for r in records).encode())
+
+    def _repair_csv_tail(self) -> None:
         if not self.path.exists():
             return
         with open(self.path, "rb+") as fh:
@@ -369,27 +460,171 @@ def load_results(path: str | Path, *, dedupe: bool = True) -> pd.DataFrame:
 
 
 def _read_dir(path: Path, fmt: str, schema: dict) -> pd.DataFrame | None:
+    """The rows of the store in ``path``; a damaged part or block is an error naming it."""
     if fmt == "parquet":
         import pyarrow.parquet as pq
 
-        parts = sorted((path / PARQUET_NAME).glob("part-*.parquet"))
-        if not parts:
+        good, damaged = _verify_parts(path / PARQUET_NAME)
+        if damaged:
+            part, why = damaged[0]
+            raise SpecError(
+                f"{part}: damaged sweep result part ({why}); run the sweep again with --resume to recompute "
+                f"its rows ({len(damaged)} damaged part(s))"
+            )
+        if not good:
             return None
-        return pd.concat([pq.read_table(p).to_pandas() for p in parts], ignore_index=True)
+        return pd.concat([pq.read_table(p).to_pandas() for p in good], ignore_index=True)
     f = path / CSV_NAME
     if not f.exists():
         return None
+    sums = path / CSV_SUMS_NAME
+    if sums.exists():
+        good, damaged, _ = _verify_csv(f, sums)
+        if damaged:
+            raise SpecError(
+                f"{f}: damaged sweep results ({damaged[0]}); run the sweep again with --resume to recompute "
+                "those rows"
+            )
+        data = b"".join(chunk for chunk, _ in good)  # an unrecorded tail (a killed write) is not read
+    else:
+        data = f.read_bytes()
+        if data and not data.endswith(b"\n"):
+            data = data[: data.rfind(b"\n") + 1]  # a last line cut by a kill
+    if not data:
+        return None
+    try:
+        return _read_csv_bytes(data, schema)
+    except Exception as exc:  # noqa: BLE001 - a file that does not parse is damaged
+        raise SpecError(
+            f"{f}: damaged sweep results ({_reason(exc)}); run the sweep again with --resume to recompute"
+        ) from None
+
+
+def _read_csv_bytes(data: bytes, schema: dict) -> pd.DataFrame:
+    import io
+
     dtype = {c: str for c, t in schema.items() if t == "str"} or {"point_id": str}
-    return conform(
-        pd.read_csv(
-            f,
-            dtype=dtype,
-            keep_default_na=False,
-            na_values={c: [""] for c in dtype}
-            | {c: ["", "nan", "NaN"] for c, t in schema.items() if t == "float"},
-        ),
-        schema,
+    df = pd.read_csv(
+        io.BytesIO(data),
+        dtype=dtype,
+        keep_default_na=False,
+        na_values={c: [""] for c in dtype}
+        | {c: ["", "nan", "NaN"] for c, t in schema.items() if t == "float"},
+        on_bad_lines="error",
     )
+    if schema and list(df.columns) != list(schema):
+        raise ValueError(f"columns {list(df.columns)[:6]} are not the sweep's {list(schema)[:6]}")
+    for col, typ in schema.items():
+        if typ in ("int", "bool") and df[col].isna().any():
+            raise ValueError(f"column {col!r} has an empty value in a row")
+    if "point_id" in df and (df["point_id"].isna() | (df["point_id"].astype(str).str.len() == 0)).any():
+        raise ValueError("a row has no point_id")
+    return conform(df, schema)
+
+
+def _reason(exc: BaseException) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text[:200]
+
+
+def _sidecar(part: Path) -> Path:
+    return part.with_name(f".{part.name}{SUM_SUFFIX}")
+
+
+def _verify_parts(folder: Path) -> tuple[list[Path], list[tuple[Path, str]]]:
+    """(intact parts, [(damaged part, why)]) of a Parquet dataset folder."""
+    import pyarrow.parquet as pq
+
+    if not folder.is_dir():
+        return [], []
+    good: list[Path] = []
+    damaged: list[tuple[Path, str]] = []
+    for part in sorted(folder.glob("part-*.parquet")):
+        try:
+            data = part.read_bytes()
+        except OSError as exc:
+            damaged.append((part, f"cannot read ({exc.strerror or exc})"))
+            continue
+        side = _sidecar(part)
+        if side.exists():
+            try:
+                rec = json.loads(side.read_text())
+                ok = isinstance(rec, dict) and all(k in rec for k in ("rows", "bytes", "sha256"))
+            except (OSError, ValueError):
+                ok = False
+            if not ok:
+                damaged.append((part, "its checksum record is unreadable"))
+            elif len(data) != rec["bytes"]:
+                damaged.append((part, f"{len(data)} bytes, {rec['bytes']} were written (truncated?)"))
+            elif hashlib.sha256(data).hexdigest() != rec["sha256"]:
+                damaged.append((part, "checksum mismatch (garbled)"))
+            else:
+                good.append(part)
+            continue
+        try:  # a part of an older vpsim, without a record: it must read completely
+            pq.read_table(part)
+        except Exception as exc:  # noqa: BLE001 - any failure to read means damaged
+            damaged.append((part, f"unreadable ({_reason(exc)})"))
+            continue
+        good.append(part)
+    return good, damaged
+
+
+def _block(offset: int, data: bytes, rows: int) -> dict:
+    return {"offset": offset, "bytes": len(data), "rows": rows, "sha256": hashlib.sha256(data).hexdigest()}
+
+
+def _verify_csv(path: Path, sums: Path) -> tuple[list[tuple[bytes, dict]], list[str], int]:
+    """([(block bytes, record)] intact, [damaged block, why], end of the recorded data) of a CSV store.
+    The blocks must follow each other from the header; once one is damaged, those after it are kept only if
+    they are intact themselves."""
+    data = path.read_bytes()
+    good: list[tuple[bytes, dict]] = []
+    damaged: list[str] = []
+    end = 0
+    try:
+        lines = sums.read_text().splitlines()
+    except (OSError, ValueError) as exc:
+        return [], [f"{sums.name}: unreadable ({_reason(exc)})"], 0
+    for k, line in enumerate(lines):
+        if not line.strip():
+            continue
+        try:
+            b = json.loads(line)
+            ok = isinstance(b, dict) and all(isinstance(b.get(x), int) for x in ("offset", "bytes", "rows"))
+            ok = ok and isinstance(b.get("sha256"), str)
+        except ValueError:
+            ok = False
+        if not ok:
+            if k == len(lines) - 1:  # a manifest line cut by a kill: its block is unrecorded
+                break
+            damaged.append(f"{sums.name} line {k + 1}: unreadable record")
+            continue
+        lo, hi = b["offset"], b["offset"] + b["bytes"]
+        chunk = data[lo:hi]
+        what = "the header" if k == 0 else f"rows at bytes {lo}-{hi} ({b['rows']} rows)"
+        if len(chunk) != b["bytes"]:
+            damaged.append(f"{path.name}: {what} cut short (file has {len(data)} bytes)")
+        elif hashlib.sha256(chunk).hexdigest() != b["sha256"]:
+            damaged.append(f"{path.name}: {what} garbled (checksum mismatch)")
+        elif k == 0 and lo != 0:
+            damaged.append(f"{path.name}: the header record does not start the file")
+        else:
+            good.append((chunk, b))
+            end = max(end, hi)
+    return good, damaged, end
+
+
+def _append_line(path: Path, line: str) -> None:
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        data = (line + "\n").encode()
+        view = memoryview(data)
+        while view:
+            view = view[os.write(fd, view) :]
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def _finish(df: pd.DataFrame | None, dedupe: bool, schema: dict | None = None) -> pd.DataFrame:
@@ -436,9 +671,14 @@ def arrow_schema(schema: dict[str, str]):
 
 def _read_meta(path: Path) -> dict:
     try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise SpecError(f"{path}: cannot read the sweep's record ({exc})") from None
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError) as exc:
+        raise SpecError(f"{path}: cannot read the sweep's record ({_reason(exc)})") from None
+    if not isinstance(meta, dict) or not isinstance(meta.get("schema", {}), dict):
+        raise SpecError(f"{path}: the sweep's record is not a JSON object with a schema; use another --out")
+    if meta.get("format") not in (None, *FORMATS):
+        raise SpecError(f"{path}: the sweep's record names format {meta.get('format')!r}; use another --out")
+    return meta
 
 
 def _fsync_path(path: Path) -> None:

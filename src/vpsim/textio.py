@@ -1,0 +1,87 @@
+"""Reading the text files users give vpsim: UTF-8 (with or without BOM) only, any newline convention.
+
+Every failure is the caller's error class with one line naming the file (and the line where it applies):
+missing file, dangling symbolic link, symbolic-link loop, a folder or a device instead of a file, a file too
+large, binary (NUL bytes), UTF-16 or other non-UTF-8 text.
+"""
+
+from __future__ import annotations
+
+import errno
+import stat
+from pathlib import Path
+from typing import Any
+
+MAX_TEXT_BYTES = 16 * 1024 * 1024  # a parameter file, sweep spec or gear schedule larger than this is refused
+
+
+MAX_PATH_CHARS = 4096  # PATH_MAX on Linux
+
+
+def check_path(name: Any, error: type[Exception], what: str = "file") -> Path:
+    """``name`` as a Path, or one-line ``error`` if it cannot name a file (NUL character, too long)."""
+    text = str(name)
+    if "\x00" in text:
+        raise error(f"{short_name(text)}: a {what} name cannot hold a NUL character")
+    if len(text) > MAX_PATH_CHARS:
+        raise error(
+            f"{short_name(text)}: a {what} name of {len(text)} characters, more than {MAX_PATH_CHARS}"
+        )
+    return Path(name)
+
+
+def short_name(text: Any, limit: int = 120) -> str:
+    """A file name cut for a one-line message."""
+    s = str(text).replace("\x00", "\\0")
+    return s if len(s) <= limit else s[: limit - 3] + "..."
+
+
+def read_text(path: Path, error: type[Exception], *, limit: int = MAX_TEXT_BYTES, what: str = "file") -> str:
+    """The text of a UTF-8 file (with or without BOM; CRLF/CR newlines become LF); one-line ``error``
+    when it is missing, a folder, a symlink loop, unreadable, too large, binary or not UTF-8."""
+    path = check_path(path, error, what)
+    try:
+        st = path.stat()
+        if stat.S_ISDIR(st.st_mode):
+            raise IsADirectoryError
+        if not stat.S_ISREG(st.st_mode):  # a FIFO or a device would block or never end
+            raise error(f"{path}: not a regular file, expected a {what}")
+        if st.st_size > limit:
+            raise error(f"{path}: file is {st.st_size} bytes, more than the {limit}-byte limit for a {what}")
+        with path.open("rb") as fh:
+            raw = fh.read(limit + 1)
+    except FileNotFoundError:
+        if path.is_symlink():
+            raise error(f"{path}: dangling symbolic link (its target does not exist)") from None
+        raise error(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise error(f"{path}: is a folder, expected a {what}") from None
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise error(f"{path}: symbolic link loop (too many levels of symbolic links)") from None
+        raise error(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if len(raw) > limit:
+        raise error(f"{path}: file is larger than the {limit}-byte limit for a {what}")
+    return decode_text(raw, path, error)
+
+
+def decode_text(raw: bytes, where: Any, error: type[Exception]) -> str:
+    """``raw`` decoded as UTF-8 (a BOM is dropped), newlines normalised; one-line ``error`` otherwise."""
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise error(f"{where}: not a text file in UTF-8 (UTF-16 byte-order mark); save it as UTF-8")
+    nul = raw.find(b"\x00")
+    if nul >= 0:
+        line = raw.count(b"\n", 0, nul) + 1
+        raise error(f"{where}:{line}: not a text file (NUL byte: binary data), expected UTF-8 text")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise error(
+            f"{where}:{line}: not a text file in UTF-8 (byte 0x{raw[exc.start]:02x} at offset {exc.start}); "
+            "save the file as UTF-8"
+        ) from None
+    return text.replace("\r\n", "\n").replace("\r", "\n")
+
+
+__all__ = ["MAX_TEXT_BYTES", "check_path", "decode_text", "read_text", "short_name"]
