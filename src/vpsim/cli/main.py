@@ -15,7 +15,18 @@ import click
 from ..errors import VpsimError
 
 # command modules, imported lazily by main() so `vpsim --help` stays fast
-COMMAND_MODULES = ("simulate", "maps", "params", "paper", "engine", "scaling", "bench", "sweep")
+COMMAND_MODULES = (
+    "simulate",
+    "maps",
+    "params",
+    "paper",
+    "engine",
+    "scaling",
+    "bench",
+    "sweep",
+    "vehicle",
+    "fleet",
+)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})

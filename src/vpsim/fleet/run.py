@@ -50,6 +50,7 @@ class FleetRun:
     technology_all: dict  # class -> parameters fitted on every vehicle (for new cars)
     timings: dict = field(default_factory=dict)
     execution: str = "serial"
+    peer: dict = field(default_factory=dict)  # FASTSim status: available, version, reason
 
     def frame(self):
         import pandas as pd
@@ -207,10 +208,12 @@ def run_fleet(
     scheduler: str | None = None,
     progress: bool = False,
     limit: int | None = None,
+    peer: bool = True,
 ) -> FleetRun:
     """Run every usable vehicle of ``source`` (a path or a :class:`TestCarList`) on the cycles it measured.
 
-    ``limit``: only the first ``limit`` usable vehicles (in file order), for a quick look.
+    ``limit``: only the first ``limit`` usable vehicles (in file order), for a quick look. ``peer``: also
+    run FASTSim (:mod:`vpsim.fleet.peer`) on the same records when it is installed.
     """
     t_start = time.perf_counter()
     cycles = tuple(cycles)
@@ -278,16 +281,50 @@ def run_fleet(
             done += len(part)
             _progress(f"{method} runs", done, len(items), t0, progress)
         timings["predict_s"] = time.perf_counter() - t0
+        # 5. the peer on the same records and cycles
+        from . import peer as peer_mod
+
+        peer_state = (
+            peer_mod.status()
+            if peer
+            else {"available": False, "version": None, "reason": "not run (--no-peer)"}
+        )
+        peer_rows: dict[tuple[str, str], dict] = {}
+        if peer_state["available"]:
+            t0 = time.perf_counter()
+            pitems = [(v, c) for v, cs in work for c in cs]
+            pch = [pitems[i : i + CHUNK * 2] for i in range(0, len(pitems), CHUNK * 2)]
+            done = 0
+            for part in executor.map(peer_mod.peer_chunk, pch):
+                for r in part:
+                    peer_rows[(r["key"], r["cycle"])] = r
+                done += len(part)
+                _progress("FASTSim runs", done, len(pitems), t0, progress)
+            timings["peer_s"] = time.perf_counter() - t0
     rows = []
     for v, cs in work:
         for c in cs:
-            rows.append(_row(v, c, fold_of[v.key], tech, preds.get((v.key, c)), failed_grid.get((v.key, c))))
+            row = _row(v, c, fold_of[v.key], tech, preds.get((v.key, c)), failed_grid.get((v.key, c)))
+            if peer_state["available"]:
+                pr = peer_rows.get((v.key, c), {})
+                mpg = pr.get("peer_mpg", math.nan)
+                meas = v.measured_mpg[c]
+                row["fastsim_mpg"] = round(mpg, 4) if math.isfinite(mpg) else math.nan
+                row["fastsim_error_pct"] = (
+                    round(100 * (mpg - meas) / meas, 4) if math.isfinite(mpg) else math.nan
+                )
+                row["fastsim_status"] = pr.get("peer_error") or (
+                    "ok" if pr.get("peer_trace_met") else "trace_miss" if pr else "not run"
+                )
+            rows.append(row)
     timings["total_s"] = time.perf_counter() - t_start
     technology = {
         f"fold{f}.{cls}": {k: (round(x, 6) if isinstance(x, float) else x) for k, x in t.items()}
         for (f, cls), t in sorted(tech.items())
     }
-    return FleetRun(rows, cars, cycles, folds, method, technology, tech_all, timings, executor.name)
+    return FleetRun(
+        rows, cars, cycles, folds, method, technology, tech_all, timings, executor.name, peer_state
+    )
 
 
 def _log_l100(mpg: float) -> float:
@@ -317,6 +354,7 @@ def _row(
         "rated_power_kw": round(v.rated_power_kw, 2),
         "test_mass_kg": round(v.mass_kg, 1),
         "power_to_mass_w_per_kg": round(1e3 * v.rated_power_kw / v.mass_kg, 2),
+        "specific_power_kw_per_l": round(v.specific_power_kw_per_l, 2),
         "thermal_efficiency": t[cal.TECH_PARAMS[0]],
         "friction_coefficient": t[cal.TECH_PARAMS[1]],
         "trace_miss_s": math.nan,
