@@ -24,10 +24,16 @@ from .main import cli
 @click.option("--method", type=click.Choice(["backward", "forward"]), default="backward", show_default=True)
 @click.option("--local-cluster", "local_cluster", type=int, default=None, help="Run on N local Dask workers.")
 @click.option("--scheduler", default=None, help="Run on the Dask scheduler at this address.")
+@click.option(
+    "--workers",
+    type=int,
+    default=None,
+    help="Local processes without Dask (default: the cores, for fleets of 256+ vehicles; 1: this process).",
+)
 @click.option("--no-peer", "no_peer", is_flag=True, help="Do not run FASTSim beside vpsim.")
 @click.option("--limit", type=int, default=None, help="Only the first N usable vehicles (a quick look).")
 @click.option("--quiet", is_flag=True, help="No progress on stderr.")
-def fleet(file, out, cycles, folds, method, local_cluster, scheduler, no_peer, limit, quiet):
+def fleet(file, out, cycles, folds, method, local_cluster, scheduler, workers, no_peer, limit, quiet):
     """Predict the measured fuel economy of the vehicles of an EPA test car list FILE."""
     import matplotlib
 
@@ -46,6 +52,7 @@ def fleet(file, out, cycles, folds, method, local_cluster, scheduler, no_peer, l
         progress=not quiet,
         limit=limit,
         peer=not no_peer,
+        workers=workers,
     )
     command = (
         "vpsim fleet " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if sys.argv[1:2] == ["fleet"] else ""

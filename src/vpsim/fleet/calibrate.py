@@ -11,7 +11,7 @@ How (fast and exact where it matters):
 2. for fold k and class c, the parameters minimise the mean |ln(predicted / measured)| over the vehicles of
    class c that are *not* in fold k, all their cycles together (an L1 loss: its minimiser is a median, so a
    few vehicles the model cannot represent do not pull the technology of the rest). The prediction between
-   grid nodes is the bilinear interpolation of ln(fuel) on the grid, searched on a fine grid
+   grid nodes is the bilinear interpolation of ln(fuel) in (ln eta_th, xi), searched on a fine grid
    (:data:`FINE`), used only to *choose* the parameters;
 3. each vehicle is then simulated once more at its own fold's parameters: every error reported comes from
    that real simulation, and the vehicle's measurements never entered the fit that produced it.
@@ -26,8 +26,8 @@ import numpy as np
 TECH_PARAMS = ("engine.thermal_efficiency", "engine.friction_coefficient")
 CLASSES = ("na", "boosted")
 GRID = (
-    np.array([0.30, 0.34, 0.38, 0.42, 0.46, 0.50, 0.54]),
-    np.array([0.1, 0.4, 0.7, 1.0, 1.3, 1.6]),
+    np.array([0.30, 0.36, 0.42, 0.48, 0.54]),
+    np.array([0.1, 0.6, 1.1, 1.6]),
 )
 FINE = 41  # points per axis of the search between the grid nodes
 SEED = 20220
@@ -52,6 +52,13 @@ def _fine_axes():
     return tuple(np.linspace(g[0], g[-1], FINE) for g in GRID)
 
 
+def _axes_for_interpolation():
+    """Interpolation coordinates: ln(eta) (fuel goes nearly as 1/eta, so ln fuel is nearly linear in it),
+    and the friction coefficient itself (FMEP is linear in it)."""
+    fe, ff = _fine_axes()
+    return (np.log(GRID[0]), np.log(fe)), (GRID[1], ff)
+
+
 def _interp_weights(grid: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     j = np.clip(np.searchsorted(grid, x, side="right") - 1, 0, len(grid) - 2)
     w = (x - grid[j]) / (grid[j + 1] - grid[j])
@@ -63,9 +70,9 @@ def surrogate(log_fuel_grid: np.ndarray) -> np.ndarray:
 
     ``log_fuel_grid``: (rows, len(GRID[0]), len(GRID[1])).
     """
-    fe, ff = _fine_axes()
-    je, we = _interp_weights(GRID[0], fe)
-    jf, wf = _interp_weights(GRID[1], ff)
+    (ge, fe), (gf, ff) = _axes_for_interpolation()
+    je, we = _interp_weights(ge, fe)
+    jf, wf = _interp_weights(gf, ff)
     g = log_fuel_grid
     a = g[:, je][:, :, jf] * (1 - wf) + g[:, je][:, :, jf + 1] * wf
     b = g[:, je + 1][:, :, jf] * (1 - wf) + g[:, je + 1][:, :, jf + 1] * wf

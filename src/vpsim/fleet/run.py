@@ -131,17 +131,54 @@ def _one_line(exc: BaseException) -> str:
 
 
 class _Serial:
-    name = "serial"
+    """In this process, compiled kernels on one thread: a fleet is thousands of small batch calls, and a
+    parallel kernel's thread start-up and join then cost more than they save (the more so on a busy
+    machine); the fleet's parallelism is over vehicles, in processes."""
+
+    name = "serial (this process)"
 
     def __enter__(self):
+        import numba
+
+        self._threads = numba.get_num_threads()
+        numba.set_num_threads(1)
         return self
 
     def __exit__(self, *exc):
+        import numba
+
+        numba.set_num_threads(self._threads)
         return False
 
     def map(self, fn, chunks, *args):
         for c in chunks:
             yield fn(c, *args)
+
+
+class _Pool:
+    """Local worker processes (spawned), one kernel thread each; results in submission order."""
+
+    def __init__(self, n: int):
+        self.n = n
+        self.name = f"{n} local processes"
+
+    def __enter__(self):
+        import concurrent.futures as cf
+        import multiprocessing
+
+        self.pool = cf.ProcessPoolExecutor(
+            max_workers=self.n, mp_context=multiprocessing.get_context("spawn"), initializer=_one_thread
+        )
+        return self
+
+    def __exit__(self, *exc):
+        self.pool.shutdown(wait=True, cancel_futures=True)
+        return False
+
+    def map(self, fn, chunks, *args):
+        futures = [self.pool.submit(fn, c, *args) for c in chunks]
+        for f in futures:
+            yield f.result()
 
 
 class _Dask:
@@ -209,11 +246,13 @@ def run_fleet(
     progress: bool = False,
     limit: int | None = None,
     peer: bool = True,
+    workers: int | None = None,
 ) -> FleetRun:
     """Run every usable vehicle of ``source`` (a path or a :class:`TestCarList`) on the cycles it measured.
 
     ``limit``: only the first ``limit`` usable vehicles (in file order), for a quick look. ``peer``: also
-    run FASTSim (:mod:`vpsim.fleet.peer`) on the same records when it is installed.
+    run FASTSim (:mod:`vpsim.fleet.peer`) on the same records when it is installed. ``workers``: local
+    processes when no Dask cluster is given (default: the number of cores; 1 runs in this process).
     """
     t_start = time.perf_counter()
     cycles = tuple(cycles)
@@ -228,6 +267,8 @@ def run_fleet(
         raise VpsimError("give a scheduler address or a local cluster size, not both")
     if local_cluster is not None and local_cluster < 1:
         raise VpsimError(f"local cluster size must be at least 1, got {local_cluster}")
+    if workers is not None and workers < 1:
+        raise VpsimError(f"workers must be at least 1, got {workers}")
     if folds < 2:
         raise VpsimError(f"--folds must be at least 2 (cross-validation), got {folds}")
     cars = source if isinstance(source, TestCarList) else read_test_car_list(source)
@@ -242,7 +283,15 @@ def run_fleet(
     timings = {"read_s": time.perf_counter() - t_start}
     work = [(v, tuple(c for c in cycles if c in v.measured_mpg)) for v in vehicles]
     chunks = [work[i : i + CHUNK] for i in range(0, len(work), CHUNK)]
-    executor = _Serial() if scheduler is None and local_cluster is None else _Dask(scheduler, local_cluster)
+    if scheduler is not None or local_cluster is not None:
+        executor = _Dask(scheduler, local_cluster)
+    else:
+        import os
+
+        n = workers or os.cpu_count() or 1
+        if workers is None and len(work) < 4 * CHUNK:  # a small fleet is not worth starting processes for
+            n = 1
+        executor = _Serial() if n == 1 or len(chunks) == 1 else _Pool(min(n, len(chunks)))
     with executor:
         # 2. the technology grid
         t0 = time.perf_counter()
