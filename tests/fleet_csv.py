@@ -151,7 +151,8 @@ def write_list(path: Path, *, perturb: str | None = None, bad_rows: bool = True)
         rows += car_rows(("X105",) + base[1:], target_a_lbf="")  # missing road load A
         hy = list(base)
         hy[-1] = (50, 52, 45, None)  # city better than highway: a hybrid by the rule
-        rows += car_rows(tuple(["X106"] + hy[1:]))
+        rows += car_rows(tuple(["X106"] + hy[1:]), model="Saver")
+        rows += car_rows(("X108",) + base[1:], model="Saver")  # ordinary mpg, but its model is a hybrid
         bag = car_rows(("X107",) + base[1:])
         bag[0][COL["bag2"]] = 999  # an implausible bag value: that bag is excluded, the car stays
         rows += bag

@@ -25,6 +25,9 @@ reason                          rule
                                 city fuel economy (FTP ``RND_ADJ_FE``) >= highway (HWY ``RND_ADJ_FE``): a
                                 conventional car always does better on the highway; a hybrid recovers braking
                                 energy and switches its engine off in town
+(either of the two above)       another test vehicle of the same make and model is a plug-in or a hybrid by
+                                the rules above (a plug-in's charge-depleting tests are often on another
+                                test vehicle than its gasoline tests)
 ``missing <field>``             a field the mapping needs is empty
 ``implausible <field>``         a field is outside its plausible range (:data:`PLAUSIBLE`)
 ``transmission type other``     transmission code ``OT``
@@ -285,10 +288,26 @@ def read_test_car_list(path: str | Path) -> TestCarList:
             excluded_rows.append(_excl(r, "missing Test Vehicle ID or configuration", test=True))
             continue
         groups.setdefault((r["vehicle_id"], int(r["configuration"])), []).append(r)
+    # what a vehicle's own tests say, then what the other test vehicles of the same model say (a plug-in's
+    # charge-depleting tests are often on another test vehicle than its charge-sustaining ones)
+    kinds = {key: _classify(tests) for key, tests in groups.items()}
+    model_kind: dict[tuple[str, str], str] = {}
+    for key, kind in kinds.items():
+        if kind is not None and kind.split(":")[0] in ("plug-in hybrid", "hybrid"):
+            name = _model_key(groups[key][0])
+            if model_kind.get(name) != "plug-in hybrid":
+                model_kind[name] = kind.split(":")[0]
     vehicles: list[VehicleRecord] = []
     excluded: Counter = Counter()
     for (vid, cfg), tests in groups.items():
-        rec, reason, test_rows = _vehicle(vid, cfg, tests)
+        kind = kinds[(vid, cfg)]
+        if kind is None and _model_key(tests[0]) in model_kind:
+            other = model_kind[_model_key(tests[0])]
+            kind = f"{other}: another test vehicle of this model is a {other}"
+        if kind is not None:
+            rec, reason, test_rows = None, kind, []
+        else:
+            rec, reason, test_rows = _vehicle(vid, cfg, tests)
         excluded_rows += test_rows
         if rec is None:
             excluded[reason.split(":")[0]] += 1
@@ -308,6 +327,10 @@ def _excl(r: dict, reason: str, *, test: bool) -> dict:
         "test_number": r["test_number"] if test else "",
         "reason": reason,
     }
+
+
+def _model_key(t: dict) -> tuple[str, str]:
+    return (t["make"].lower(), t["model"].lower())
 
 
 def _classify(tests: list[dict]) -> str | None:
@@ -362,10 +385,7 @@ def _field_problem(name: str, value: float) -> str | None:
 
 
 def _vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[VehicleRecord | None, str, list[dict]]:
-    """(record or None, exclusion reason, excluded test rows) of one vehicle's tests."""
-    kind = _classify(tests)
-    if kind is not None:
-        return None, kind, []
+    """(record or None, exclusion reason, excluded test rows) of one conventional vehicle's tests."""
     test_rows: list[dict] = []
     values: dict[str, list[float]] = {c: [] for c in ("ftp_bag2", "ftp_bag3", "hwy", "us06")}
     used: list[dict] = []
