@@ -22,6 +22,7 @@ Steps 2 and 4 run in chunks of vehicles, in this process or on Dask (``local_clu
 
 from __future__ import annotations
 
+import contextlib
 import math
 import sys
 import time
@@ -68,8 +69,30 @@ def _vehicle_class(rec: VehicleRecord) -> str:
 # --- units of work (module level: they travel to Dask workers) ----------------------------------------------
 
 
+@contextlib.contextmanager
+def _kernels_on_one_thread():
+    """Compiled kernels on one thread while a chunk runs: a fleet is thousands of small batch calls, and a
+    parallel kernel's thread start-up and join then cost more than they save (4x per call measured on a
+    busy 2-core machine); the fleet's parallelism is over vehicles, in processes. numba's thread count is
+    per calling thread, so it is set here, in the thread that runs the chunk (a Dask worker's executor
+    thread is not the one ``Client.run`` reaches)."""
+    import numba
+
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+
+
 def grid_chunk(items: list[tuple[VehicleRecord, tuple[str, ...]]]) -> list[dict]:
     """Backward runs over the technology grid; one dict per vehicle x cycle (``log_fuel`` on the grid)."""
+    with _kernels_on_one_thread():
+        return _grid_chunk(items)
+
+
+def _grid_chunk(items: list[tuple[VehicleRecord, tuple[str, ...]]]) -> list[dict]:
     from ..batch import run_batch
     from ..gears import default_schedule
     from .vehicle import record_parameters
@@ -98,6 +121,11 @@ def grid_chunk(items: list[tuple[VehicleRecord, tuple[str, ...]]]) -> list[dict]
 
 def predict_chunk(items: list[tuple[VehicleRecord, str, dict, np.ndarray]], method: str) -> list[dict]:
     """One run per (record, cycle, technology, gear per sample) with ``method``; dicts with the prediction."""
+    with _kernels_on_one_thread():
+        return _predict_chunk(items, method)
+
+
+def _predict_chunk(items, method: str) -> list[dict]:
     from ..batch import run_batch
     from ..gears import GearSchedule
     from .vehicle import record_parameters
@@ -135,23 +163,12 @@ def _one_line(exc: BaseException) -> str:
 
 
 class _Serial:
-    """In this process, compiled kernels on one thread: a fleet is thousands of small batch calls, and a
-    parallel kernel's thread start-up and join then cost more than they save (the more so on a busy
-    machine); the fleet's parallelism is over vehicles, in processes."""
-
     name = "serial (this process)"
 
     def __enter__(self):
-        import numba
-
-        self._threads = numba.get_num_threads()
-        numba.set_num_threads(1)
         return self
 
     def __exit__(self, *exc):
-        import numba
-
-        numba.set_num_threads(self._threads)
         return False
 
     def map(self, fn, chunks, *args):
@@ -171,7 +188,7 @@ class _Pool:
         import multiprocessing
 
         self.pool = cf.ProcessPoolExecutor(
-            max_workers=self.n, mp_context=multiprocessing.get_context("spawn"), initializer=_one_thread
+            max_workers=self.n, mp_context=multiprocessing.get_context("spawn")
         )
         return self
 
@@ -206,7 +223,6 @@ class _Dask:
                 self.client = Client(self.scheduler, timeout="20s")
             except (OSError, TimeoutError) as exc:
                 raise VpsimError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from None
-        self.client.run(_one_thread)
         return self
 
     def __exit__(self, *exc):
@@ -220,12 +236,6 @@ class _Dask:
         futures = [self.client.submit(fn, c, *args, pure=False) for c in chunks]
         for f in futures:  # in submission order: the rows come out in the same order as serial
             yield f.result()
-
-
-def _one_thread():
-    import numba
-
-    numba.set_num_threads(1)
 
 
 def _progress(label: str, done: int, total: int, t0: float, enabled: bool) -> None:
