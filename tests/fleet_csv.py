@@ -152,7 +152,14 @@ def write_list(path: Path, *, perturb: str | None = None, bad_rows: bool = True)
         hy = list(base)
         hy[-1] = (50, 52, 45, None)  # city better than highway: a hybrid by the rule
         rows += car_rows(tuple(["X106"] + hy[1:]), model="Saver")
-        rows += car_rows(("X108",) + base[1:], model="Saver")  # ordinary mpg, but its model is a hybrid
+        hot = list(base)
+        hot[-1] = (40, 38, 44, None)  # hot town (bag 2) mpg 0.91 x highway: a hybrid by the rule
+        rows += car_rows(tuple(["X110"] + hot[1:]))
+        rows += car_rows(("X111",) + base[1:], model="Cruiser HEV")  # hybrid by name
+        plug = car_rows(("X109",) + base[1:], model="Plugger")
+        plug.append(dict(plug[0], **{COL["category"]: "CD", COL["test_number"]: "X109-CD", COL["fe"]: ""}))
+        rows += plug
+        rows += car_rows(("X108",) + base[1:], model="Plugger")  # gasoline tests only; its model is a plug-in
         bag = car_rows(("X107",) + base[1:])
         bag[0][COL["bag2"]] = 999  # an implausible bag value: that bag is excluded, the car stays
         rows += bag

@@ -41,7 +41,8 @@ def test_bad_rows_are_excluded_with_their_reason(tmp_path):
     cars = read_test_car_list(write_list(tmp_path / "list.csv"))
     assert len(cars.vehicles) == len(CARS) + 1  # X107 keeps its bag 3 and HWY tests
     assert cars.excluded == {
-        "hybrid": 3,
+        "hybrid": 4,
+        "plug-in hybrid": 2,
         "diesel": 1,
         "electric": 1,
         "flex-fuel (E85 test)": 1,
@@ -53,7 +54,10 @@ def test_bad_rows_are_excluded_with_their_reason(tmp_path):
     assert reasons["X105"] == "missing target_a_lbf"
     assert reasons["X100"] == "hybrid"
     assert reasons["X106"] == "hybrid: city mpg >= highway mpg"
-    assert reasons["X108"] == "hybrid: another test vehicle of this model is a hybrid"
+    assert reasons["X110"] == "hybrid: hot town (FTP bag 2) mpg >= 0.86 x highway mpg"
+    assert reasons["X111"] == "hybrid"
+    assert reasons["X109"] == "plug-in hybrid"
+    assert reasons["X108"] == "plug-in hybrid: another test vehicle of this model is a plug-in hybrid"
     bag = [r for r in cars.excluded_rows if r["vehicle_id"] == "X107"]
     assert len(bag) == 1 and bag[0]["reason"] == "FTP test: FE Bag 2 999 mpg outside [5, 150]"
     x107 = cars.find("X107")

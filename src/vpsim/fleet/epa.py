@@ -21,13 +21,16 @@ reason                          rule
 ``fuel cell``                   a test on hydrogen
 ``diesel``                      a test on diesel fuel
 ``flex-fuel (E85 test)``        a test on E85
-``hybrid``                      ``hybrid`` in the model name, or (hybrids are not flagged in a column)
-                                city fuel economy (FTP ``RND_ADJ_FE``) >= highway (HWY ``RND_ADJ_FE``): a
-                                conventional car always does better on the highway; a hybrid recovers braking
-                                energy and switches its engine off in town
-(either of the two above)       another test vehicle of the same make and model is a plug-in or a hybrid by
-                                the rules above (a plug-in's charge-depleting tests are often on another
-                                test vehicle than its gasoline tests)
+``plug-in hybrid``              another test vehicle of the same make and model is a plug-in (its
+                                charge-depleting tests are often on another test vehicle than its gasoline
+                                tests)
+``hybrid``                      (hybrids are not flagged in a column) the model name holds ``hybrid``, the
+                                word ``HEV``/``FHEV``/``PHEV`` or a Lexus-style ``300h``
+                                (:data:`HYBRID_NAME`); or city fuel economy (FTP ``RND_ADJ_FE``) >= highway
+                                (HWY ``RND_ADJ_FE``); or hot town fuel economy (FTP bag 2) >=
+                                :data:`HOT_TOWN_HYBRID_RATIO` x highway. A conventional car does clearly
+                                better on the highway; a hybrid recovers braking energy and switches its
+                                engine off in town
 ``missing <field>``             a field the mapping needs is empty
 ``implausible <field>``         a field is outside its plausible range (:data:`PLAUSIBLE`)
 ``transmission type other``     transmission code ``OT``
@@ -41,6 +44,7 @@ Each excluded vehicle, and each skipped or implausible test row, is also listed 
 from __future__ import annotations
 
 import math
+import re
 from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -141,6 +145,12 @@ TRANSMISSION_KIND = {
     "SCV": "cvt",  # selectable CVT (stepped "virtual gears" on demand)
     "OT": "other",
 }
+
+# hybrids: a model name with the word hybrid, HEV (FHEV, PHEV) or a Lexus-style "300h"
+HYBRID_NAME = re.compile(r"hybrid|\b[fp]?hev\b|\b\d{3}h\b", re.IGNORECASE)
+# a conventional car's hot stabilised town fuel economy (FTP bag 2) is 0.44-0.85 of its highway figure in
+# the 2022 list; hybrids (engine off at rest and in slow traffic, braking energy recovered) are above
+HOT_TOWN_HYBRID_RATIO = 0.86
 
 # boosted or naturally aspirated: the list has no column for it
 BOOST_SPECIFIC_POWER_KW_PER_L = 75.0
@@ -293,10 +303,8 @@ def read_test_car_list(path: str | Path) -> TestCarList:
     kinds = {key: _classify(tests) for key, tests in groups.items()}
     model_kind: dict[tuple[str, str], str] = {}
     for key, kind in kinds.items():
-        if kind is not None and kind.split(":")[0] in ("plug-in hybrid", "hybrid"):
-            name = _model_key(groups[key][0])
-            if model_kind.get(name) != "plug-in hybrid":
-                model_kind[name] = kind.split(":")[0]
+        if kind is not None and kind.split(":")[0] == "plug-in hybrid":
+            model_kind[_model_key(groups[key][0])] = "plug-in hybrid"
     vehicles: list[VehicleRecord] = []
     excluded: Counter = Counter()
     for (vid, cfg), tests in groups.items():
@@ -349,12 +357,15 @@ def _classify(tests: list[dict]) -> str | None:
         return "diesel"
     if any("e85" in f for f in fuels):
         return "flex-fuel (E85 test)"
-    if any("hybrid" in t["model"].lower() for t in tests):
+    if any(HYBRID_NAME.search(t["model"]) for t in tests):
         return "hybrid"
     city = [t["fe"] for t in tests if _is_cert_ftp(t) and _plausible_mpg(t["fe"])]
+    hot = [t["bag2"] for t in tests if _is_cert_ftp(t) and _plausible_mpg(t["bag2"])]
     hwy = [t["fe"] for t in tests if _is_cert(t, "HWY") and _plausible_mpg(t["fe"])]
     if city and hwy and _harmonic(city) >= _harmonic(hwy):
         return "hybrid: city mpg >= highway mpg"
+    if hot and hwy and _harmonic(hot) >= HOT_TOWN_HYBRID_RATIO * _harmonic(hwy):
+        return f"hybrid: hot town (FTP bag 2) mpg >= {HOT_TOWN_HYBRID_RATIO} x highway mpg"
     return None
 
 
