@@ -27,7 +27,7 @@ TECH_PARAMS = ("engine.thermal_efficiency", "engine.friction_coefficient")
 CLASSES = ("na", "boosted")
 GRID = (
     np.array([0.30, 0.36, 0.42, 0.48, 0.54]),
-    np.array([0.1, 0.6, 1.1, 1.6]),
+    np.array([0.1, 0.8, 1.5, 2.2, 2.9]),
 )
 FINE = 41  # points per axis of the search between the grid nodes
 SEED = 20220

@@ -7,7 +7,8 @@ Steps (:mod:`vpsim.fleet.calibrate` explains the calibration):
 
 1. read the list (:func:`vpsim.fleet.epa.read_test_car_list`); fold per vehicle;
 2. per vehicle and cycle: its parameters (road load folded over *that* cycle's speeds), its gear schedule
-   (the documented rule of :func:`vpsim.gears.default_schedule`, derived once with the preset technology
+   (the documented rule of :func:`vpsim.gears.default_schedule` with an earlier upshift,
+   :data:`GEAR_RULE`, derived once with the preset technology
    and then kept for every technology value, as a sweep keeps the shifts), and the backward method over the
    technology grid in one :func:`vpsim.batch.run_batch` call (extended mode: clutch, idle, brakes);
 3. technology per fold and class fitted on the other folds;
@@ -31,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import VpsimError
+from ..gears import GearRule
 from . import calibrate as cal
 from .cycles import FLEET_CYCLES, fleet_cycle
 from .epa import TestCarList, VehicleRecord, mpg_from_l_per_100km, read_test_car_list
@@ -38,6 +40,12 @@ from .epa import TestCarList, VehicleRecord, mpg_from_l_per_100km, read_test_car
 METHODS = ("backward", "forward")
 MODE = "extended"
 CHUNK = 64  # vehicles per unit of work
+# The documented rule of vpsim.gears with an earlier upshift: modern automatics (and the shift schedules
+# manuals are tested with) keep the engine near 1200-1500 rpm on the FTP; the paper's 200 rad/s (1900 rpm)
+# is a 1990s manual driven briskly. Out-of-fold median |error| on the first 300 vehicles of the 2022 list
+# (bag 2 / bag 3 / HWY): 200 rad/s 10.0 / 8.1 / 6.3 %; 140 rad/s 9.3 / 7.3 / 4.7 %; 130 rad/s (1240 rpm,
+# with the friction grid up to 2.9) 10.1 / 6.7 / 4.4 %.
+GEAR_RULE = GearRule(min_engine_speed=130.0)
 FORWARD_DRIVER = "2"  # the stiffer preset PI driver (a = 1 s): the test driver follows the trace closely
 
 
@@ -106,7 +114,7 @@ def _grid_chunk(items: list[tuple[VehicleRecord, tuple[str, ...]]]) -> list[dict
             try:
                 cyc = fleet_cycle(name)
                 p = record_parameters(rec, [cyc])
-                sched = default_schedule(cyc, p, None)
+                sched = default_schedule(cyc, p, None, rule=GEAR_RULE)
                 df = run_batch(cyc, variants, method="backward", params=p, mode=MODE, gears=sched)
                 fuel = df["fuel_l_per_100km"].to_numpy()
                 if not np.all(np.isfinite(fuel) & (fuel > 0)):
