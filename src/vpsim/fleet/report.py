@@ -122,25 +122,23 @@ def mechanisms(df):
         parts = []
         if r["miss"] > 0:
             parts.append(
-                f"trace miss {r['miss']:.0f} s: the model's NA engine of this displacement lacks"
-                " the full-load torque" + (" of the boosted original" if r["boosted"] else "")
+                f"trace miss {r['miss']:.0f} s (NA model engine lacks full-load torque"
+                + (", the car is boosted)" if r["boosted"] else ")")
             )
         if r["pw"] >= pw90:
-            parts.append(f"high power/mass {r['pw']:.0f} W/kg: a large engine at very low load")
+            parts.append(f"high power/mass {r['pw']:.0f} W/kg (engine at very low load)")
         elif r["pw"] <= pw10:
-            parts.append(f"low power/mass {r['pw']:.0f} W/kg: engine near full load")
+            parts.append(f"low power/mass {r['pw']:.0f} W/kg (engine near full load)")
         if r["sp"] >= sp90:
-            parts.append(
-                f"high specific power {r['sp']:.0f} kW/L: a high-output engine (rich, high friction)"
-            )
+            parts.append(f"high specific power {r['sp']:.0f} kW/L (high-output engine)")
         if r["transmission"] == "cvt":
-            parts.append("CVT (modelled as 8 fixed ratios, no ratio optimisation)")
+            parts.append("CVT (model: 8 fixed ratios)")
         elif r["transmission"] == "automatic":
-            parts.append("torque-converter automatic (no converter in the model)")
+            parts.append("automatic (model: no torque converter)")
         elif r["transmission"] == "manual":
-            parts.append("manual (default shift rule, not the driver's)")
+            parts.append("manual (no converter loss, but the fleet technology absorbs the automatics')")
         if r["boosted"]:
-            parts.append("boosted (modelled naturally aspirated)")
+            parts.append("boosted (model: NA)")
         if r["mass"] >= m90:
             parts.append(f"heavy: {r['mass']:.0f} kg")
         if r["cyl"] >= 8:
