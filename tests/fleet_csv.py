@@ -135,10 +135,10 @@ def car_rows(car, fuel="Tier 2 Cert Gasoline", scale=1.0, model=None, **override
 
 
 def write_list(path: Path, *, perturb: str | None = None, bad_rows: bool = True) -> Path:
-    """The made-up list; ``perturb``: a vehicle id whose measured mpg are all doubled."""
+    """The made-up list; ``perturb``: a vehicle id whose measured mpg are all x 0.6."""
     rows = []
     for car in CARS:
-        rows += car_rows(car, scale=2.0 if car[0] == perturb else 1.0)
+        rows += car_rows(car, scale=0.6 if car[0] == perturb else 1.0)
     if bad_rows:
         base = CARS[1]
         rows += car_rows(("X100",) + base[1:], model="Family Hybrid")  # hybrid by name
@@ -156,6 +156,9 @@ def write_list(path: Path, *, perturb: str | None = None, bad_rows: bool = True)
         hot[-1] = (40, 38, 44, None)  # hot town (bag 2) mpg 0.91 x highway: a hybrid by the rule
         rows += car_rows(tuple(["X110"] + hot[1:]))
         rows += car_rows(("X111",) + base[1:], model="Cruiser HEV")  # hybrid by name
+        eff = list(base)
+        eff[-1] = (30, 32, 120, None)  # 120 mpg on the highway: more wheel work than an engine can give
+        rows += car_rows(tuple(["X112"] + eff[1:]))
         plug = car_rows(("X109",) + base[1:], model="Plugger")
         plug.append(dict(plug[0], **{COL["category"]: "CD", COL["test_number"]: "X109-CD", COL["fe"]: ""}))
         rows += plug

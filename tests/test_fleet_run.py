@@ -51,7 +51,7 @@ def test_a_vehicles_own_measurement_never_enters_its_fit(tmp_path):
     target = "T006"
     moved = run_fleet(write_list(tmp_path / "b.csv", perturb=target), folds=3, peer=False)
     a, b = _rows(clean.frame()), _rows(moved.frame())
-    assert (b.loc[target, "measured_mpg"] == 2 * a.loc[target, "measured_mpg"]).all()
+    assert np.allclose(b.loc[target, "measured_mpg"], 0.6 * a.loc[target, "measured_mpg"], rtol=1e-3)
     np.testing.assert_array_equal(a.loc[target, "predicted_mpg"], b.loc[target, "predicted_mpg"])
     own_fold = int(a.loc[target, "fold"].iloc[0])
     same_class = a["boosted"] == bool(a.loc[target, "boosted"].iloc[0])

@@ -28,9 +28,11 @@ reason                          rule
                                 word ``HEV``/``FHEV``/``PHEV`` or a Lexus-style ``300h``
                                 (:data:`HYBRID_NAME`); or city fuel economy (FTP ``RND_ADJ_FE``) >= highway
                                 (HWY ``RND_ADJ_FE``); or hot town fuel economy (FTP bag 2) >=
-                                :data:`HOT_TOWN_HYBRID_RATIO` x highway. A conventional car does clearly
+                                :data:`HOT_TOWN_HYBRID_RATIO` x highway (a conventional car does clearly
                                 better on the highway; a hybrid recovers braking energy and switches its
-                                engine off in town
+                                engine off in town); or positive wheel work on the HWFET over the fuel's
+                                heating value >= :data:`HWY_EFFICIENCY_HYBRID`
+                                (:func:`implied_hwy_efficiency`)
 ``missing <field>``             a field the mapping needs is empty
 ``implausible <field>``         a field is outside its plausible range (:data:`PLAUSIBLE`)
 ``transmission type other``     transmission code ``OT``
@@ -151,6 +153,15 @@ HYBRID_NAME = re.compile(r"hybrid|\b[fp]?hev\b|\b\d{3}h\b", re.IGNORECASE)
 # a conventional car's hot stabilised town fuel economy (FTP bag 2) is 0.44-0.85 of its highway figure in
 # the 2022 list; hybrids (engine off at rest and in slow traffic, braking energy recovered) are above
 HOT_TOWN_HYBRID_RATIO = 0.86
+
+# ... or whose highway test implies a tank-to-wheel efficiency no conventional car reaches: on the 2022 list
+# conventional cars reach at most 0.34 (Nissan Rogue, variable-compression turbo + CVT), the Hyundai Ioniq
+# hybrid 0.37 (its hot town bag is only 0.64 x highway, so the ratio rule misses it)
+HWY_EFFICIENCY_HYBRID = 0.35
+METRES_PER_MILE = 1609.344
+LITRES_PER_GALLON = 3.785411784
+CERT_FUEL_KG_PER_L = 0.743  # Tier 2 certification gasoline
+CERT_FUEL_LHV_J_PER_KG = 42.9e6
 
 # boosted or naturally aspirated: the list has no column for it
 BOOST_SPECIFIC_POWER_KW_PER_L = 75.0
@@ -366,7 +377,34 @@ def _classify(tests: list[dict]) -> str | None:
         return "hybrid: city mpg >= highway mpg"
     if hot and hwy and _harmonic(hot) >= HOT_TOWN_HYBRID_RATIO * _harmonic(hwy):
         return f"hybrid: hot town (FTP bag 2) mpg >= {HOT_TOWN_HYBRID_RATIO} x highway mpg"
+    if hwy:
+        eff = implied_hwy_efficiency(tests[0], _harmonic(hwy))
+        if eff >= HWY_EFFICIENCY_HYBRID:
+            return f"hybrid: wheel work / fuel energy on HWY {eff:.3f} >= {HWY_EFFICIENCY_HYBRID}"
     return None
+
+
+def implied_hwy_efficiency(t: dict, hwy_mpg: float) -> float:
+    """Positive work at the wheels on the HWFET (road load A + B v + C v^2 and inertia m a, with the test
+    mass) over the heating value of the fuel the HWY test burned (certification gasoline); nan when the
+    record lacks a field."""
+    import numpy as np
+
+    from .cycles import fleet_cycle
+
+    vals = [t[k] for k in ("target_a_lbf", "target_b_lbf_per_mph", "target_c_lbf_per_mph2", "etw_lb")]
+    if not all(math.isfinite(x) for x in vals) or not hwy_mpg > 0:
+        return math.nan
+    cyc = fleet_cycle("hwy")
+    v = 0.5 * (cyc.speed_mps[1:] + cyc.speed_mps[:-1])
+    dt = np.diff(cyc.time_s)
+    acc = np.diff(cyc.speed_mps) / dt
+    a, b, c = vals[0] * LBF_TO_N, lbf_per_mph_to_si(vals[1]), lbf_per_mph2_to_si(vals[2])
+    force = a + b * v + c * v * v + vals[3] * LB_TO_KG * acc
+    work = float(np.sum(np.maximum(force, 0.0) * v * dt))
+    distance = float(np.sum(v * dt))
+    gallons = distance / METRES_PER_MILE / hwy_mpg
+    return work / (gallons * LITRES_PER_GALLON * CERT_FUEL_KG_PER_L * CERT_FUEL_LHV_J_PER_KG)
 
 
 def _is_cert(t: dict, category: str) -> bool:

@@ -136,7 +136,7 @@ def mechanisms(df):
         elif r["transmission"] == "automatic":
             parts.append("automatic (model: no torque converter)")
         elif r["transmission"] == "manual":
-            parts.append("manual (no converter loss, but the fleet technology absorbs the automatics')")
+            parts.append("manual (model upshifts at 1240 rpm; the tested schedule shifts later in town)")
         if r["boosted"]:
             parts.append("boosted (model: NA)")
         if r["mass"] >= m90:
