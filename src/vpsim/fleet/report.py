@@ -323,7 +323,7 @@ def figure_by_group(df, cycles):
 def figure_worst(w):
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(14, 0.42 * max(len(w), 4) + 1.2), layout="constrained")
+    fig = Figure(figsize=(16, 0.42 * max(len(w), 4) + 1.2), layout="constrained")
     ax = fig.subplots()
     if len(w):
         y = np.arange(len(w))[::-1]
@@ -338,9 +338,9 @@ def figure_worst(w):
             ax.text(
                 0.01 * lim if neg else -0.01 * lim,
                 yi,
-                r.mechanism[:110],
+                r.mechanism[:150],
                 va="center",
-                fontsize=6,
+                fontsize=5.5,
                 ha="left" if neg else "right",
             )
         ax.axvline(0, color="k", lw=0.8)
