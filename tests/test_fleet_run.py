@@ -88,22 +88,42 @@ def test_from_epa_errors_are_one_line(tmp_path, capsys):
 
 def _check_outputs(out, cycles):
     s = json.loads((out / "summary.json").read_text())
-    assert set(SUMMARY_KEYS) <= set(s)
+    assert tuple(s) == SUMMARY_KEYS  # exactly the keys the issue names
     assert s["held_out"] is True
     assert set(s["cycles"]) == set(cycles)
     for c in cycles:
-        assert set(STAT_KEYS) <= set(s["cycles"][c])
+        assert tuple(s["cycles"][c]) == STAT_KEYS
     fs = s["peer"]["fastsim"]
-    if fs["measured"]:
-        for c in cycles:
-            assert set(STAT_KEYS) <= set(fs[c])
+    assert set(s["peer"]) == {"fastsim"}
+    if "measured" in fs:  # FASTSim not installed: said so, nothing faked
+        assert fs["measured"] is False and fs["reason"] and set(fs) == {"measured", "reason"}
     else:
-        assert fs["reason"]
+        assert set(fs) == set(cycles)
+        for c in cycles:
+            assert tuple(fs[c]) == STAT_KEYS
+    info = json.loads((out / "run.json").read_text())
+    assert set(info["trace_miss"]) == set(cycles) and info["n_rows"] > 0
     df = pd.read_csv(out / "vehicles.csv")
     assert tuple(df.columns[: len(CSV_COLUMNS)]) == CSV_COLUMNS
-    for f in (*FIGURES, "report.md", "excluded.csv", "technology.json"):
+    assert info["n_rows"] == len(df)
+    for f in (*FIGURES, "report.md", "technology.json"):
         assert (out / f).stat().st_size > 100
+    assert pd.read_csv(out / "excluded.csv").columns[-1] == "reason"
     return s, df
+
+
+def test_summary_without_the_peer_says_not_measured(tmp_path, capsys):
+    out = tmp_path / "o"
+    lst = write_list(tmp_path / "list.csv", bad_rows=False)
+    assert (
+        main(
+            ["fleet", str(lst), "--out", str(out), "--folds", "3", "--cycles", "hwy", "--no-peer", "--quiet"]
+        )
+        == 0
+    )
+    assert "FASTSim not measured" in capsys.readouterr().out
+    s, _ = _check_outputs(out, ("hwy",))
+    assert s["peer"]["fastsim"] == {"measured": False, "reason": "not run (--no-peer)"}
 
 
 def test_fleet_cli_on_a_made_up_list(tmp_path, capsys):

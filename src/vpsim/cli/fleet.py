@@ -57,11 +57,14 @@ def fleet(file, out, cycles, folds, method, local_cluster, scheduler, workers, n
     command = (
         "vpsim fleet " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if sys.argv[1:2] == ["fleet"] else ""
     )
-    s = write_outputs(run, out, command=command)
+    s, info = write_outputs(run, out, command=command)
     excl = sum(s["excluded"].values())
-    click.echo(f"{s['n_vehicles']} vehicles, {s['n_rows']} vehicle x cycle rows; {excl} vehicles excluded:")
+    click.echo(
+        f"{s['n_vehicles']} vehicles, {info['n_rows']} vehicle x cycle rows; {excl} vehicles excluded:"
+    )
     click.echo("  " + ", ".join(f"{k} {v}" for k, v in s["excluded"].items()))
     fs = s["peer"]["fastsim"]
+    measured = fs.get("measured", True)
     click.echo(
         f"{'cycle':10s} {'n':>5s} {'median':>8s} {'med|e|':>8s} {'p90|e|':>8s}   FASTSim: median, med|e|, p90"
     )
@@ -71,21 +74,21 @@ def fleet(file, out, cycles, folds, method, local_cluster, scheduler, workers, n
             f"{c:10s} {v['n']:5d} {_f(v['median_error_pct'])} {_f(v['median_abs_error_pct'])} "
             f"{_f(v['p90_abs_error_pct'])}"
         )
-        if fs.get("measured"):
+        if measured:
             f = fs[c]
             line += (
                 f"   {_f(f['median_error_pct'])} {_f(f['median_abs_error_pct'])} {_f(f['p90_abs_error_pct'])}"
             )
         click.echo(line)
-    if not fs.get("measured"):
+    if not measured:
         click.echo(f"FASTSim not measured: {fs.get('reason')}")
-    rt = s["runtime_s"]
+    rt = info["runtime_s"]
     click.echo(
-        f"runtime {rt['total_s']:.1f} s ({s['execution']}): "
+        f"runtime {rt['total_s']:.1f} s ({info['execution']}): "
         + ", ".join(f"{k} {v:.1f} s" for k, v in rt.items() if k != "total_s")
     )
     click.echo(
-        f"wrote {out}/vehicles.csv, summary.json, report.md, excluded.csv, technology.json and figures"
+        f"wrote {out}/vehicles.csv, summary.json, run.json, report.md, excluded.csv, technology.json, figures"
     )
 
 

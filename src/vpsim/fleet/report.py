@@ -2,8 +2,11 @@
 
 * ``vehicles.csv``: one row per vehicle x cycle; first the columns of :data:`CSV_COLUMNS`, then extras
   (transmission, boost, mass, technology used, trace miss, FASTSim's prediction);
-* ``summary.json``: :data:`SUMMARY_KEYS` (statistics of error_pct = 100 (predicted - measured) / measured
-  in mpg, over the rows with a prediction) and the run's settings;
+* ``summary.json``: exactly :data:`SUMMARY_KEYS`, and exactly :data:`STAT_KEYS` per cycle (statistics of
+  error_pct = 100 (predicted - measured) / measured in mpg over the rows with a prediction; FASTSim's over
+  the same rows where it gave one); ``peer.fastsim`` is ``{"measured": false, "reason": ...}`` when
+  FASTSim is not installed;
+* ``run.json``: the settings, row counts, trace misses and failures per cycle, and the runtime;
 * ``excluded.csv``: every excluded vehicle and skipped test row with its one-line reason;
 * ``technology.json``: the technology per fold and class (out of fold), and fitted on all vehicles;
 * ``report.md`` and the figures ``predicted_vs_measured.png``, ``error_histograms.png``,
@@ -32,7 +35,7 @@ CSV_COLUMNS = (
     "fold",
     "status",
 )
-SUMMARY_KEYS = ("n_vehicles", "excluded", "held_out", "cycles", "peer")
+SUMMARY_KEYS = ("n_vehicles", "excluded", "held_out", "cycles", "peer")  # exactly these
 STAT_KEYS = ("n", "median_error_pct", "median_abs_error_pct", "p90_abs_error_pct")
 FIGURES = ("predicted_vs_measured.png", "error_histograms.png", "error_by_group.png", "worst_vehicles.png")
 N_WORST = 20
@@ -52,46 +55,55 @@ def error_stats(errors) -> dict:
 
 
 def summary(run) -> dict:
+    """The summary with exactly the keys of :data:`SUMMARY_KEYS` (the run's settings: :func:`run_info`)."""
     df = run.frame()
     predicted = df[np.isfinite(df["error_pct"])]
     out = {
         "n_vehicles": int(df.drop_duplicates(["vehicle_id", "configuration"]).shape[0]),
         "excluded": dict(sorted(run.cars.excluded.items(), key=lambda kv: (-kv[1], kv[0]))),
         "held_out": True,
-        "cycles": {},
+        "cycles": {c: error_stats(predicted[predicted["cycle"] == c]["error_pct"]) for c in run.cycles},
         "peer": {},
     }
-    for c in run.cycles:
-        sub = predicted[predicted["cycle"] == c]
-        st = error_stats(sub["error_pct"])
-        st["n_trace_miss"] = int((sub["status"] == "trace_miss").sum())
-        st["n_failed"] = int(((df["cycle"] == c) & (df["status"] == "failed")).sum())
-        out["cycles"][c] = st
     if run.peer.get("available"):
-        fs = {"measured": True, "version": run.peer.get("version")}
-        for c in run.cycles:
-            sub = predicted[(predicted["cycle"] == c) & np.isfinite(predicted["fastsim_error_pct"])]
-            fs[c] = error_stats(sub["fastsim_error_pct"])
-            fs[c]["n_trace_miss"] = int((sub["fastsim_status"] == "trace_miss").sum())
-        out["peer"]["fastsim"] = fs
+        both = predicted[np.isfinite(predicted["fastsim_error_pct"])]
+        out["peer"]["fastsim"] = {
+            c: error_stats(both[both["cycle"] == c]["fastsim_error_pct"]) for c in run.cycles
+        }
     else:
         out["peer"]["fastsim"] = {"measured": False, "reason": run.peer.get("reason", "not run")}
-    out.update(
-        {
-            "method": run.method,
-            "mode": "extended",
-            "folds": run.folds,
-            "technology_parameters": ["engine.thermal_efficiency", "engine.friction_coefficient"],
-            "technology_classes": ["na", "boosted"],
-            "input": str(run.cars.path),
-            "n_test_rows": run.cars.n_rows,
-            "n_rows": int(len(df)),
-            "status": {k: int(v) for k, v in df["status"].value_counts().items()},
-            "execution": run.execution,
-            "runtime_s": {k: round(v, 2) for k, v in run.timings.items()},
-        }
-    )
     return out
+
+
+def run_info(run) -> dict:
+    """How the run was made and what it met: settings, counts, trace misses, runtime (``run.json``)."""
+    df = run.frame()
+    info = {
+        "method": run.method,
+        "mode": "extended",
+        "folds": run.folds,
+        "technology_parameters": ["engine.thermal_efficiency", "engine.friction_coefficient"],
+        "technology_classes": ["na", "boosted"],
+        "input": str(run.cars.path),
+        "n_test_rows": run.cars.n_rows,
+        "n_rows": int(len(df)),
+        "status": {k: int(v) for k, v in df["status"].value_counts().items()},
+        "trace_miss": {
+            c: int(((df["cycle"] == c) & (df["status"] == "trace_miss")).sum()) for c in run.cycles
+        },
+        "failed": {c: int(((df["cycle"] == c) & (df["status"] == "failed")).sum()) for c in run.cycles},
+        "execution": run.execution,
+        "runtime_s": {k: round(v, 2) for k, v in run.timings.items()},
+        "peer": {"fastsim": dict(run.peer)},
+    }
+    if run.peer.get("available"):
+        info["peer"]["fastsim"]["trace_miss"] = {
+            c: int(((df["cycle"] == c) & (df["fastsim_status"] == "trace_miss")).sum()) for c in run.cycles
+        }
+        info["peer"]["fastsim"]["failed"] = {
+            c: int(((df["cycle"] == c) & ~np.isfinite(df["fastsim_mpg"])).sum()) for c in run.cycles
+        }
+    return info
 
 
 # --- mechanisms -----------------------------------------------------------------------------------------
@@ -352,8 +364,8 @@ def figure_worst(w):
 # --- writing --------------------------------------------------------------------------------------------
 
 
-def write_outputs(run, out_dir, command: str = "") -> dict:
-    """Write everything into ``out_dir``; returns the summary."""
+def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
+    """Write everything into ``out_dir``; returns (summary, run info)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     df = run.frame()
@@ -369,7 +381,9 @@ def write_outputs(run, out_dir, command: str = "") -> dict:
         json.dumps({"out_of_fold": run.technology, "all_vehicles": run.technology_all}, indent=2) + "\n"
     )
     s = summary(run)
+    info = run_info(run)
     (out / "summary.json").write_text(json.dumps(s, indent=2) + "\n")
+    (out / "run.json").write_text(json.dumps(info, indent=2) + "\n")
     peer = bool(run.peer.get("available"))
     w = worst(df)
     figs = {
@@ -380,26 +394,26 @@ def write_outputs(run, out_dir, command: str = "") -> dict:
     }
     for name, fig in figs.items():
         fig.savefig(out / name, dpi=110)
-    (out / "report.md").write_text(markdown(run, s, df, w, command))
-    return s
+    (out / "report.md").write_text(markdown(run, s, info, df, w, command))
+    return s, info
 
 
 def _fmt(x, spec="+.1f"):
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
 
 
-def markdown(run, s, df, w, command: str) -> str:
+def markdown(run, s, info, df, w, command: str) -> str:
     L = [
         "# Fleet: predicted against measured fuel economy",
         "",
-        f"Input: `{Path(run.cars.path).name}` ({s['n_test_rows']} test rows). Method: **{run.method}**, "
+        f"Input: `{Path(run.cars.path).name}` ({info['n_test_rows']} test rows). Method: **{run.method}**, "
         "extended mode; technology (`engine.thermal_efficiency`, `engine.friction_coefficient` per NA / "
         "boosted class) "
         f"fitted by {run.folds}-fold cross-validation by vehicle: **every error below is out of fold**.",
     ]
     if command:
         L += ["", f"Command: `{command}`"]
-    rt = s["runtime_s"]
+    rt = info["runtime_s"]
     L += [
         "",
         f"Runtime: {rt.get('total_s', 0):.1f} s in total ({run.execution}); "
@@ -423,13 +437,14 @@ def markdown(run, s, df, w, command: str) -> str:
         "|---|---|---|---|---|---|---|---|---|",
     ]
     fs = s["peer"]["fastsim"]
+    measured = fs.get("measured", True)
     for c in run.cycles:
         v = s["cycles"][c]
-        f = fs.get(c, {}) if fs.get("measured") else {}
+        f = fs.get(c, {}) if measured else {}
         L.append(
             f"| {c} | {v['n']} | {_fmt(v['median_error_pct'])} % | "
             f"{_fmt(v['median_abs_error_pct'], '.1f')} % | "
-            f"{_fmt(v['p90_abs_error_pct'], '.1f')} % | {v['n_trace_miss']} | "
+            f"{_fmt(v['p90_abs_error_pct'], '.1f')} % | {info['trace_miss'][c]} | "
             + (
                 f"{_fmt(f.get('median_error_pct'))} % | {_fmt(f.get('median_abs_error_pct'), '.1f')} % | "
                 f"{_fmt(f.get('p90_abs_error_pct'), '.1f')} % |"
@@ -437,8 +452,16 @@ def markdown(run, s, df, w, command: str) -> str:
                 else "not measured | | |"
             )
         )
-    if not fs.get("measured"):
+    if not measured:
         L += ["", f"FASTSim: not measured ({fs.get('reason')})."]
+    else:
+        tm = info["peer"]["fastsim"]["trace_miss"]
+        L += [
+            "",
+            "FASTSim trace misses (its power ramp; run with trace_miss_opts = Allow): "
+            + ", ".join(f"{c} {n}" for c, n in tm.items())
+            + ".",
+        ]
     L += [
         "",
         "![predicted vs measured](predicted_vs_measured.png)",
