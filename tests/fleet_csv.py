@@ -7,7 +7,7 @@ from pathlib import Path
 
 from vpsim.fleet.epa import COL
 
-EXTRA = ("Model Year", "Vehicle Type", "FE Bag 1", "FE Bag 4")
+EXTRA = ("Model Year", "Vehicle Type", "FE Bag 1")
 
 # made-up gasoline cars: id, make, model, litres, cylinders, hp, code, gears, etw, axle, n/v, A, B, C, mpg
 # (bag 2, bag 3, hwy, us06 or None)
@@ -106,7 +106,7 @@ def _row(car, category, procedure, fuel, fe, bag2="", bag3="", test="", model=No
         "Model Year": 2022,
         "Vehicle Type": "Car",
         "FE Bag 1": "",
-        "FE Bag 4": "",
+        COL["bag4"]: "",
     }
     r.update({COL[k]: v for k, v in override.items()})
     return r
@@ -163,6 +163,9 @@ def write_list(path: Path, *, perturb: str | None = None, bad_rows: bool = True)
         plug.append(dict(plug[0], **{COL["category"]: "CD", COL["test_number"]: "X109-CD", COL["fe"]: ""}))
         rows += plug
         rows += car_rows(("X108",) + base[1:], model="Plugger")  # gasoline tests only; its model is a plug-in
+        mild = car_rows(("X113",) + base[1:])
+        mild[0][COL["bag4"]] = 28.5  # a 4-bag FTP: a 48 V mild hybrid
+        rows += mild
         bag = car_rows(("X107",) + base[1:])
         bag[0][COL["bag2"]] = 999  # an implausible bag value: that bag is excluded, the car stays
         rows += bag

@@ -43,6 +43,7 @@ def test_bad_rows_are_excluded_with_their_reason(tmp_path):
     assert cars.excluded == {
         "hybrid": 5,
         "plug-in hybrid": 2,
+        "mild hybrid": 1,
         "diesel": 1,
         "electric": 1,
         "flex-fuel (E85 test)": 1,
@@ -56,6 +57,7 @@ def test_bad_rows_are_excluded_with_their_reason(tmp_path):
     assert reasons["X106"] == "hybrid: city mpg >= highway mpg"
     assert reasons["X110"] == "hybrid: hot town (FTP bag 2) mpg >= 0.86 x highway mpg"
     assert reasons["X111"] == "hybrid"
+    assert reasons["X113"] == "mild hybrid: FTP with a fourth bag"
     assert reasons["X112"].startswith("hybrid: wheel work / fuel energy on HWY 0.")
     assert reasons["X109"] == "plug-in hybrid"
     assert reasons["X108"] == "plug-in hybrid: another test vehicle of this model is a plug-in hybrid"
