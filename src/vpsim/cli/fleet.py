@@ -31,7 +31,12 @@ from .main import cli
     help="Local processes without Dask (default: the cores, for fleets of 256+ vehicles; 1: this process).",
 )
 @click.option("--no-peer", "no_peer", is_flag=True, help="Do not run FASTSim beside vpsim.")
-@click.option("--limit", type=int, default=None, help="Only the first N usable vehicles (a quick look).")
+@click.option(
+    "--limit",
+    type=int,
+    default=None,
+    help="Only the first N usable vehicles (a quick look; exclusions: whole file).",
+)
 @click.option("--quiet", is_flag=True, help="No progress on stderr.")
 def fleet(file, out, cycles, folds, method, local_cluster, scheduler, workers, no_peer, limit, quiet):
     """Predict the measured fuel economy of the vehicles of an EPA test car list FILE."""
