@@ -25,7 +25,18 @@ import click
 from ..errors import VpsimError
 
 # command modules, imported lazily by main() so `vpsim --help` stays fast
-COMMAND_MODULES = ("simulate", "maps", "params", "paper", "engine", "scaling", "bench", "sweep")
+COMMAND_MODULES = (
+    "simulate",
+    "maps",
+    "params",
+    "paper",
+    "engine",
+    "scaling",
+    "bench",
+    "sweep",
+    "vehicle",
+    "fleet",
+)
 
 EXIT_ERROR = 2  # bad input: the user can act on the message
 EXIT_INTERNAL = 3  # a bug of vpsim: the message asks for a report

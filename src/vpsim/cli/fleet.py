@@ -1,0 +1,101 @@
+"""``vpsim fleet``: every usable vehicle of a test car list on the cycles its tests measured."""
+
+from __future__ import annotations
+
+import shlex
+import sys
+
+import click
+
+from .main import cli
+
+
+@cli.command()
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--out", "out", required=True, type=click.Path(file_okay=False), help="Output folder.")
+@click.option(
+    "--cycles",
+    "cycles",
+    default="ftp_bag2,ftp_bag3,hwy,us06",
+    show_default=True,
+    help="Comma-separated subset of ftp_bag2, ftp_bag3, hwy, us06.",
+)
+@click.option("--folds", type=int, default=5, show_default=True, help="Cross-validation folds (by vehicle).")
+@click.option("--method", type=click.Choice(["backward", "forward"]), default="backward", show_default=True)
+@click.option("--local-cluster", "local_cluster", type=int, default=None, help="Run on N local Dask workers.")
+@click.option("--scheduler", default=None, help="Run on the Dask scheduler at this address.")
+@click.option(
+    "--workers",
+    type=int,
+    default=None,
+    help="Local processes without Dask (default: the cores, for fleets of 256+ vehicles; 1: this process).",
+)
+@click.option("--no-peer", "no_peer", is_flag=True, help="Do not run FASTSim beside vpsim.")
+@click.option(
+    "--limit",
+    type=int,
+    default=None,
+    help="Only the first N usable vehicles (a quick look; exclusions: whole file).",
+)
+@click.option("--quiet", is_flag=True, help="No progress on stderr.")
+def fleet(file, out, cycles, folds, method, local_cluster, scheduler, workers, no_peer, limit, quiet):
+    """Predict the measured fuel economy of the vehicles of an EPA test car list FILE."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from ..fleet.report import write_outputs
+    from ..fleet.run import run_fleet
+
+    names = tuple(c.strip() for c in cycles.split(",") if c.strip())
+    run = run_fleet(
+        file,
+        cycles=names,
+        folds=folds,
+        method=method,
+        local_cluster=local_cluster,
+        scheduler=scheduler,
+        progress=not quiet,
+        limit=limit,
+        peer=not no_peer,
+        workers=workers,
+    )
+    command = (
+        "vpsim fleet " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if sys.argv[1:2] == ["fleet"] else ""
+    )
+    s, info = write_outputs(run, out, command=command)
+    excl = sum(s["excluded"].values())
+    click.echo(
+        f"{s['n_vehicles']} vehicles, {info['n_rows']} vehicle x cycle rows; {excl} vehicles excluded:"
+    )
+    click.echo("  " + ", ".join(f"{k} {v}" for k, v in s["excluded"].items()))
+    fs = s["peer"]["fastsim"]
+    measured = fs.get("measured", True)
+    click.echo(
+        f"{'cycle':10s} {'n':>5s} {'median':>8s} {'med|e|':>8s} {'p90|e|':>8s}   FASTSim: median, med|e|, p90"
+    )
+    for c in names:
+        v = s["cycles"][c]
+        line = (
+            f"{c:10s} {v['n']:5d} {_f(v['median_error_pct'])} {_f(v['median_abs_error_pct'])} "
+            f"{_f(v['p90_abs_error_pct'])}"
+        )
+        if measured:
+            f = fs[c]
+            line += (
+                f"   {_f(f['median_error_pct'])} {_f(f['median_abs_error_pct'])} {_f(f['p90_abs_error_pct'])}"
+            )
+        click.echo(line)
+    if not measured:
+        click.echo(f"FASTSim not measured: {fs.get('reason')}")
+    rt = info["runtime_s"]
+    click.echo(
+        f"runtime {rt['total_s']:.1f} s ({info['execution']}): "
+        + ", ".join(f"{k} {v:.1f} s" for k, v in rt.items() if k != "total_s")
+    )
+    click.echo(
+        f"wrote {out}/vehicles.csv, summary.json, run.json, report.md, excluded.csv, technology.json, figures"
+    )
+
+
+def _f(x) -> str:
+    return "       –" if x is None else f"{x:+7.1f}%"

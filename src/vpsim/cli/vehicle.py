@@ -1,0 +1,62 @@
+"""``vpsim vehicle from-epa``: a vehicle parameter file from a certification record."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from ..errors import VpsimError
+from .main import cli
+
+
+@cli.group()
+def vehicle():
+    """Vehicles from other sources (certification records)."""
+
+
+@vehicle.command("from-epa")
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--id", "vehicle_id", required=True, help="Test Vehicle ID of the record.")
+@click.option("--config", "config", type=int, default=None, help="Test Veh Configuration # (when several).")
+@click.option(
+    "--out",
+    "out",
+    required=True,
+    type=click.Path(dir_okay=False),
+    help="TOML file to write (vpsim simulate --vehicle reads it).",
+)
+@click.option(
+    "--technology",
+    "technology",
+    default=None,
+    type=click.Path(dir_okay=False),
+    help="technology.json of a `vpsim fleet` run: use its all-vehicle fit for this car's NA/boosted class.",
+)
+def from_epa(file, vehicle_id, config, out, technology):
+    """Write the parameters of test vehicle --id of the EPA test car list FILE as an editable TOML."""
+    from ..fleet.epa import read_test_car_list
+    from ..fleet.vehicle import record_parameters, vehicle_toml
+
+    cars = read_test_car_list(file)
+    rec = cars.find(vehicle_id, config)
+    tech, note = None, ""
+    if technology:
+        try:
+            data = json.loads(Path(technology).read_text())
+            cls = "boosted" if rec.boosted else "na"
+            fit = data["all_vehicles"][cls]
+            tech = {k: float(fit[k]) for k in ("engine.thermal_efficiency", "engine.friction_coefficient")}
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise VpsimError(f"{technology}: not a technology.json of vpsim fleet ({exc})") from None
+        note = f"fleet fit ({cls} class, all vehicles) from {Path(technology).name}"
+    params = record_parameters(rec, technology=tech)
+    text = vehicle_toml(rec, params, source=Path(file).name, technology_note=note)
+    Path(out).write_text(text)
+    meas = ", ".join(f"{c} {v:.1f} mpg" for c, v in rec.measured_mpg.items())
+    click.echo(
+        f"wrote {out}: {rec.make} {rec.model} ({rec.key}), {rec.mass_kg:.0f} kg, {rec.displacement_l:g} L "
+        f"{rec.cylinders} cyl. {'boosted' if rec.boosted else 'NA'}, {rec.transmission_kind} "
+        f"{params.transmission.n_gears} ratios; measured {meas or 'nothing usable'}"
+    )

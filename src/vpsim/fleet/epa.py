@@ -1,0 +1,551 @@
+"""Reader of the U.S. EPA Test Car List (one row per certification test), grouped per vehicle.
+
+A *vehicle* is one ``Test Vehicle ID`` + ``Test Veh Configuration #``; its tests give the measured fuel
+economy per cycle (see :mod:`vpsim.fleet.cycles`):
+
+* ``ftp_bag2``, ``ftp_bag3``: ``FE Bag 2`` / ``FE Bag 3`` of its FTP tests (test category FTP, not the
+  ``Cold CO`` procedure);
+* ``hwy``: ``RND_ADJ_FE`` of its HWY tests; ``us06``: ``RND_ADJ_FE`` of its US06 tests (the whole cycle).
+
+Only tests on the gasoline certification fuel (``Tier 2 Cert Gasoline``) are used; tests on other fuels
+of a gasoline car (cold-CO fuels, low-altitude E10) are skipped, and so are SC03 tests. Several tests of one
+vehicle on one cycle are averaged in fuel per distance (the harmonic mean of their mpg).
+
+Exclusion rules (a vehicle excluded is counted under its reason; the first rule that applies wins):
+
+==============================  ==============================================================================
+reason                          rule
+==============================  ==============================================================================
+``electric``                    a test on ``Electricity`` and no gasoline test, or displacement < 0.1 L
+``plug-in hybrid``              a charge-depleting (``CD``) or electricity test beside gasoline tests
+``fuel cell``                   a test on hydrogen
+``diesel``                      a test on diesel fuel
+``flex-fuel (E85 test)``        a test on E85
+``mild hybrid``                 ``MHEV`` in the model name, or an FTP test with a fourth bag (the 4-bag FTP of
+                                electrified vehicles: 48 V start-stop, recuperation and assist)
+``plug-in hybrid``              another test vehicle of the same make and model is a plug-in (its
+                                charge-depleting tests are often on another test vehicle than its gasoline
+                                tests)
+``hybrid``                      (hybrids are not flagged in a column) the model name holds ``hybrid``, the
+                                word ``HEV``/``FHEV``/``PHEV`` or a Lexus-style ``300h``
+                                (:data:`HYBRID_NAME`); or city fuel economy (FTP ``RND_ADJ_FE``) >= highway
+                                (HWY ``RND_ADJ_FE``); or hot town fuel economy (FTP bag 2) >=
+                                :data:`HOT_TOWN_HYBRID_RATIO` x highway (a conventional car does clearly
+                                better on the highway; a hybrid recovers braking energy and switches its
+                                engine off in town); or positive wheel work on the HWFET over the fuel's
+                                heating value >= :data:`HWY_EFFICIENCY_HYBRID`
+                                (:func:`implied_hwy_efficiency`)
+``missing <field>``             a field the mapping needs is empty
+``implausible <field>``         a field is outside its plausible range (:data:`PLAUSIBLE`)
+``transmission type other``     transmission code ``OT``
+``no usable test``              no FTP, HWY or US06 test on certification gasoline with a plausible value
+==============================  ==============================================================================
+
+Each excluded vehicle, and each skipped or implausible test row, is also listed with a one-line reason
+(:attr:`TestCarList.excluded_rows`); a bad row never stops the reading.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from ..errors import VpsimError
+
+# --- unit conversions (exact definitions) -------------------------------------------------------------------
+LB_TO_KG = 0.45359237
+LBF_TO_N = 4.4482216152605  # lbf = lb x standard gravity 9.80665 m/s^2
+MPH_TO_MPS = 0.44704
+HP_TO_KW = 0.745699871582270  # mechanical horsepower (550 ft lbf/s)
+L_PER_100KM_MPG = 235.2145833  # mpg = L_PER_100KM_MPG / (L/100 km): 100 km / 3.785411784 L per 1.609344 km
+
+
+def lbf_per_mph_to_si(b: float) -> float:
+    """lbf/mph -> N/(m/s)."""
+    return b * LBF_TO_N / MPH_TO_MPS
+
+
+def lbf_per_mph2_to_si(c: float) -> float:
+    """lbf/mph^2 -> N/(m/s)^2."""
+    return c * LBF_TO_N / MPH_TO_MPS**2
+
+
+def mpg_from_l_per_100km(l_per_100km):
+    return L_PER_100KM_MPG / l_per_100km
+
+
+# --- columns ------------------------------------------------------------------------------------------------
+COL = {
+    "make": "Represented Test Veh Make",
+    "model": "Represented Test Veh Model",
+    "manufacturer": "Vehicle Manufacturer Name",
+    "vehicle_id": "Test Vehicle ID",
+    "configuration": "Test Veh Configuration #",
+    "displacement_l": "Test Veh Displacement (L)",
+    "rated_hp": "Rated Horsepower",
+    "cylinders": "# of Cylinders and Rotors",
+    "transmission_code": "Tested Transmission Type Code",
+    "n_gears": "# of Gears",
+    "lockup": "Transmission Lockup?",
+    "drive": "Drive System Code",
+    "etw_lb": "Equivalent Test Weight (lbs.)",
+    "axle_ratio": "Axle Ratio",
+    "nv_ratio": "N/V Ratio",
+    "test_number": "Test Number",
+    "procedure": "Test Procedure Description",
+    "fuel": "Test Fuel Type Description",
+    "category": "Test Category",
+    "fe": "RND_ADJ_FE",
+    "bag2": "FE Bag 2",
+    "bag3": "FE Bag 3",
+    "bag4": "FE Bag 4",
+    "target_a_lbf": "Target Coef A (lbf)",
+    "target_b_lbf_per_mph": "Target Coef B (lbf/mph)",
+    "target_c_lbf_per_mph2": "Target Coef C (lbf/mph**2)",
+}
+
+CERT_GASOLINE = "Tier 2 Cert Gasoline"
+
+# plausible ranges of the record's fields (inclusive); outside => "implausible <field>"
+PLAUSIBLE = {
+    "etw_lb": (1500.0, 10000.0),
+    "target_a_lbf": (1.0, 200.0),
+    "target_b_lbf_per_mph": (-3.0, 3.0),
+    "target_c_lbf_per_mph2": (0.005, 0.15),
+    "displacement_l": (0.5, 10.0),
+    "cylinders": (2.0, 16.0),
+    "rated_hp": (40.0, 1600.0),
+    "nv_ratio": (10.0, 80.0),
+    "axle_ratio": (1.5, 8.0),
+    "mpg": (5.0, 150.0),
+}
+NUMERIC = (
+    "configuration",
+    "displacement_l",
+    "rated_hp",
+    "cylinders",
+    "n_gears",
+    "etw_lb",
+    "axle_ratio",
+    "nv_ratio",
+    "fe",
+    "bag2",
+    "bag3",
+    "bag4",
+    "target_a_lbf",
+    "target_b_lbf_per_mph",
+    "target_c_lbf_per_mph2",
+)
+
+# transmission type codes of the list -> the transmission kinds a powertrain engineer distinguishes
+TRANSMISSION_KIND = {
+    "M": "manual",
+    "A": "automatic",
+    "SA": "automatic",  # semi-automatic: a torque-converter automatic with a manual mode
+    "AM": "amt_dct",  # automated manual (single or dual clutch)
+    "AMS": "amt_dct",  # the same, selectable (paddles)
+    "CVT": "cvt",
+    "SCV": "cvt",  # selectable CVT (stepped "virtual gears" on demand)
+    "OT": "other",
+}
+
+# 48 V mild hybrids (engine stop, recuperation, electric assist): named MHEV, or certified with the 4-bag FTP
+# electrified vehicles are tested with (FE Bag 4 recorded). On the 2022 list these are mostly BMW, Audi,
+# Mercedes, Jaguar Land Rover and Ram eTorque models; kept in, they ran 10 % (town) and 7.5 % (highway)
+# short of their measured mpg with today's model.
+MILD_HYBRID_NAME = re.compile(r"\bmhev\b|mild hybrid", re.IGNORECASE)
+# hybrids: a model name with the word hybrid, HEV (FHEV, PHEV) or a Lexus-style "300h"
+HYBRID_NAME = re.compile(r"hybrid|\b[fp]?hev\b|\b\d{3}h\b", re.IGNORECASE)
+# a conventional car's hot stabilised town fuel economy (FTP bag 2) is 0.44-0.85 of its highway figure in
+# the 2022 list; hybrids (engine off at rest and in slow traffic, braking energy recovered) are above
+HOT_TOWN_HYBRID_RATIO = 0.86
+
+# ... or whose highway test implies a tank-to-wheel efficiency no conventional car reaches: on the 2022 list
+# conventional cars reach at most 0.34 (Nissan Rogue, variable-compression turbo + CVT), the Hyundai Ioniq
+# hybrid 0.37 (its hot town bag is only 0.64 x highway, so the ratio rule misses it)
+HWY_EFFICIENCY_HYBRID = 0.35
+METRES_PER_MILE = 1609.344
+LITRES_PER_GALLON = 3.785411784
+CERT_FUEL_KG_PER_L = 0.743  # Tier 2 certification gasoline
+CERT_FUEL_LHV_J_PER_KG = 42.9e6
+
+# boosted or naturally aspirated: the list has no column for it
+BOOST_SPECIFIC_POWER_KW_PER_L = 75.0
+
+
+@dataclass(frozen=True)
+class VehicleRecord:
+    """What the certification record says about one test vehicle (record units, as in the list)."""
+
+    vehicle_id: str
+    configuration: int
+    make: str
+    model: str
+    manufacturer: str
+    displacement_l: float
+    cylinders: int
+    rated_hp: float
+    transmission_code: str
+    transmission_kind: str  # manual, automatic, amt_dct, cvt
+    n_gears: int  # as listed (1 for a CVT)
+    lockup: bool
+    drive: str
+    etw_lb: float
+    axle_ratio: float  # nan when not given
+    nv_ratio: float  # engine rpm per mph in top gear
+    target_a_lbf: float
+    target_b_lbf_per_mph: float
+    target_c_lbf_per_mph2: float
+    boosted: bool
+    boost_rule: str  # how ``boosted`` was decided
+    measured_mpg: dict[str, float] = field(default_factory=dict)  # fleet cycle -> mpg
+    n_tests: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def key(self) -> str:
+        return f"{self.vehicle_id}#{self.configuration}"
+
+    @property
+    def rated_power_kw(self) -> float:
+        return self.rated_hp * HP_TO_KW
+
+    @property
+    def specific_power_kw_per_l(self) -> float:
+        return self.rated_power_kw / self.displacement_l
+
+    @property
+    def mass_kg(self) -> float:
+        return self.etw_lb * LB_TO_KG
+
+    @property
+    def road_load_si(self) -> tuple[float, float, float]:
+        """Target road load (A, B, C) in N, N/(m/s), N/(m/s)^2."""
+        return (
+            self.target_a_lbf * LBF_TO_N,
+            lbf_per_mph_to_si(self.target_b_lbf_per_mph),
+            lbf_per_mph2_to_si(self.target_c_lbf_per_mph2),
+        )
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class TestCarList:
+    """The usable vehicles of a test car list, and what was left out and why."""
+
+    path: str
+    vehicles: list[VehicleRecord]
+    excluded: Counter  # reason -> number of vehicles
+    excluded_rows: list[dict]  # one dict per excluded vehicle or skipped/implausible test row
+    n_rows: int
+
+    def find(self, vehicle_id: str, configuration: int | None = None) -> VehicleRecord:
+        hits = [
+            v
+            for v in self.vehicles
+            if v.vehicle_id == vehicle_id and (configuration is None or v.configuration == configuration)
+        ]
+        if len(hits) == 1:
+            return hits[0]
+        if len(hits) > 1:
+            configs = ", ".join(str(v.configuration) for v in hits)
+            raise VpsimError(f"{self.path}: vehicle {vehicle_id} has configurations {configs}; give --config")
+        why = [
+            r["reason"]
+            for r in self.excluded_rows
+            if r["vehicle_id"] == vehicle_id
+            and r["test_number"] == ""
+            and (configuration is None or r["configuration"] == configuration)
+        ]
+        if why:
+            raise VpsimError(f"{self.path}: vehicle {vehicle_id} is excluded: {why[0]}")
+        raise VpsimError(
+            f"{self.path}: no vehicle {vehicle_id}"
+            + ("" if configuration is None else f" config {configuration}")
+        )
+
+
+def _num(x) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return math.nan
+    return v
+
+
+def _text(x) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return ""
+    return str(x).strip()
+
+
+def read_test_car_list(path: str | Path) -> TestCarList:
+    """Read the list at ``path``; errors about the file itself are one line, bad rows are excluded."""
+    import pandas as pd
+
+    path = Path(path)
+    if not path.exists():
+        raise VpsimError(f"{path}: no such file")
+    try:
+        df = pd.read_csv(path, encoding="utf-8-sig", dtype=str, keep_default_na=False)
+    except (UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise VpsimError(f"{path}: not a readable CSV test car list ({msg})") from None
+    df.columns = [c.strip() for c in df.columns]
+    missing = [c for c in COL.values() if c not in df.columns]
+    if missing:
+        raise VpsimError(f"{path}: not an EPA test car list; missing column(s) {', '.join(missing)}")
+    rows = []
+    for i, raw in enumerate(df[list(COL.values())].itertuples(index=False, name=None)):
+        r = {k: raw[j] for j, k in enumerate(COL)}
+        for k in NUMERIC:
+            r[k] = _num(r[k]) if r[k] != "" else math.nan
+        for k in COL:
+            if k not in NUMERIC:
+                r[k] = _text(r[k])
+        r["line"] = i + 2  # header is line 1
+        rows.append(r)
+    if not rows:
+        raise VpsimError(f"{path}: no test rows below the header")
+    groups: dict[tuple[str, int], list[dict]] = {}
+    excluded_rows: list[dict] = []
+    for r in rows:
+        if r["vehicle_id"] == "" or not math.isfinite(r["configuration"]):
+            excluded_rows.append(_excl(r, "missing Test Vehicle ID or configuration", test=True))
+            continue
+        groups.setdefault((r["vehicle_id"], int(r["configuration"])), []).append(r)
+    # what a vehicle's own tests say, then what the other test vehicles of the same model say (a plug-in's
+    # charge-depleting tests are often on another test vehicle than its charge-sustaining ones)
+    kinds = {key: _classify(tests) for key, tests in groups.items()}
+    model_kind: dict[tuple[str, str], str] = {}
+    for key, kind in kinds.items():
+        if kind is not None and kind.split(":")[0] == "plug-in hybrid":
+            model_kind[_model_key(groups[key][0])] = "plug-in hybrid"
+    vehicles: list[VehicleRecord] = []
+    excluded: Counter = Counter()
+    for (vid, cfg), tests in groups.items():
+        kind = kinds[(vid, cfg)]
+        if (kind is None or kind.startswith("mild hybrid")) and _model_key(tests[0]) in model_kind:
+            other = model_kind[_model_key(tests[0])]
+            kind = f"{other}: another test vehicle of this model is a {other}"
+        if kind is not None:
+            rec, reason, test_rows = None, kind, []
+        else:
+            rec, reason, test_rows = _vehicle(vid, cfg, tests)
+        excluded_rows += test_rows
+        if rec is None:
+            excluded[reason.split(":")[0]] += 1
+            excluded_rows.append(_excl(tests[0], reason, test=False))
+        else:
+            vehicles.append(rec)
+    return TestCarList(str(path), vehicles, excluded, excluded_rows, len(rows))
+
+
+def _excl(r: dict, reason: str, *, test: bool) -> dict:
+    return {
+        "line": r["line"],
+        "vehicle_id": r["vehicle_id"],
+        "configuration": int(r["configuration"]) if math.isfinite(r["configuration"]) else -1,
+        "make": r["make"],
+        "model": r["model"],
+        "test_number": r["test_number"] if test else "",
+        "reason": reason,
+    }
+
+
+def _model_key(t: dict) -> tuple[str, str]:
+    return (t["make"].lower(), t["model"].lower())
+
+
+def _classify(tests: list[dict]) -> str | None:
+    fuels = {t["fuel"].lower() for t in tests}
+    cats = {t["category"].upper() for t in tests}
+    gasoline = any("gasoline" in f for f in fuels)
+    electric = "electricity" in fuels or "CD" in cats
+    disp = [t["displacement_l"] for t in tests if math.isfinite(t["displacement_l"])]
+    if (electric and not gasoline) or (disp and max(disp) < 0.1):
+        return "electric"
+    if electric:
+        return "plug-in hybrid"
+    if any("hydrogen" in f for f in fuels):
+        return "fuel cell"
+    if any("diesel" in f for f in fuels):
+        return "diesel"
+    if any("e85" in f for f in fuels):
+        return "flex-fuel (E85 test)"
+    if any(HYBRID_NAME.search(t["model"]) for t in tests):
+        return "hybrid"
+    city = [t["fe"] for t in tests if _is_cert_ftp(t) and _plausible_mpg(t["fe"])]
+    hot = [t["bag2"] for t in tests if _is_cert_ftp(t) and _plausible_mpg(t["bag2"])]
+    hwy = [t["fe"] for t in tests if _is_cert(t, "HWY") and _plausible_mpg(t["fe"])]
+    if city and hwy and _harmonic(city) >= _harmonic(hwy):
+        return "hybrid: city mpg >= highway mpg"
+    if hot and hwy and _harmonic(hot) >= HOT_TOWN_HYBRID_RATIO * _harmonic(hwy):
+        return f"hybrid: hot town (FTP bag 2) mpg >= {HOT_TOWN_HYBRID_RATIO} x highway mpg"
+    if hwy:
+        eff = implied_hwy_efficiency(tests[0], _harmonic(hwy))
+        if eff >= HWY_EFFICIENCY_HYBRID:
+            return f"hybrid: wheel work / fuel energy on HWY {eff:.3f} >= {HWY_EFFICIENCY_HYBRID}"
+    if any(MILD_HYBRID_NAME.search(t["model"]) for t in tests):
+        return "mild hybrid"
+    if any(_is_cert_ftp(t) and math.isfinite(t["bag4"]) for t in tests):
+        return "mild hybrid: FTP with a fourth bag"
+    return None
+
+
+def implied_hwy_efficiency(t: dict, hwy_mpg: float) -> float:
+    """Positive work at the wheels on the HWFET (road load A + B v + C v^2 and inertia m a, with the test
+    mass) over the heating value of the fuel the HWY test burned (certification gasoline); nan when the
+    record lacks a field."""
+    import numpy as np
+
+    from .cycles import fleet_cycle
+
+    vals = [t[k] for k in ("target_a_lbf", "target_b_lbf_per_mph", "target_c_lbf_per_mph2", "etw_lb")]
+    if not all(math.isfinite(x) for x in vals) or not hwy_mpg > 0:
+        return math.nan
+    cyc = fleet_cycle("hwy")
+    v = 0.5 * (cyc.speed_mps[1:] + cyc.speed_mps[:-1])
+    dt = np.diff(cyc.time_s)
+    acc = np.diff(cyc.speed_mps) / dt
+    a, b, c = vals[0] * LBF_TO_N, lbf_per_mph_to_si(vals[1]), lbf_per_mph2_to_si(vals[2])
+    force = a + b * v + c * v * v + vals[3] * LB_TO_KG * acc
+    work = float(np.sum(np.maximum(force, 0.0) * v * dt))
+    distance = float(np.sum(v * dt))
+    gallons = distance / METRES_PER_MILE / hwy_mpg
+    return work / (gallons * LITRES_PER_GALLON * CERT_FUEL_KG_PER_L * CERT_FUEL_LHV_J_PER_KG)
+
+
+def _is_cert(t: dict, category: str) -> bool:
+    return t["category"].upper() == category and t["fuel"] == CERT_GASOLINE
+
+
+def _is_cert_ftp(t: dict) -> bool:
+    return _is_cert(t, "FTP") and "cold co" not in t["procedure"].lower()
+
+
+def _plausible_mpg(x: float) -> bool:
+    lo, hi = PLAUSIBLE["mpg"]
+    return math.isfinite(x) and lo <= x <= hi
+
+
+def _harmonic(xs: list[float]) -> float:
+    return len(xs) / sum(1.0 / x for x in xs)
+
+
+def _field_problem(name: str, value: float) -> str | None:
+    if not math.isfinite(value):
+        return f"missing {name}"
+    lo, hi = PLAUSIBLE[name]
+    if not lo <= value <= hi:
+        return f"implausible {name}: {value:g} outside [{lo:g}, {hi:g}]"
+    return None
+
+
+def _vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[VehicleRecord | None, str, list[dict]]:
+    """(record or None, exclusion reason, excluded test rows) of one conventional vehicle's tests."""
+    test_rows: list[dict] = []
+    values: dict[str, list[float]] = {c: [] for c in ("ftp_bag2", "ftp_bag3", "hwy", "us06")}
+    used: list[dict] = []
+    for t in tests:
+        cat = t["category"].upper()
+        if (
+            cat not in ("FTP", "HWY", "US06")
+            or t["fuel"] != CERT_GASOLINE
+            or "cold co" in t["procedure"].lower()
+        ):
+            continue  # SC03, cold CO and other-fuel tests: not a cycle of the fleet (not an error)
+        picks = {"FTP": (("ftp_bag2", "bag2"), ("ftp_bag3", "bag3")), "HWY": (("hwy", "fe"),)}
+        picks["US06"] = (("us06", "fe"),)
+        ok = False
+        for cyc, col in picks[cat]:
+            x = t[col]
+            if _plausible_mpg(x):
+                values[cyc].append(x)
+                ok = True
+            else:
+                what = "missing" if not math.isfinite(x) else f"{x:g} mpg outside [5, 150]"
+                test_rows.append(_excl(t, f"{cat} test: {COL[col]} {what}", test=True))
+        if ok:
+            used.append(t)
+    if not used:
+        return None, "no usable test", test_rows
+    first = used[0]
+    for name in (
+        "etw_lb",
+        "target_a_lbf",
+        "target_b_lbf_per_mph",
+        "target_c_lbf_per_mph2",
+        "displacement_l",
+        "cylinders",
+        "rated_hp",
+        "nv_ratio",
+    ):
+        problem = _field_problem(name, first[name])
+        if problem:
+            return None, problem, test_rows
+    code = first["transmission_code"].upper()
+    kind = TRANSMISSION_KIND.get(code)
+    if kind is None:
+        return None, f"missing transmission type code: {code or 'empty'}", test_rows
+    if kind == "other":
+        return None, "transmission type other", test_rows
+    n_gears = first["n_gears"]
+    if not math.isfinite(n_gears):
+        return None, "missing n_gears", test_rows
+    if kind == "cvt":
+        n_gears = 1
+    elif not 3 <= n_gears <= 12:
+        return None, f"implausible n_gears: {n_gears:g} for a {kind} transmission", test_rows
+    axle = first["axle_ratio"]
+    if not (math.isfinite(axle) and PLAUSIBLE["axle_ratio"][0] <= axle <= PLAUSIBLE["axle_ratio"][1]):
+        axle = math.nan  # the mapping then uses a default top-gear ratio (vpsim.fleet.vehicle)
+    spec = first["rated_hp"] * HP_TO_KW / first["displacement_l"]
+    boosted = spec > BOOST_SPECIFIC_POWER_KW_PER_L
+    rule = f"specific power {spec:.1f} kW/L {'>' if boosted else '<='} {BOOST_SPECIFIC_POWER_KW_PER_L:g} kW/L"
+    measured = {c: _harmonic(v) for c, v in values.items() if v}
+    rec = VehicleRecord(
+        vehicle_id=vid,
+        configuration=cfg,
+        make=first["make"],
+        model=first["model"],
+        manufacturer=first["manufacturer"],
+        displacement_l=first["displacement_l"],
+        cylinders=int(round(first["cylinders"])),
+        rated_hp=first["rated_hp"],
+        transmission_code=code,
+        transmission_kind=kind,
+        n_gears=int(n_gears),
+        lockup=first["lockup"].upper() == "Y",
+        drive=first["drive"],
+        etw_lb=first["etw_lb"],
+        axle_ratio=axle,
+        nv_ratio=first["nv_ratio"],
+        target_a_lbf=first["target_a_lbf"],
+        target_b_lbf_per_mph=first["target_b_lbf_per_mph"],
+        target_c_lbf_per_mph2=first["target_c_lbf_per_mph2"],
+        boosted=boosted,
+        boost_rule=rule,
+        measured_mpg=measured,
+        n_tests={c: len(v) for c, v in values.items() if v},
+    )
+    return rec, "", test_rows
+
+
+__all__ = [
+    "COL",
+    "LBF_TO_N",
+    "LB_TO_KG",
+    "MPH_TO_MPS",
+    "PLAUSIBLE",
+    "TestCarList",
+    "VehicleRecord",
+    "lbf_per_mph2_to_si",
+    "lbf_per_mph_to_si",
+    "mpg_from_l_per_100km",
+    "read_test_car_list",
+]

@@ -1,0 +1,538 @@
+"""What ``vpsim fleet`` writes: the table, the summary, the report and the figures of a :class:`FleetRun`.
+
+* ``vehicles.csv``: one row per vehicle x cycle; first the columns of :data:`CSV_COLUMNS`, then extras
+  (transmission, boost, mass, technology used, trace miss, FASTSim's prediction);
+* ``summary.json``: exactly :data:`SUMMARY_KEYS`, and exactly :data:`STAT_KEYS` per cycle (statistics of
+  error_pct = 100 (predicted - measured) / measured in mpg over the rows with a prediction; FASTSim's over
+  the same rows where it gave one); ``peer.fastsim`` is ``{"measured": false, "reason": ...}`` when
+  FASTSim is not installed;
+* ``run.json``: the settings, row counts, trace misses and failures per cycle, and the runtime;
+* ``excluded.csv``: every excluded vehicle and skipped test row with its one-line reason;
+* ``technology.json``: the technology per fold and class (out of fold), and fitted on all vehicles;
+* ``report.md`` and the figures ``predicted_vs_measured.png``, ``error_histograms.png``,
+  ``error_by_group.png``, ``worst_vehicles.png``.
+
+Figures are drawn on :class:`matplotlib.figure.Figure` objects (no pyplot state, no backend choice).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+CSV_COLUMNS = (
+    "vehicle_id",
+    "configuration",
+    "make",
+    "model",
+    "cycle",
+    "measured_mpg",
+    "predicted_mpg",
+    "error_pct",
+    "fold",
+    "status",
+)
+SUMMARY_KEYS = ("n_vehicles", "excluded", "held_out", "cycles", "peer")  # exactly these
+STAT_KEYS = ("n", "median_error_pct", "median_abs_error_pct", "p90_abs_error_pct")
+FIGURES = ("predicted_vs_measured.png", "error_histograms.png", "error_by_group.png", "worst_vehicles.png")
+N_WORST = 20
+
+
+def error_stats(errors) -> dict:
+    e = np.asarray(errors, float)
+    e = e[np.isfinite(e)]
+    if e.size == 0:
+        return {"n": 0, "median_error_pct": None, "median_abs_error_pct": None, "p90_abs_error_pct": None}
+    return {
+        "n": int(e.size),
+        "median_error_pct": round(float(np.median(e)), 3),
+        "median_abs_error_pct": round(float(np.median(np.abs(e))), 3),
+        "p90_abs_error_pct": round(float(np.percentile(np.abs(e), 90)), 3),
+    }
+
+
+def summary(run) -> dict:
+    """The summary with exactly the keys of :data:`SUMMARY_KEYS` (the run's settings: :func:`run_info`)."""
+    df = run.frame()
+    predicted = df[np.isfinite(df["error_pct"])]
+    out = {
+        "n_vehicles": int(df.drop_duplicates(["vehicle_id", "configuration"]).shape[0]),
+        "excluded": dict(sorted(run.cars.excluded.items(), key=lambda kv: (-kv[1], kv[0]))),
+        "held_out": True,
+        "cycles": {c: error_stats(predicted[predicted["cycle"] == c]["error_pct"]) for c in run.cycles},
+        "peer": {},
+    }
+    if run.peer.get("available"):
+        both = predicted[np.isfinite(predicted["fastsim_error_pct"])]
+        out["peer"]["fastsim"] = {
+            c: error_stats(both[both["cycle"] == c]["fastsim_error_pct"]) for c in run.cycles
+        }
+    else:
+        out["peer"]["fastsim"] = {"measured": False, "reason": run.peer.get("reason", "not run")}
+    return out
+
+
+def run_info(run) -> dict:
+    """How the run was made and what it met: settings, counts, trace misses, runtime (``run.json``)."""
+    df = run.frame()
+    info = {
+        "method": run.method,
+        "mode": "extended",
+        "folds": run.folds,
+        "technology_parameters": ["engine.thermal_efficiency", "engine.friction_coefficient"],
+        "technology_classes": ["na", "boosted"],
+        "input": str(run.cars.path),
+        "n_test_rows": run.cars.n_rows,
+        "n_rows": int(len(df)),
+        "status": {k: int(v) for k, v in df["status"].value_counts().items()},
+        "trace_miss": {
+            c: int(((df["cycle"] == c) & (df["status"] == "trace_miss")).sum()) for c in run.cycles
+        },
+        "failed": {c: int(((df["cycle"] == c) & (df["status"] == "failed")).sum()) for c in run.cycles},
+        "execution": run.execution,
+        "runtime_s": {k: round(v, 2) for k, v in run.timings.items()},
+        "peer": {"fastsim": dict(run.peer)},
+    }
+    if run.peer.get("available"):
+        info["peer"]["fastsim"]["trace_miss"] = {
+            c: int(((df["cycle"] == c) & (df["fastsim_status"] == "trace_miss")).sum()) for c in run.cycles
+        }
+        info["peer"]["fastsim"]["failed"] = {
+            c: int(((df["cycle"] == c) & ~np.isfinite(df["fastsim_mpg"])).sum()) for c in run.cycles
+        }
+    return info
+
+
+# --- mechanisms -----------------------------------------------------------------------------------------
+
+
+def mechanisms(df):
+    """A data-derived mechanism per vehicle (a string): what sets it apart from the fleet, in order of the
+    model gaps it points at. ``df``: the rows of :func:`FleetRun.frame`."""
+    per = df.groupby(["vehicle_id", "configuration"]).agg(
+        transmission=("transmission", "first"),
+        n_gears=("n_gears", "first"),
+        boosted=("boosted", "first"),
+        pw=("power_to_mass_w_per_kg", "first"),
+        sp=("specific_power_kw_per_l", "first"),
+        mass=("test_mass_kg", "first"),
+        cyl=("cylinders", "first"),
+        miss=("trace_miss_s", "max"),
+        err=("error_pct", "median"),
+    )
+    pw90, m90, pw10, sp90 = (
+        np.nanpercentile(per["pw"], 90),
+        np.nanpercentile(per["mass"], 90),
+        np.nanpercentile(per["pw"], 10),
+        np.nanpercentile(per["sp"], 90),
+    )
+    out = {}
+    for key, r in per.iterrows():
+        parts = []
+        if r["miss"] > 0:
+            parts.append(
+                f"trace miss {r['miss']:.0f} s (NA model engine lacks full-load torque"
+                + (", the car is boosted)" if r["boosted"] else ")")
+            )
+        if r["pw"] >= pw90:
+            parts.append(f"high power/mass {r['pw']:.0f} W/kg (engine at very low load)")
+        elif r["pw"] <= pw10:
+            parts.append(f"low power/mass {r['pw']:.0f} W/kg (engine near full load)")
+        if r["sp"] >= sp90:
+            parts.append(f"high specific power {r['sp']:.0f} kW/L (high-output engine)")
+        if r["transmission"] == "cvt":
+            parts.append("CVT (model: 8 fixed ratios)")
+        elif r["transmission"] == "automatic":
+            parts.append("automatic (model: no torque converter)")
+        elif r["transmission"] == "manual":
+            parts.append("manual (model upshifts at 1240 rpm; the tested schedule shifts later in town)")
+        if r["boosted"]:
+            parts.append("boosted (model: NA)")
+        if r["mass"] >= m90:
+            parts.append(f"heavy: {r['mass']:.0f} kg")
+        if r["cyl"] >= 8:
+            parts.append(f"{int(r['cyl'])} cylinders")
+        out[key] = "; ".join(parts) if parts else "no distinguishing feature in the record"
+    return out
+
+
+def worst(df, n: int = N_WORST):
+    """The ``n`` vehicles with the largest median |error| over their cycles, with their mechanism."""
+    import pandas as pd
+
+    ok = df[np.isfinite(df["error_pct"])].copy()
+    ok["abs_error_pct"] = ok["error_pct"].abs()
+    g = ok.groupby(["vehicle_id", "configuration"])
+    per = g.agg(
+        make=("make", "first"),
+        model=("model", "first"),
+        median_error_pct=("error_pct", "median"),
+        median_abs_error_pct=("abs_error_pct", "median"),
+        cycles=("cycle", lambda s: ",".join(s)),
+    )
+    per = per.sort_values("median_abs_error_pct", ascending=False).head(n)
+    mech = mechanisms(df)
+    per["mechanism"] = [mech[k] for k in per.index]
+    return per.reset_index() if len(per) else pd.DataFrame()
+
+
+# --- breakdowns -----------------------------------------------------------------------------------------
+
+
+def _mass_bin(m):
+    edges = [0, 1600, 1900, 2200, 2600, 10000]
+    labels = ["<1600 kg", "1600-1900", "1900-2200", "2200-2600", ">2600 kg"]
+    for lo, hi, lab in zip(edges[:-1], edges[1:], labels, strict=True):
+        if lo <= m < hi:
+            return lab
+    return labels[-1]
+
+
+GROUPS = {
+    "transmission": lambda df: df["transmission"],
+    "boost": lambda df: np.where(df["boosted"], "boosted", "NA"),
+    "cylinders": lambda df: df["cylinders"].map(lambda z: f"{int(z)} cyl" if z < 8 else ">=8 cyl"),
+    "test mass": lambda df: df["test_mass_kg"].map(_mass_bin),
+}
+
+
+def breakdown(df):
+    """Per group kind, group and cycle: n, median error, median |error| (a long DataFrame)."""
+    import pandas as pd
+
+    ok = df[np.isfinite(df["error_pct"])].copy()
+    rows = []
+    for kind, fn in GROUPS.items():
+        ok["group"] = fn(ok)
+        for (grp, cyc), sub in ok.groupby(["group", "cycle"]):
+            e = sub["error_pct"].to_numpy()
+            rows.append(
+                {
+                    "by": kind,
+                    "group": grp,
+                    "cycle": cyc,
+                    "n": len(e),
+                    "median_error_pct": round(float(np.median(e)), 2),
+                    "median_abs_error_pct": round(float(np.median(np.abs(e))), 2),
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+# --- figures --------------------------------------------------------------------------------------------
+
+
+def _axes_grid(n, ncols=2, size=(5.2, 4.2)):
+    from matplotlib.figure import Figure
+
+    nrows = max(1, math.ceil(n / ncols))
+    fig = Figure(figsize=(size[0] * ncols, size[1] * nrows), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    return fig, axes
+
+
+def figure_predicted_vs_measured(df, cycles, peer: bool):
+    fig, axes = _axes_grid(len(cycles))
+    for ax, c in zip(axes, cycles, strict=False):
+        sub = df[(df["cycle"] == c) & np.isfinite(df["predicted_mpg"])]
+        lo = 0.9 * min(sub["measured_mpg"].min(), sub["predicted_mpg"].min()) if len(sub) else 0
+        hi = 1.05 * max(sub["measured_mpg"].max(), sub["predicted_mpg"].max()) if len(sub) else 1
+        if peer and "fastsim_mpg" in sub:
+            ax.scatter(
+                sub["measured_mpg"], sub["fastsim_mpg"], s=7, c="tab:orange", alpha=0.45, label="FASTSim 3.1"
+            )
+        miss = sub["status"] == "trace_miss"
+        ax.scatter(
+            sub["measured_mpg"][~miss],
+            sub["predicted_mpg"][~miss],
+            s=7,
+            c="tab:blue",
+            alpha=0.6,
+            label="vpsim",
+        )
+        if miss.any():
+            ax.scatter(
+                sub["measured_mpg"][miss],
+                sub["predicted_mpg"][miss],
+                s=12,
+                marker="x",
+                c="tab:red",
+                label="vpsim, trace miss",
+            )
+        x = np.array([lo, hi])
+        ax.plot(x, x, "k-", lw=0.8)
+        ax.plot(x, 1.1 * x, "k:", lw=0.7)
+        ax.plot(x, 0.9 * x, "k:", lw=0.7, label="±10 %")
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(lo, hi)
+        ax.set_title(f"{c} (n = {len(sub)})")
+        ax.set_xlabel("measured mpg")
+        ax.set_ylabel("predicted mpg (out of fold)")
+        ax.legend(fontsize=7, loc="upper left")
+    fig.suptitle("Predicted against measured fuel economy, 2022 EPA test cars")
+    return fig
+
+
+def figure_histograms(df, cycles, peer: bool):
+    fig, axes = _axes_grid(len(cycles))
+    bins = np.arange(-60, 61, 4)
+    for ax, c in zip(axes, cycles, strict=False):
+        sub = df[(df["cycle"] == c) & np.isfinite(df["error_pct"])]
+        ax.hist(np.clip(sub["error_pct"], -59.9, 59.9), bins=bins, alpha=0.7, color="tab:blue", label="vpsim")
+        if peer and "fastsim_error_pct" in sub:
+            e = sub["fastsim_error_pct"].dropna()
+            ax.hist(
+                np.clip(e, -59.9, 59.9),
+                bins=bins,
+                histtype="step",
+                lw=1.5,
+                color="tab:orange",
+                label="FASTSim 3.1",
+            )
+        ax.axvline(0, color="k", lw=0.8)
+        ax.set_title(f"{c}: median {np.median(sub['error_pct']):+.1f} %" if len(sub) else c)
+        ax.set_xlabel("error of predicted mpg, % (clipped at ±60)")
+        ax.set_ylabel("vehicles")
+        ax.legend(fontsize=7)
+    fig.suptitle("Error histograms (out of fold)")
+    return fig
+
+
+def figure_by_group(df, cycles):
+    fig, axes = _axes_grid(len(GROUPS))
+    ok = df[np.isfinite(df["error_pct"])].copy()
+    colours = ["tab:blue", "tab:green", "tab:purple", "tab:red"]
+    for ax, (kind, fn) in zip(axes, GROUPS.items(), strict=False):
+        ok["group"] = fn(ok)
+        groups = sorted(ok["group"].unique())
+        for j, c in enumerate(cycles):
+            xs, med, q1, q3 = [], [], [], []
+            for i, g in enumerate(groups):
+                e = ok[(ok["group"] == g) & (ok["cycle"] == c)]["error_pct"]
+                if len(e):
+                    xs.append(i + (j - (len(cycles) - 1) / 2) * 0.18)
+                    med.append(np.median(e))
+                    q1.append(np.percentile(e, 25))
+                    q3.append(np.percentile(e, 75))
+            med, q1, q3 = map(np.asarray, (med, q1, q3))
+            ax.errorbar(
+                xs, med, yerr=[med - q1, q3 - med], fmt="o", ms=4, capsize=2, color=colours[j % 4], label=c
+            )
+        counts = ok.drop_duplicates(["vehicle_id", "configuration"]).groupby("group").size()
+        ax.set_xticks(range(len(groups)), [f"{g}\n({counts.get(g, 0)})" for g in groups], fontsize=8)
+        ax.axhline(0, color="k", lw=0.8)
+        ax.set_title(f"error by {kind} (median, quartiles; vehicles)")
+        ax.set_ylabel("error of predicted mpg, %")
+        ax.legend(fontsize=7)
+    return fig
+
+
+def figure_worst(w):
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(16, 0.42 * max(len(w), 4) + 1.2), layout="constrained")
+    ax = fig.subplots()
+    if len(w):
+        y = np.arange(len(w))[::-1]
+        e = w["median_error_pct"].to_numpy()
+        ax.barh(y, e, color=np.where(e > 0, "tab:blue", "tab:red"))
+        labels = [f"{r.make} {r.model} ({r.vehicle_id}#{r.configuration})"[:48] for r in w.itertuples()]
+        ax.set_yticks(y, labels, fontsize=7)
+        lim = 1.05 * float(np.max(np.abs(e)))
+        ax.set_xlim(-lim, lim)
+        for yi, r in zip(y, w.itertuples(), strict=True):  # the mechanism on the empty side of the bar
+            neg = r.median_error_pct < 0
+            ax.text(
+                0.01 * lim if neg else -0.01 * lim,
+                yi,
+                r.mechanism[:150],
+                va="center",
+                fontsize=5.5,
+                ha="left" if neg else "right",
+            )
+        ax.axvline(0, color="k", lw=0.8)
+    ax.set_xlabel("median error over the vehicle's cycles, % (> 0: predicted mpg too high)")
+    ax.set_title(f"The {len(w)} worst vehicles and the mechanism the record points at")
+    return fig
+
+
+# --- writing --------------------------------------------------------------------------------------------
+
+
+def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
+    """Write everything into ``out_dir``; returns (summary, run info)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    df = run.frame()
+    cols = list(CSV_COLUMNS) + [c for c in df.columns if c not in CSV_COLUMNS]
+    df[cols].to_csv(out / "vehicles.csv", index=False)
+    import pandas as pd
+
+    pd.DataFrame(
+        run.cars.excluded_rows,
+        columns=["line", "vehicle_id", "configuration", "make", "model", "test_number", "reason"],
+    ).to_csv(out / "excluded.csv", index=False)
+    (out / "technology.json").write_text(
+        json.dumps({"out_of_fold": run.technology, "all_vehicles": run.technology_all}, indent=2) + "\n"
+    )
+    s = summary(run)
+    info = run_info(run)
+    (out / "summary.json").write_text(json.dumps(s, indent=2) + "\n")
+    (out / "run.json").write_text(json.dumps(info, indent=2) + "\n")
+    peer = bool(run.peer.get("available"))
+    w = worst(df)
+    figs = {
+        "predicted_vs_measured.png": figure_predicted_vs_measured(df, run.cycles, peer),
+        "error_histograms.png": figure_histograms(df, run.cycles, peer),
+        "error_by_group.png": figure_by_group(df, run.cycles),
+        "worst_vehicles.png": figure_worst(w),
+    }
+    for name, fig in figs.items():
+        fig.savefig(out / name, dpi=110)
+    (out / "report.md").write_text(markdown(run, s, info, df, w, command))
+    return s, info
+
+
+def _fmt(x, spec="+.1f"):
+    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
+
+
+def markdown(run, s, info, df, w, command: str) -> str:
+    L = [
+        "# Fleet: predicted against measured fuel economy",
+        "",
+        f"Input: `{Path(run.cars.path).name}` ({info['n_test_rows']} test rows). Method: **{run.method}**, "
+        "extended mode; technology (`engine.thermal_efficiency`, `engine.friction_coefficient` per NA / "
+        "boosted class) "
+        f"fitted by {run.folds}-fold cross-validation by vehicle: **every error below is out of fold**.",
+    ]
+    if command:
+        L += ["", f"Command: `{command}`"]
+    rt = info["runtime_s"]
+    L += [
+        "",
+        f"Runtime: {rt.get('total_s', 0):.1f} s in total ({run.execution}); "
+        + ", ".join(f"{k} {v:.1f} s" for k, v in rt.items() if k != "total_s")
+        + ".",
+    ]
+    L += [
+        "",
+        f"## Vehicles: {s['n_vehicles']} run, {sum(s['excluded'].values())} excluded",
+        "",
+        "| reason | vehicles |",
+        "|---|---|",
+    ]
+    L += [f"| {k} | {v} |" for k, v in s["excluded"].items()]
+    L += ["", "Every excluded vehicle and skipped test row, with its reason: `excluded.csv`.", ""]
+    L += [
+        "## Errors per cycle (error = predicted / measured mpg − 1)",
+        "",
+        "| cycle | n | vpsim median | vpsim median abs | vpsim p90 abs | trace misses | FASTSim median | "
+        "FASTSim median abs | FASTSim p90 abs |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    fs = s["peer"]["fastsim"]
+    measured = fs.get("measured", True)
+    for c in run.cycles:
+        v = s["cycles"][c]
+        f = fs.get(c, {}) if measured else {}
+        L.append(
+            f"| {c} | {v['n']} | {_fmt(v['median_error_pct'])} % | "
+            f"{_fmt(v['median_abs_error_pct'], '.1f')} % | "
+            f"{_fmt(v['p90_abs_error_pct'], '.1f')} % | {info['trace_miss'][c]} | "
+            + (
+                f"{_fmt(f.get('median_error_pct'))} % | {_fmt(f.get('median_abs_error_pct'), '.1f')} % | "
+                f"{_fmt(f.get('p90_abs_error_pct'), '.1f')} % |"
+                if f
+                else "not measured | | |"
+            )
+        )
+    if not measured:
+        L += ["", f"FASTSim: not measured ({fs.get('reason')})."]
+    else:
+        tm = info["peer"]["fastsim"]["trace_miss"]
+        L += [
+            "",
+            "FASTSim trace misses (its power ramp; run with trace_miss_opts = Allow): "
+            + ", ".join(f"{c} {n}" for c, n in tm.items())
+            + ".",
+        ]
+    L += [
+        "",
+        "![predicted vs measured](predicted_vs_measured.png)",
+        "",
+        "![error histograms](error_histograms.png)",
+    ]
+    L += [
+        "",
+        "## Technology fitted (out of fold)",
+        "",
+        "| fold.class | thermal efficiency | friction coefficient | training rows | basis |",
+        "|---|---|---|---|---|",
+    ]
+    for k, t in run.technology.items():
+        L.append(
+            f"| {k} | {t['engine.thermal_efficiency']:.3f} | {t['engine.friction_coefficient']:.3f} | "
+            f"{t['n_train']} | {t['basis']} |"
+        )
+    L += [
+        "",
+        "## Error by transmission, boost, cylinders and test mass",
+        "",
+        "Median error (median |error|) in %, per cycle:",
+        "",
+    ]
+    b = breakdown(df)
+    if len(b):
+        for kind in GROUPS:
+            sub = b[b["by"] == kind]
+            L += [
+                f"**{kind}**",
+                "",
+                "| group | " + " | ".join(run.cycles) + " |",
+                "|---|" + "---|" * len(run.cycles),
+            ]
+            for g in sorted(sub["group"].unique()):
+                cells = []
+                for c in run.cycles:
+                    r = sub[(sub["group"] == g) & (sub["cycle"] == c)]
+                    cells.append(
+                        f"{r['median_error_pct'].iloc[0]:+.1f} ({r['median_abs_error_pct'].iloc[0]:.1f}), "
+                        f"n={r['n'].iloc[0]}"
+                        if len(r)
+                        else "–"
+                    )
+                L.append(f"| {g} | " + " | ".join(cells) + " |")
+            L.append("")
+    L += [
+        "![error by group](error_by_group.png)",
+        "",
+        f"## The {len(w)} worst vehicles",
+        "",
+        "| vehicle | make model | cycles | median error | mechanism (from the record) |",
+        "|---|---|---|---|---|",
+    ]
+    for r in w.itertuples():
+        L.append(
+            f"| {r.vehicle_id}#{r.configuration} | {r.make} {r.model} | {r.cycles} | "
+            f"{r.median_error_pct:+.1f} % | {r.mechanism} |"
+        )
+    L += ["", "![worst vehicles](worst_vehicles.png)", ""]
+    return "\n".join(L) + "\n"
+
+
+__all__ = [
+    "CSV_COLUMNS",
+    "FIGURES",
+    "SUMMARY_KEYS",
+    "breakdown",
+    "error_stats",
+    "summary",
+    "worst",
+    "write_outputs",
+]

@@ -1,0 +1,172 @@
+"""Vehicles from certification records: unit conversions, exclusions, the record -> parameters mapping."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fleet_csv import CARS, write_list
+from vpsim.errors import VpsimError
+from vpsim.fleet import epa
+from vpsim.fleet.cycles import fleet_cycle, time_window
+from vpsim.fleet.epa import read_test_car_list
+from vpsim.fleet.vehicle import (
+    AIR_DENSITY,
+    FRONTAL_AREA_M2,
+    bore_stroke,
+    fold_road_load,
+    gear_ratios,
+    record_parameters,
+    top_gear_total_ratio,
+)
+
+
+def test_unit_conversions_against_hand_values():
+    # 3500 lb x 0.45359237 kg/lb
+    assert 3500 * epa.LB_TO_KG == pytest.approx(1587.573295, rel=1e-9)
+    # 1 lbf = 0.45359237 kg x 9.80665 m/s^2 = 4.448222 N
+    assert epa.LBF_TO_N == pytest.approx(0.45359237 * 9.80665, rel=1e-12)
+    assert 40 * epa.LBF_TO_N == pytest.approx(177.9289, rel=1e-6)
+    # 1 lbf/mph = 4.448222 N / 0.44704 m/s = 9.950388 N/(m/s)
+    assert epa.lbf_per_mph_to_si(1.0) == pytest.approx(9.950388, rel=1e-6)
+    # 1 lbf/mph^2 = 4.448222 N / (0.44704 m/s)^2 = 22.25840 N/(m/s)^2
+    assert epa.lbf_per_mph2_to_si(0.02) == pytest.approx(0.445168, rel=1e-5)
+    # 10 L/100 km = 23.52 mpg
+    assert epa.mpg_from_l_per_100km(10.0) == pytest.approx(23.5215, rel=1e-5)
+
+
+def test_bad_rows_are_excluded_with_their_reason(tmp_path):
+    cars = read_test_car_list(write_list(tmp_path / "list.csv"))
+    assert len(cars.vehicles) == len(CARS) + 1  # X107 keeps its bag 3 and HWY tests
+    assert cars.excluded == {
+        "hybrid": 5,
+        "plug-in hybrid": 2,
+        "mild hybrid": 1,
+        "diesel": 1,
+        "electric": 1,
+        "flex-fuel (E85 test)": 1,
+        "implausible etw_lb": 1,
+        "missing target_a_lbf": 1,
+    }
+    reasons = {r["vehicle_id"]: r["reason"] for r in cars.excluded_rows if r["test_number"] == ""}
+    assert reasons["X104"] == "implausible etw_lb: 150 outside [1500, 10000]"
+    assert reasons["X105"] == "missing target_a_lbf"
+    assert reasons["X100"] == "hybrid"
+    assert reasons["X106"] == "hybrid: city mpg >= highway mpg"
+    assert reasons["X110"] == "hybrid: hot town (FTP bag 2) mpg >= 0.86 x highway mpg"
+    assert reasons["X111"] == "hybrid"
+    assert reasons["X113"] == "mild hybrid: FTP with a fourth bag"
+    assert reasons["X112"].startswith("hybrid: wheel work / fuel energy on HWY 0.")
+    assert reasons["X109"] == "plug-in hybrid"
+    assert reasons["X108"] == "plug-in hybrid: another test vehicle of this model is a plug-in hybrid"
+    bag = [r for r in cars.excluded_rows if r["vehicle_id"] == "X107"]
+    assert len(bag) == 1 and bag[0]["reason"] == "FTP test: FE Bag 2 999 mpg outside [5, 150]"
+    x107 = cars.find("X107")
+    assert set(x107.measured_mpg) == {"ftp_bag3", "hwy", "us06"}  # no ftp_bag2
+    with pytest.raises(VpsimError, match="X104 is excluded: implausible etw_lb"):
+        cars.find("X104")
+
+
+def test_implied_highway_efficiency_by_hand(tmp_path):
+    # steady 60 mph on a made-up "cycle" would give F v / (fuel power); here the HWFET itself: check the
+    # conventional made-up cars stay well below the hybrid limit and scale as 1/mpg
+    cars = read_test_car_list(write_list(tmp_path / "list.csv", bad_rows=False))
+    rec = cars.find("T002")
+    t = {
+        "target_a_lbf": rec.target_a_lbf,
+        "target_b_lbf_per_mph": rec.target_b_lbf_per_mph,
+        "target_c_lbf_per_mph2": rec.target_c_lbf_per_mph2,
+        "etw_lb": rec.etw_lb,
+    }
+    e38 = epa.implied_hwy_efficiency(t, 38.0)
+    assert 0.15 < e38 < 0.35
+    assert epa.implied_hwy_efficiency(t, 76.0) == pytest.approx(2 * e38)
+    assert math.isnan(epa.implied_hwy_efficiency(dict(t, etw_lb=math.nan), 38.0))
+
+
+def test_record_fields_and_rules(tmp_path):
+    cars = read_test_car_list(write_list(tmp_path / "list.csv", bad_rows=False))
+    cvt = cars.find("T001")
+    assert cvt.transmission_kind == "cvt" and cvt.n_gears == 1
+    assert not cvt.boosted  # 110 hp / 1.5 L = 54.7 kW/L
+    coupe = cars.find("T004")
+    assert coupe.boosted and coupe.transmission_kind == "amt_dct"  # 250 hp / 2 L = 93 kW/L
+    assert coupe.mass_kg == pytest.approx(3625 * 0.45359237)
+    a, b, c = coupe.road_load_si
+    assert (a, b, c) == pytest.approx((30 * 4.4482216152605, 0.2 * 9.950388, 0.019 * 22.258397), rel=1e-6)
+    fam = cars.find("T002")
+    assert fam.measured_mpg == pytest.approx({"ftp_bag2": 27, "ftp_bag3": 29, "hwy": 38, "us06": 24})
+
+
+def test_unreadable_list_is_one_line_error(tmp_path):
+    with pytest.raises(VpsimError, match="no such file"):
+        read_test_car_list(tmp_path / "none.csv")
+    p = tmp_path / "other.csv"
+    p.write_text("a,b\n1,2\n")
+    with pytest.raises(VpsimError, match="not an EPA test car list; missing column"):
+        read_test_car_list(p)
+
+
+def test_bore_stroke_and_top_gear():
+    b, s = bore_stroke(2.0, 4, 1.05)
+    assert 4 * math.pi / 4 * b * b * s == pytest.approx(2.0e-3, rel=1e-12)
+    assert s / b == pytest.approx(1.05)
+    # 25 rpm per mph with r = 0.33 m: w_e = 25 x 2 pi / 60 rad/s at 0.44704 m/s -> i = w_e r / v
+    assert top_gear_total_ratio(25.0, 0.33) == pytest.approx(25 * 2 * math.pi / 60 * 0.33 / 0.44704)
+
+
+def test_gear_ratios_follow_the_record(tmp_path):
+    cars = read_test_car_list(write_list(tmp_path / "list.csv", bad_rows=False))
+    for vid in ("T002", "T005", "T007", "T008"):
+        rec = cars.find(vid)
+        ratios, final = gear_ratios(rec)
+        assert final == pytest.approx(rec.axle_ratio)
+        assert ratios[-1] * final == pytest.approx(top_gear_total_ratio(rec.nv_ratio))
+        assert all(np.diff(ratios) < 0)
+        assert len(ratios) == (8 if rec.transmission_kind == "cvt" else rec.n_gears)
+
+
+def test_road_load_fold_is_exact_without_b_term(tmp_path):
+    from dataclasses import replace
+
+    cars = read_test_car_list(write_list(tmp_path / "list.csv", bad_rows=False))
+    rec = replace(cars.find("T003"), target_b_lbf_per_mph=0.0)
+    a, _, c = rec.road_load_si
+    c_r, c_d, misfit = fold_road_load(rec, [fleet_cycle("hwy")])
+    assert c_r == pytest.approx(a / (rec.mass_kg * 9.81), rel=1e-6)
+    assert c_d == pytest.approx(c / (0.5 * AIR_DENSITY * FRONTAL_AREA_M2), rel=1e-6)
+    assert misfit < 1e-6
+    # with a B term the fold is a compromise: the road-load work of the cycle is kept within a few percent
+    rec_b = cars.find("T003")
+    c_r, c_d, _ = fold_road_load(rec_b, [fleet_cycle("hwy")])
+    cyc = fleet_cycle("hwy")
+    v = 0.5 * (cyc.speed_mps[1:] + cyc.speed_mps[:-1])
+    a, b, c = rec_b.road_load_si
+    work_record = np.sum((a + b * v + c * v * v) * v)
+    work_fold = np.sum((rec_b.mass_kg * 9.81 * c_r + 0.5 * AIR_DENSITY * FRONTAL_AREA_M2 * c_d * v * v) * v)
+    assert work_fold == pytest.approx(work_record, rel=0.01)
+
+
+def test_record_parameters_validate(tmp_path):
+    cars = read_test_car_list(write_list(tmp_path / "list.csv", bad_rows=False))
+    for rec in cars.vehicles:
+        p = record_parameters(rec, technology={"engine.thermal_efficiency": 0.41})
+        assert p.engine.displacement == pytest.approx(rec.displacement_l * 1e-3, rel=1e-9)
+        assert p.engine.cylinders == rec.cylinders
+        assert p.vehicle.mass == pytest.approx(rec.mass_kg)
+        assert p.engine.thermal_efficiency == 0.41
+
+
+def test_bag_cycles_are_udds_windows():
+    bag2, bag3 = fleet_cycle("ftp_bag2"), fleet_cycle("ftp_bag3")
+    assert bag2.time_s[0] == 0 and bag2.duration_s == 864 and bag3.duration_s == 505
+    assert bag2.distance_m / 1e3 == pytest.approx(6.211, abs=1e-3)  # PROVENANCE: FTP-75 bag 2 6.211 km
+    assert bag3.distance_m / 1e3 == pytest.approx(5.779, abs=1e-3)
+    udds = fleet_cycle("hwy")
+    part = time_window(udds, 10.5, 20.5)
+    assert part.time_s[0] == 0 and part.duration_s == 10
+    assert part.speed_mps[0] == pytest.approx(udds.speed_at(10.5))
+    with pytest.raises(VpsimError, match="not inside"):
+        time_window(udds, 0, 1e4)
