@@ -5,13 +5,12 @@ Mapping (record units -> SI; every default below is a module constant, documente
 * **mass**: the equivalent test weight, ``ETW [lb] x 0.45359237``. The dynamometer simulates the vehicle's
   inertia with this mass, so it is the mass of the test (wheel inertia included).
 * **road load**: the target coast-down road load F = A + B v + C v^2 (lbf, lbf/mph, lbf/mph^2 -> N,
-  N/(m/s), N/(m/s)^2). Today's model knows only F = m g c_r + 1/2 rho C_d A_f v^2, so the record's curve
-  is folded into c_r and C_d (with the nominal :data:`FRONTAL_AREA_M2` and :data:`AIR_DENSITY`) by
-  least squares over the speeds the cycle drives, each interval weighted by the distance driven in it
-  (the fit matches the road-load *work* of the cycle), with c_r >= 0 and C_d > 0 (non-negative least
-  squares). The B term (usually small) is thereby absorbed into the other two. The record's A/B/C are
-  kept beside the parameters (see :func:`write_vehicle_toml`), ready for an ``F = A + B v + C v^2`` road
-  load in the model.
+  N/(m/s), N/(m/s)^2), given to the model as it is (``vehicle.road_load_a/b/c``, which replace
+  m g c_r + 1/2 rho C_d A_f). c_r and C_d are still written (the curve folded by least squares over the
+  cycles' speeds, with the nominal :data:`FRONTAL_AREA_M2` and :data:`AIR_DENSITY`): they are what the peer
+  (FASTSim, which knows only that form) runs with.
+* **accessories**: :data:`ACCESSORY_POWER_W` on the crank while the engine runs (``engine.accessory_power``).
+* **fuel cut-off in overrun** above :data:`FUEL_CUTOFF_SPEED_RADPS` (``simulation.fuel_cutoff_speed``).
 * **engine**: displacement V_d and cylinders z give bore and stroke with the stroke/bore ratio
   :data:`STROKE_BORE_RATIO`: B = (4 V_d / (pi z k))^(1/3), S = k B; the rest of the engine is the preset
   ``hofman2011`` engine scaled by :func:`vpsim.scaling.scale_engine` (throttle areas with z B^2, speed range
@@ -56,6 +55,11 @@ CVT_SPREAD = 6.5  # ratio range of a typical belt CVT
 FUEL_DENSITY_KG_PER_L = 0.743  # Tier 2 certification gasoline
 FUEL_LHV_J_PER_KG = 42.9e6
 GRAVITY = 9.81
+# a certification test runs with the accessories off but the alternator's base load (engine electronics, fuel
+# pump, ignition): some 200-400 W of electrical power, about 300-500 W at the crank
+ACCESSORY_POWER_W = 300.0
+# modern engine controls cut the fuel on overrun above about 1,000-1,500 rpm (Guzzella & Onder 2010)
+FUEL_CUTOFF_SPEED_RADPS = 1200.0 * 2.0 * math.pi / 60.0
 
 
 def bore_stroke(
@@ -150,6 +154,7 @@ def record_parameters(
         "min_throttle_area": eng.min_throttle_area,
         "map_speed_range": list(eng.map_speed_range),
         "fuel_heating_value": FUEL_LHV_J_PER_KG,
+        "accessory_power": ACCESSORY_POWER_W,
     }
     sections = {
         "vehicle": {
@@ -160,6 +165,9 @@ def record_parameters(
             "air_density": AIR_DENSITY,
             "gravity": GRAVITY,
             "wheel_radius": WHEEL_RADIUS_M,
+            "road_load_a": rec.road_load_si[0],
+            "road_load_b": rec.road_load_si[1],
+            "road_load_c": rec.road_load_si[2],
         },
         "transmission": {
             "efficiency": TRANSMISSION_EFFICIENCY,
@@ -170,6 +178,7 @@ def record_parameters(
         "simulation": {
             "idle_fuel_flow": base.simulation.idle_fuel_flow * vd_ratio,
             "fuel_density": FUEL_DENSITY_KG_PER_L,
+            "fuel_cutoff_speed": FUEL_CUTOFF_SPEED_RADPS,
         },
     }
     for key, value in (technology or {}).items():
@@ -213,7 +222,7 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         f"# {rec.make} {rec.model}: test vehicle {rec.vehicle_id}, configuration {rec.configuration}",
         f"# built by vpsim vehicle from-epa from {source or 'an EPA test car list'}",
         "# (the module vpsim.fleet.vehicle documents the mapping and its defaults)",
-        "# SI units. Edit freely; run with: vpsim simulate --vehicle THIS_FILE --mode extended",
+        "# SI units. Edit freely; run with: vpsim simulate --vehicle THIS_FILE",
         "# Note: vpsim fleet shifts up at 130 rad/s (vpsim.fleet.run.GEAR_RULE) and folds the road load",
         "# over each cycle's own speeds; vpsim simulate uses the paper's rule (200 rad/s) and this file's",
         "# fold over all four fleet cycles: it predicts more fuel than vpsim fleet (no shift field yet).",
@@ -223,8 +232,13 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
     ]
     notes = {
         "vehicle.mass": "record: equivalent test weight",
-        "vehicle.rolling_resistance": "fit: road load A/B/C folded over the fleet cycles' speeds",
-        "vehicle.drag_coefficient": "fit: road load A/B/C folded, for the nominal frontal area",
+        "vehicle.rolling_resistance": "unused while road_load_* are set (the A/B/C folded, for the peer)",
+        "vehicle.drag_coefficient": "unused while road_load_* are set (the A/B/C folded, for the peer)",
+        "vehicle.road_load_a": "record: target coast-down A (N)",
+        "vehicle.road_load_b": "record: target coast-down B (N per m/s)",
+        "vehicle.road_load_c": "record: target coast-down C (N per (m/s)^2)",
+        "engine.accessory_power": "default: alternator base load (W)",
+        "simulation.fuel_cutoff_speed": "default: fuel cut on overrun above 1200 rpm (rad/s)",
         "vehicle.frontal_area": "default: nominal",
         "vehicle.wheel_radius": "default",
         "transmission.gearbox_ratios": "top gear: record N/V; geometric, default spread",
@@ -251,6 +265,9 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
                 "air_density",
                 "gravity",
                 "wheel_radius",
+                "road_load_a",
+                "road_load_b",
+                "road_load_c",
             ),
         ),
         ("transmission", ("efficiency", "gearbox_ratios", "final_drive")),
@@ -268,9 +285,10 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
                 "fuel_heating_value",
                 "thermal_efficiency",
                 "friction_coefficient",
+                "accessory_power",
             ),
         ),
-        ("simulation", ("idle_fuel_flow", "fuel_density")),
+        ("simulation", ("idle_fuel_flow", "fuel_density", "fuel_cutoff_speed")),
     ):
         lines.append(f"[{sec}]")
         for f in fields_:
