@@ -129,3 +129,18 @@ def test_bad_gear_file(params, tmp_path):
     f.write_text("time_s,gear\n0,1\n1,7\n")
     with pytest.raises(vpsim.CycleError, match=r"g\.csv:3: gear 7 is not a whole number in 0\.\.5"):
         gears.load_schedule(f, 5)
+
+
+def test_load_dependent_shift_rule_holds_lower_gears_under_load(params):
+    """An automatic's strategy: the engine speed kept rises with the load, so accelerations use lower gears
+    than cruising (and than the constant rule at the light-load speed)."""
+    from vpsim.gears import GearRule, default_schedule
+
+    c = load_cycle("ftp75")
+    const = default_schedule(c, params, rule=GearRule(min_engine_speed=120.0)).on_cycle(c)
+    loaded = default_schedule(
+        c, params, rule=GearRule(min_engine_speed=120.0, full_load_engine_speed=400.0)
+    ).on_cycle(c)
+    accel = np.r_[np.diff(c.speed_mps) > 0.5, False]
+    assert loaded[accel].mean() < const[accel].mean() - 0.3
+    assert np.mean(loaded < const) > 5 * np.mean(loaded > const)  # (merging and the no-upshift rule aside)

@@ -77,6 +77,9 @@ class GearRule:
 
     min_engine_speed: float = 200.0  # about 1900 rpm: shift up once the next gear keeps the engine above this
     max_engine_speed: float = 600.0
+    # an automatic's load-dependent strategy: the speed kept rises linearly with the load (demanded over
+    # full-load torque in that gear) from min_engine_speed at no load to this at full load; None: constant
+    full_load_engine_speed: float | None = None
     torque_reserve: float = 0.9
     min_hold_s: float = 3.0
 
@@ -127,7 +130,12 @@ def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | Non
         reserve = np.where(speed_ok, ratios[:, None] * (t_max - t_cr), -np.inf)
         fallback = np.where(speed_ok.any(axis=0), np.argmax(reserve, axis=0), n_g - 1)
         admissible[fallback[none], np.flatnonzero(none)] = True
-    high_enough = admissible & (w_e >= rule.min_engine_speed)
+    w_keep = rule.min_engine_speed
+    if rule.full_load_engine_speed is not None:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            load = np.clip(np.where(t_max > 0, t_cr / t_max, 1.0), 0.0, 1.0)
+        w_keep = rule.min_engine_speed + (rule.full_load_engine_speed - rule.min_engine_speed) * load
+    high_enough = admissible & (w_e >= w_keep)
     gears = np.arange(1, n_g + 1)[:, None]
     best_high = np.where(high_enough, gears, 0).max(axis=0)
     lowest_adm = np.where(admissible, gears, n_g + 1).min(axis=0)
