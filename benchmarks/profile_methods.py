@@ -56,7 +56,8 @@ def profile_backward(p, cyc, schedule, em):
     s2 = default_schedule(two, p, em)
     fixed = median_us(lambda: backward.run(two, p, engine_map=em, schedule=s2), 2000)
     print(
-        f"backward udds: run {run:.1f} us ({(run - fixed) * 1e3 / n:.0f} ns per interval beyond the fixed cost); "
+        f"backward udds: run {run:.1f} us ({(run - fixed) * 1e3 / n:.0f} ns per interval beyond the fixed "
+        "cost); "
         f"fixed cost (2-interval cycle) {fixed:.1f} us"
     )
     print(top(lambda: backward.run(cyc, p, engine_map=em, schedule=schedule), 2000))

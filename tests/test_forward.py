@@ -106,7 +106,8 @@ def test_open_loop_matches_scipy_radau(params, gear, a_eff):
     gear=st.integers(1, 5),
 )
 def test_right_side_is_the_affine_form_21(params, v, p, a_eff, gear):
-    """The kernel's dv/dt and dp_i/dt equal (21) with vpsim.model.vehicle.statespace_coefficients (open-loop throttle)."""
+    """The kernel's dv/dt and dp_i/dt equal (21) with vpsim.model.vehicle.statespace_coefficients (open
+    loop)."""
     ratio = params.transmission.ratios[gear - 1]
     c = record(params)
     D = forward.settings(params)

@@ -128,7 +128,7 @@ def test_batch_rows_equal_single_runs_with_the_exact_map(params):
             assert df["trace_miss_s"][k] == r.trace_miss.seconds
 
 
-# --- one definition per equation -----------------------------------------------------------------------------
+# --- one definition per equation ---------------------------------------------------------------------
 
 # numbers that only occur in the equations of the model: Soltic's friction law (5) and the friction term of
 # BMEP, the flow function (12),(13); a copy of an equation elsewhere would carry them
@@ -184,7 +184,7 @@ def test_methods_do_not_import_each_other():
                 assert node.module.split(".")[0] not in {"backward", "forward", "inverse"}, f.name
 
 
-# --- extension: a change in one place of the model shows up everywhere ----------------------------------------
+# --- extension: a change in one place of the model shows up everywhere -------------------------------
 
 _EXTENSION_PROBE = textwrap.dedent(
     """
@@ -193,7 +193,7 @@ _EXTENSION_PROBE = textwrap.dedent(
     from vpsim.model.maps import cached_engine_map
     from vpsim.params import load_parameters
     p = load_parameters()
-    out = {m: vpsim.simulate("nedc", method=m, mode="extended").fuel_kg for m in ("backward", "forward", "inverse")}
+    out = {m: vpsim.simulate("nedc", method=m).fuel_kg for m in ("backward", "forward", "inverse")}
     out["batch"] = float(run_batch("nedc", {"vehicle.mass": [1700.0]}, mode="extended")["fuel_kg"][0])
     out["map_max_torque"] = float(cached_engine_map(p.engine).max_torque(300.0))
     out["map_fuel"] = float(cached_engine_map(p.engine).fuel_flow(50.0, 300.0))
@@ -247,7 +247,7 @@ def test_parameter_record_fields_follow_parameters(params):
     assert vh.equivalent_mass(10.0, heavier) > 2000.0
 
 
-# --- the realistic car's extra physics: coast-down road load, accessories, fuel cut-off -------------------------
+# --- the realistic car's extra physics: coast-down road load, accessories, fuel cut-off --------------
 
 
 def test_coastdown_road_load_is_a_plus_bv_plus_cv2(params):

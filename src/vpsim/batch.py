@@ -19,7 +19,7 @@ Methods:
 
 * ``backward``: compiled over variants (:func:`vpsim.methods.backward.run_variants`, parallel over the cores).
   Each variant has its own engine, hence its own fuel map and max-torque line. The fuel flow is the BQM in
-  closed form (:func:`vpsim.model.maps.bqm_fuel_flow`, linear in p_i, so there is nothing to tabulate); this is
+  closed form (:func:`vpsim.model.engine.bqm_fuel_flow`, linear in p_i: nothing to tabulate); this is
   what :func:`vpsim.methods.backward.run` computes with ``engine_map=generate_engine_map(eng, exact=True)``
   (the default table lookup differs from it by < 1e-5 relative). The max-torque line (the FQM at A_max,
   a Newton solve per speed, tabulated at 1 rad/s like :func:`vpsim.model.maps.generate_engine_map` and

@@ -241,8 +241,8 @@ IDLE_CHECK_SPEED = 80.0  # rad/s: the idle speed of the methods (vpsim.model.rec
 _EFFICIENCIES = ("transmission.efficiency", "engine.thermal_efficiency")
 # fields of earlier versions that no longer exist: read and ignored, with the reason
 _RETIRED = {
-    "simulation.newton_max_iterations": "the FQM's Newton solve always converges to 1e-12 (at most 30 iterations)",
-    "simulation.newton_relative_tolerance": "the FQM's Newton solve always converges to 1e-12 (at most 30 iterations)",
+    "simulation.newton_max_iterations": "the FQM's Newton solve always converges to 1e-12 (at most 30 steps)",
+    "simulation.newton_relative_tolerance": "the FQM's Newton solve always converges to 1e-12",
 }
 
 

@@ -32,7 +32,8 @@ with the functions of :mod:`vpsim.model`. Gears and launch:
 The manifold is stiff at full throttle (dPsi/dp_r -> -inf as p_i -> p_a, time constant of some 10 ms against
 the vehicle's seconds), so the integrator is the L-stable linearly implicit Rosenbrock method ROS2 (Verwer,
 Spee, Blom & Hundsdorfer 1999) with a fixed step ``dt`` (default 50 ms), run on many designs at once (the
-model's equations broadcast over an array of parameter records). Every event is a speed threshold (clutch lock-up,
+model's equations broadcast over an array of parameter records). Every event is a speed threshold (clutch
+lock-up,
 upshift, rev limit, target), so a step that would pass one is shortened to land on it. The time agrees
 with an adaptive implicit solver with event location (scipy Radau, rtol 1e-8) to about 1 ms (see the tests).
 """

@@ -182,7 +182,8 @@ class Deviations:
             return "not assessed" if x is None else f"{x:g} s"
 
         parts = [
-            f"speed not followed {s(self.speed_not_followed_s)} (max error {self.max_speed_error_mps:.2f} m/s)"
+            f"speed not followed {s(self.speed_not_followed_s)} "
+            f"(max error {self.max_speed_error_mps:.2f} m/s)"
         ]
         dn = self.demand_not_deliverable_s
         if dn:

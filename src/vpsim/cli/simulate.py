@@ -169,7 +169,8 @@ def _causes(dev) -> str:
         parts.append(f"throttle below minimum {dev.throttle_below_minimum_s:g} s")
     if dev.engine_speed_out_of_range_s:
         parts.append(
-            f"engine speed out of range {dev.engine_speed_out_of_range_s:g} s, max {dev.max_engine_speed_radps:.0f} rad/s"
+            f"engine speed out of range {dev.engine_speed_out_of_range_s:g} s, "
+            f"max {dev.max_engine_speed_radps:.0f} rad/s"
         )
     return "; ".join(parts)
 

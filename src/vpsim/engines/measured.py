@@ -33,7 +33,8 @@ points are extrapolated and flagged too.
 
 :class:`MeasuredEngineMap` (``engine.engine_map()``) is the view the backward method consumes, with the same
 ``fuel_flow(T, w)``, ``max_torque(w)``, ``min_torque(w)``, ``inertia`` and ``name`` as the generated map
-(:class:`vpsim.model.maps.GeneratedEngineMap`). It adds the rules for the part of a drive cycle the measurements do
+(:class:`vpsim.model.maps.GeneratedEngineMap`). It adds the rules for the part of a drive cycle the
+measurements do
 not cover (zero and negative torque, speeds below the map); see its docstring and docs/scaling.md.
 """
 
@@ -535,7 +536,8 @@ ZERO_TORQUE_RULES = ("ignore", "use")
 
 @dataclass(frozen=True, eq=False)
 class MeasuredEngineMap:
-    """A measured engine as the backward method consumes it, like :class:`vpsim.model.maps.GeneratedEngineMap`.
+    """A measured engine as the backward method consumes it, an
+    :class:`~vpsim.model.maps.EngineMap` like :class:`~vpsim.model.maps.GeneratedEngineMap`.
 
     ``fuel_flow(t_cr, w_e)`` (kg/s), ``max_torque(w_e)``, ``min_torque(w_e)`` (N*m), ``inertia``, ``name``.
     The measured map is steady-state data at positive brake torque, read as the crank torque T_cr of the

@@ -534,7 +534,7 @@ def _result(cycle, params, mode, series, fuel_kg, distance, cpu, steps, trace, e
     )
 
 
-# --- many design variants at once ----------------------------------------------------------------------------
+# --- many design variants at once ---------------------------------------------------------------------
 
 # columns of run_variants' output
 B_FUEL, B_MISS_S, B_MAX_SHORT, B_DEFICIT = range(4)

@@ -561,7 +561,8 @@ def run(
     if not (invert_points.overloads and account.overloads):  # compile (or load) outside the timing
         passes(cycle.time_s[:3], cycle.speed_mps[:3], keep_series)
     t_cpu = time.process_time()
-    # the paper caps the step at 1 s (simulation.inverse_max_step): longer intervals of a coarse or gappy trace
+    # the paper caps the step at 1 s (simulation.inverse_max_step): longer intervals of a coarse or gappy
+    # trace
     # are subdivided, so the trapezoid follows the smoothed speed and the method drives the trace's distance
     time_s, speed, samples = subdivide(cycle.time_s, cycle.speed_mps, params.simulation.inverse_max_step)
     t, v, dv, ddv, gear_s, v_c, rows, acc, extra = passes(time_s, speed, keep_series)

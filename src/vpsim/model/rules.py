@@ -29,7 +29,7 @@ _MODE_ALIASES = {"extended": "realistic"}  # the realistic mode's earlier name
 
 
 def canonical_mode(mode) -> str:
-    """``"realistic"`` or ``"paper"`` for a mode name (``"extended"`` is the realistic mode's earlier name)."""
+    """``"realistic"`` or ``"paper"`` for a mode name (``"extended"``: the realistic mode's earlier name)."""
     m = _MODE_ALIASES.get(mode, mode)
     if m not in MODES:
         from ..errors import VpsimError
@@ -61,7 +61,7 @@ def slipping_clutch_torque(t_cr):
 
 @equation
 def accessories_torque(w_e, realistic, c):
-    """The accessories' torque on the crank: the realistic car's (:func:`vpsim.model.engine.accessory_torque`);
+    """The accessories' torque on the crank: the realistic car's (:func:`.engine.accessory_torque`);
     the paper's model has none."""
     return en.accessory_torque(w_e, c) if realistic else 0.0
 
@@ -114,7 +114,8 @@ def operating_point(v, a, ratio, t_closed, extended, c):
     if f_wheel > 0.0:  # slipping: the engine at idle passes the wheel torque, its inertia decoupled
         t_clutch = vh.wheel_to_engine_torque(f_wheel, ratio, c) + en.accessory_torque(c.idle_speed, c)
         return c.idle_speed, 0.0, w_wheel, t_clutch, 0.0, CLUTCH_SLIPPING, True, f_wheel
-    # open: the engine idles (accessories included in the idle flow), the brakes hold what the road load does not
+    # open: the engine idles (accessories included in the idle flow), the brakes hold what the road load
+    # does not
     return c.idle_speed, 0.0, w_wheel, 0.0, (-f_wheel if f_wheel < 0.0 else 0.0), CLUTCH_OPEN, True, f_wheel
 
 
