@@ -292,3 +292,23 @@ def test_paper_mode_ignores_the_realistic_extras(params):
     a = vpsim.simulate("nedc", params=params, mode="paper")
     b = vpsim.simulate("nedc", params=q, mode="paper")
     assert a.fuel_kg == b.fuel_kg
+
+
+def test_boost_raises_full_load_and_respects_its_limit(params):
+    """A boosted engine: full-load torque above the aspirated one from the spool speed on, the intake
+    pressure never above the boost limit, the rated power a cap; the balance still closes."""
+    from vpsim.model.maps import max_torque
+
+    boost = 1.6e5
+    q = params.with_changes(engine={"boost_pressure": boost, "rated_power": 110e3})
+    w = np.linspace(100.0, 600.0, 11)
+    na, boosted = max_torque(w, params.engine), max_torque(w, q.engine)
+    assert np.all(boosted >= na - 1e-9) and boosted[3] > 1.3 * na[3]
+    assert np.all(boosted * w <= 110e3 * (1 + 1e-12))
+    c = record(q)
+    assert en.full_load_pressure(300.0, c) == pytest.approx(boost)
+    assert en.crank_torque(en.boost_for_power(100e3, 500.0, c), 500.0, c) * 500.0 == pytest.approx(100e3)
+    r = vpsim.simulate("us06", params=q)
+    assert np.nanmax(r.series["intake_pressure_pa"]) <= boost
+    assert r.deviations.torque_beyond_full_load_s == 0.0  # the aspirated engine misses 3 s of US06
+    assert abs(r.energy.residual) <= 1e-9 * r.energy.indicated

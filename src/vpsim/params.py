@@ -101,6 +101,8 @@ class Engine:
     min_throttle_area: float  # m^2
     map_speed_range: tuple[float, float]  # rad/s
     accessory_power: float = 0.0  # W, mechanical load of the accessories (alternator, pumps) while running
+    boost_pressure: float = 0.0  # Pa absolute, full-load intake pressure of a boosted engine (0: aspirated)
+    rated_power: float = 0.0  # W, the full-load line is capped at rated_power / w_e (0: no cap)
 
     @property
     def displacement(self) -> float:
@@ -223,6 +225,8 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "vehicle.road_load_b": (-1.0e3, 1.0e3, True),
     "vehicle.road_load_c": (0.0, 100.0, True),
     "engine.accessory_power": (0.0, 1.0e5, True),
+    "engine.boost_pressure": (0.0, 4.0e5, True),
+    "engine.rated_power": (0.0, 2.0e6, True),
 }
 # Whole numbers: (low, high). Production piston engines have 1 to 16 cylinders and are two-stroke (1
 # revolution per cycle) or four-stroke (2); Newton converges in a handful of iterations or not at all.

@@ -14,9 +14,10 @@ Mapping (record units -> SI; every default below is a module constant, documente
 * **engine**: displacement V_d and cylinders z give bore and stroke with the stroke/bore ratio
   :data:`STROKE_BORE_RATIO`: B = (4 V_d / (pi z k))^(1/3), S = k B; the rest of the engine is the preset
   ``hofman2011`` engine scaled by :func:`vpsim.scaling.scale_engine` (throttle areas with z B^2, speed range
-  with 1/S, manifold volume and inertia with V_d). The idle fuel flow scales with V_d. Rated power and
-  boost are kept in the record (the model has no boost yet; boosted engines run as naturally aspirated
-  engines of their displacement, so their full-load torque is too low: a trace miss, reported).
+  with 1/S, manifold volume and inertia with V_d). The idle fuel flow scales with V_d. The rated power caps
+  the full-load line (``engine.rated_power``); a boosted engine (:mod:`vpsim.fleet.epa` decides) gets the
+  boost pressure that gives its rated power at :data:`RATED_SPEED_RADPS` (``engine.boost_pressure``,
+  :func:`vpsim.model.engine.boost_for_power`), within [1.05 p_a, :data:`MAX_BOOST_PA`].
 * **transmission**: the top-gear total ratio from the N/V ratio (engine rpm per mph in top gear):
   i_top = N/V x r x 2 pi / (60 x 0.44704); the final drive is the axle ratio (when the record lacks a
   plausible one, i_top / :data:`DEFAULT_TOP_GEAR`); the gearbox ratios are a geometric progression from
@@ -60,6 +61,8 @@ GRAVITY = 9.81
 ACCESSORY_POWER_W = 300.0
 # modern engine controls cut the fuel on overrun above about 1,000-1,500 rpm (Guzzella & Onder 2010)
 FUEL_CUTOFF_SPEED_RADPS = 1200.0 * 2.0 * math.pi / 60.0
+RATED_SPEED_RADPS = 5500.0 * 2.0 * math.pi / 60.0  # where a 2022 engine makes its rated power, typically
+MAX_BOOST_PA = 2.8e5  # absolute; production gasoline engines run up to about 2.5-2.8 bar
 
 
 def bore_stroke(
@@ -188,7 +191,18 @@ def record_parameters(
         sections[sec][fld] = value
     from dataclasses import replace
 
+    rated = rec.rated_power_kw * 1e3
+    if math.isfinite(rated) and rated > 0:
+        sections["engine"]["rated_power"] = rated
     p = base.with_changes(**sections)
+    if rec.boosted and math.isfinite(rated) and rated > 0:
+        from ..model import engine as en
+        from ..model.record import record
+
+        c = record(p)
+        boost = float(en.boost_for_power(rated, RATED_SPEED_RADPS, c))
+        boost = min(max(boost, 1.05 * c.ambient_pressure), MAX_BOOST_PA)
+        p = p.with_changes(engine={"boost_pressure": boost})
     return replace(p, name=f"{rec.make} {rec.model} ({rec.key})")
 
 
@@ -238,6 +252,8 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         "vehicle.road_load_b": "record: target coast-down B (N per m/s)",
         "vehicle.road_load_c": "record: target coast-down C (N per (m/s)^2)",
         "engine.accessory_power": "default: alternator base load (W)",
+        "engine.boost_pressure": "boosted: the pressure of the rated power at 5500 rpm (Pa); 0: aspirated",
+        "engine.rated_power": "record: rated power (W), caps the full-load line",
         "simulation.fuel_cutoff_speed": "default: fuel cut on overrun above 1200 rpm (rad/s)",
         "vehicle.frontal_area": "default: nominal",
         "vehicle.wheel_radius": "default",
@@ -286,6 +302,8 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
                 "thermal_efficiency",
                 "friction_coefficient",
                 "accessory_power",
+                "boost_pressure",
+                "rated_power",
             ),
         ),
         ("simulation", ("idle_fuel_flow", "fuel_density", "fuel_cutoff_speed")),

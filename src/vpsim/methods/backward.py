@@ -550,33 +550,35 @@ def _line_node(j, n_line, w_end):
 
 
 @equation
-def _line_value(j, a_eff, cache, n_line, w_end, c):
-    """FQM crank torque at line node j for throttle area a_eff, computed on first use and cached."""
+def _line_value(j, full, cache, n_line, w_end, c):
+    """The full-load line (``full``) or the closed-throttle line (the FQM at A_min) at node j, computed on
+    first use and cached."""
     val = cache[j]
     if val != val:  # NaN: not yet computed
-        val = en.steady_torque(a_eff, _line_node(j, n_line, w_end), c)
+        w = _line_node(j, n_line, w_end)
+        val = en.full_load_torque(w, c) if full else en.steady_torque(c.min_throttle_area, w, c)
         cache[j] = val
     return val
 
 
 @equation
-def _lazy_line(w, a_eff, cache, n_line, w_end, c):
+def _lazy_line(w, full, cache, n_line, w_end, c):
     """numpy.interp(w, line speeds, line torques) with the line's nodes computed lazily."""
     if w <= 0.0:
-        return _line_value(0, a_eff, cache, n_line, w_end, c)
+        return _line_value(0, full, cache, n_line, w_end, c)
     if w >= w_end:
-        return _line_value(n_line - 1, a_eff, cache, n_line, w_end, c)
+        return _line_value(n_line - 1, full, cache, n_line, w_end, c)
     j = min(int(w / (w_end / (n_line - 1))), n_line - 2)
     while j > 0 and _line_node(j, n_line, w_end) > w:
         j -= 1
     while _line_node(j + 1, n_line, w_end) <= w:
         j += 1
     x0 = _line_node(j, n_line, w_end)
-    f0 = _line_value(j, a_eff, cache, n_line, w_end, c)
+    f0 = _line_value(j, full, cache, n_line, w_end, c)
     if x0 == w:
         return f0
     x1 = _line_node(j + 1, n_line, w_end)
-    f1 = _line_value(j + 1, a_eff, cache, n_line, w_end, c)
+    f1 = _line_value(j + 1, full, cache, n_line, w_end, c)
     return (f1 - f0) / (x1 - x0) * (w - x0) + f0
 
 
@@ -604,6 +606,8 @@ def _variant(c, rat, gear, dt, v, a, v_top_gear, extended, out):
         0.0, max(w_s - 2.0 * step, 0.0), c
     )
     p_screen = p_floor - d_p - 1e-7 * c.ambient_pressure
+    if c.boost_pressure > c.ambient_pressure or c.rated_power > 0.0:
+        p_screen = -math.inf  # the full-load pressure is not monotone (spool) or power-capped: no screening
     cache_max = np.full(n_line, np.nan)
     cache_min = np.full(n_line if extended else 1, np.nan)
     fuel = 0.0
@@ -615,14 +619,14 @@ def _variant(c, rat, gear, dt, v, a, v_top_gear, extended, out):
         i = rat[gear[k]]
         t_closed = 0.0
         if extended:
-            t_closed = _lazy_line(i * v[k] / c.wheel_radius, c.min_throttle_area, cache_min, n_line, w_end, c)
+            t_closed = _lazy_line(i * v[k] / c.wheel_radius, False, cache_min, n_line, w_end, c)
         w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(
             v[k], a[k], i, t_closed, extended, c
         )
         p = en.intake_pressure_for_torque(t_req, w, c)
         short = 0.0
         if not (w <= w_end and p <= p_screen):
-            t_max = _lazy_line(w, c.max_throttle_area, cache_max, n_line, w_end, c)
+            t_max = _lazy_line(w, True, cache_max, n_line, w_end, c)
             if t_req > t_max:
                 short = t_req - t_max
                 p = en.intake_pressure_for_torque(t_max, w, c)

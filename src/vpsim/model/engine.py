@@ -311,6 +311,39 @@ def steady_torque(a_eff, w_e, c):
     return crank_torque(p, w_e, c)
 
 
+BOOST_SPOOL_SPEED = 200.0  # rad/s (1,900 rpm): a modern turbocharger's full boost from about here up
+
+
+@equation
+def full_load_pressure(w_e, c):
+    """Intake pressure at full load: the FQM at A_max for an aspirated engine; a boosted engine's boost
+    control raises it to ``c.boost_pressure``, reached at :data:`BOOST_SPOOL_SPEED` (linearly from ambient
+    below, where the exhaust cannot yet drive the turbine), never below the aspirated pressure."""
+    p_na, _ = steady_pressure(c.max_throttle_area, w_e, c)
+    if c.boost_pressure <= c.ambient_pressure:
+        return p_na
+    spool = w_e / BOOST_SPOOL_SPEED if w_e < BOOST_SPOOL_SPEED else 1.0
+    p_boost = c.ambient_pressure + (c.boost_pressure - c.ambient_pressure) * spool
+    return p_boost if p_boost > p_na else p_na
+
+
+@equation
+def full_load_torque(w_e, c):
+    """The maximum-torque line: crank torque at the full-load pressure, capped at the rated power
+    (``c.rated_power`` / w_e) where one is given."""
+    t = crank_torque(full_load_pressure(w_e, c), w_e, c)
+    if c.rated_power > 0.0 and w_e > 0.0 and t * w_e > c.rated_power:
+        return c.rated_power / w_e
+    return t
+
+
+@equation
+def boost_for_power(power, w_e, c):
+    """The full-load intake pressure that gives ``power`` at engine speed w_e: (2)-(8) inverted (the boost
+    limit that follows from a rated power)."""
+    return intake_pressure_for_torque(power / w_e, w_e, c)
+
+
 @equation
 def idle_throttle(c):
     """Steady throttle area holding the engine at idle speed with zero crank torque (FQM inverted), m²."""
@@ -333,6 +366,21 @@ def _dpsi_loop(p_r, recs, out):
     one = recs.size == 1
     for k in range(p_r.size):
         out[k] = dpsi_dpr(p_r[k], recs[0 if one else k])
+
+
+@kernel
+def _full_load_loop(w_e, recs, out):
+    one = recs.size == 1
+    for k in range(w_e.size):
+        out[k] = full_load_torque(w_e[k], recs[0 if one else k])
+
+
+def full_load_torque_array(w_e, c):
+    """:func:`full_load_torque` over an array of engine speeds."""
+    shape, (w,), recs = _flat(w_e, recs=c)
+    out = np.empty(w.size)
+    _full_load_loop(w, recs, out)
+    return out.reshape(shape)
 
 
 @kernel

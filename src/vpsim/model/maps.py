@@ -97,8 +97,9 @@ def torque_map(eng, a_eff=None, speed=None) -> TorqueMap:
 
 
 def max_torque(w_e, eng):
-    """The maximum-torque line: FQM crank torque at A_eff = A_max."""
-    return steady_state(eng.max_throttle_area, w_e, eng).crank_torque
+    """The maximum-torque line (:func:`vpsim.model.engine.full_load_torque`): the FQM at A_eff = A_max for an
+    aspirated engine, at the boost pressure for a boosted one, capped at the rated power if given."""
+    return en.full_load_torque_array(np.asarray(w_e, float), engine_record(eng))
 
 
 def min_torque(w_e, eng):

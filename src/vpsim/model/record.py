@@ -59,6 +59,8 @@ _PARAMETER_FIELDS = {
         "max_throttle_area",
         "min_throttle_area",
         "accessory_power",
+        "boost_pressure",
+        "rated_power",
     ),
     "simulation": ("idle_fuel_flow", "fuel_density", "fuel_cutoff_speed"),
 }
