@@ -336,7 +336,7 @@ def _schedules(cycle, params, names, values, gears):
     elif isinstance(gears, GearSchedule):
         schedule = gears
     elif isinstance(gears, str | Path):
-        schedule = load_schedule(Path(gears), params.transmission.n_gears)
+        schedule = load_schedule(Path(gears), params.transmission.n_gears, cycle=cycle)
     else:
         raise VpsimError(
             f"gears must be 'baseline', 'per_variant', a GearSchedule or a CSV path, got {gears!r}"

@@ -10,7 +10,6 @@ True
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -248,6 +247,8 @@ def flags(series: dict, limits: dict) -> dict[str, np.ndarray]:
     if demand is not None and a_min is not None:  # the inverse method's throttle demand
         below |= moving & ~braked & ~(demand >= a_min)
         beyond |= moving & (demand > a_max)
+    elif short is not None and thr is not None and a_min is not None:  # backward: the steady throttle asked
+        below |= moving & ~braked & (thr < a_min * (1 - 1e-6))
     elif thr is not None and a_max is not None and ref is not None:  # a driver at its limits, still behind
         beyond |= (thr >= a_max * (1 - 1e-9)) & (v < ref - band)
         below |= (thr <= a_min * (1 + 1e-9)) & ~braked & (v > ref + band)
@@ -400,7 +401,10 @@ class Result:
         }
 
     def to_json(self, **kw) -> str:
-        return json.dumps(self.summary(), **kw)
+        """The summary as valid JSON: an undefined figure is null with a ``<key>_undefined`` reason."""
+        from .jsonsafe import dumps
+
+        return dumps(self.summary(), **kw)
 
     def to_dataframe(self, *, raw: bool = False):
         """Time series as a pandas DataFrame, one row per cycle sample, SI units in the column names.
@@ -426,6 +430,8 @@ class Result:
             ):
                 if key in df:
                     df.loc[fl[flag], key] = np.nan
+            if "throttle_area_m2" in df:  # a negative area (an air flow out of the cylinders) is no throttle
+                df.loc[df["throttle_area_m2"] < 0.0, "throttle_area_m2"] = np.nan
         for k, v in fl.items():
             df[k] = v
         return df
@@ -445,9 +451,12 @@ class Result:
         return pd.concat(frames, axis=1)
 
     def __repr__(self) -> str:
+        from .jsonsafe import number
+
+        lp100 = number(self.fuel_l_per_100km, ".3f", "fuel_l_per_100km")
         return (
-            f"Result({self.method}{'' if self.driver is None else ' driver ' + self.driver}, "
-            f"{self.cycle}, {self.mode}: {self.fuel_l_per_100km:.3f} L/100 km, "
+            f"Result({self.method}{'' if self.driver is None else ' driver ' + str(self.driver)}, "
+            f"{self.cycle}, {self.mode}: {lp100} L/100 km, "
             f"{self.fuel_kg * 1e3:.1f} g over {self.distance_km:.3f} km, "
             f"{self.steps} steps, {self.cpu_time_s * 1e3:.2f} ms; {self.deviations})"
         )
@@ -460,6 +469,8 @@ class Result:
         intake pressure or fuel flow) are not drawn.
         """
         import matplotlib.pyplot as plt
+
+        from .jsonsafe import number
 
         df = self.to_dataframe()
         t = df["time_s"].to_numpy()
@@ -525,7 +536,7 @@ class Result:
         axes[-1].set_xlabel("time (s)")
         axes[0].set_title(
             f"{self.method}{'' if self.driver is None else ' driver ' + str(self.driver)} on {self.cycle} "
-            f"({self.mode}): {self.fuel_l_per_100km:.2f} L/100 km",
+            f"({self.mode}): {number(self.fuel_l_per_100km, '.2f', 'fuel_l_per_100km')} L/100 km",
             fontsize=9,
         )
         fig.tight_layout()

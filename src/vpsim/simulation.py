@@ -31,7 +31,7 @@ def resolve_inputs(cycle, params, gears=None):
     if gears is None or isinstance(gears, GearSchedule):
         schedule = gears
     else:
-        schedule = load_schedule(Path(gears), params.transmission.n_gears)
+        schedule = load_schedule(Path(gears), params.transmission.n_gears, cycle=cycle)
     if schedule is None:
         from .model.maps import cached_engine_map
 
