@@ -35,8 +35,8 @@ from ..model import vehicle as vh
 from ..model._compile import kernel
 from ..model.engine import equation, inline
 from ..model.maps import EngineMap, GeneratedEngineMap, cached_engine_map
+from ..model.record import kernel_records
 from ..model.record import ratios as total_ratios
-from ..model.record import record_array
 from ..result import EnergyBalance, Result, TraceMiss, limits_of
 
 # how the fuel flow of an operating point is found
@@ -214,7 +214,7 @@ def run_kernel(
     sched_t,
     sched_gear,
     ratios,
-    c,
+    recs,
     extended,
     fuel_kind,
     map_speed,
@@ -232,6 +232,7 @@ def run_kernel(
     """The BQM over the cycle's intervals: operating points (and their fuel flow, unless ``fuel_kind`` is
     FUEL_GIVEN: then only ``rows`` are filled, for :func:`account` after the map gave the fuel), and the
     sums of :func:`account` in the same pass. ``rows`` may have no columns (no series wanted)."""
+    c = recs[0]
     inv_line = tb.inverse_spacing(line_speed)
     inv_ms = tb.inverse_spacing(map_speed)
     inv_mt = tb.inverse_spacing(map_torque)
@@ -292,10 +293,11 @@ def run_kernel(
 
 
 @kernel(_nrt=False)
-def account(time_s, rows, ratios, gear, c, with_engine, extended, acc, comp):
+def account(time_s, rows, ratios, gear, recs, with_engine, extended, acc, comp):
     """Fuel, distance, the energy terms (compensated sums over the intervals) and the trace miss: seconds
     beyond the max-torque line, the largest shortfall and the largest speed deficit accumulated over a
     contiguous miss, from the rows of :func:`run_kernel` (with the fuel flow of a measured map filled in)."""
+    c = recs[0]
     for q in range(N_ACC):
         acc[q] = 0.0
         comp[q] = 0.0
@@ -376,7 +378,7 @@ def run(
     extended = mode == "realistic"
     kind, m_speed, m_torque, table, l_speed, l_max, l_min = _map_arrays(engine_map, params)
     generated = isinstance(engine_map, GeneratedEngineMap)
-    c = record_array(params)[0]
+    recs = kernel_records(params)
     ratios = total_ratios(params.transmission)
     n = cycle.time_s.size - 1
 
@@ -392,7 +394,7 @@ def run(
             schedule.time_s,
             schedule.gear,
             ratios,
-            c,
+            recs,
             extended,
             kind,
             m_speed,
@@ -413,7 +415,7 @@ def run(
                 rows[R_CLUTCH] == rules.CLUTCH_OPEN, params.simulation.idle_fuel_flow, flow
             )
             rows[R_MDOT] = np.where(rows[R_FIRED] != 0.0, rows[R_MDOT], 0.0)  # fuel cut-off
-            account(time_s, rows, ratios, gear, c, generated, extended, acc, np.empty(N_ACC))
+            account(time_s, rows, ratios, gear, recs, generated, extended, acc, np.empty(N_ACC))
         return gear, rows, acc
 
     if not run_kernel.overloads:  # compile (or load) outside the timing

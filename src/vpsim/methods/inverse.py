@@ -60,7 +60,7 @@ from ..model import rules
 from ..model import vehicle as vh
 from ..model._compile import kernel
 from ..model.engine import equation
-from ..model.record import memo, record
+from ..model.record import kernel_records, memo, record
 from ..model.record import ratios as total_ratios
 from ..result import EnergyBalance, Result, TraceMiss, limits_of
 
@@ -332,8 +332,9 @@ def invert_point(v, dv, ddv, ratio, coef, extended, c):
 
 
 @kernel
-def invert_points(v, dv, ddv, gear, ratios, coef, extended, c, rows):
+def invert_points(v, dv, ddv, gear, ratios, coef, extended, recs, rows):
     """:func:`invert_point` at every point (gear 1-based) into ``rows``; False if a gear does not exist."""
+    c = recs[0]
     for k in range(v.size):
         if not (1 <= gear[k] <= ratios.size):
             return False
@@ -394,7 +395,7 @@ def invert(v, dv, ddv, gear, params, mode: str = "paper") -> dict[str, np.ndarra
         total_ratios(params.transmission),
         gear_coefficients(params),
         mode == "realistic",
-        record(params),
+        kernel_records(params),
         rows,
     )
     if not ok:
@@ -416,7 +417,7 @@ N_ACC = _A_FUEL + 12
 
 
 @kernel
-def account(v, dv, vc, rows, left, right, dt, c, realistic, band, weight, acc, extra):
+def account(v, dv, vc, rows, left, right, dt, recs, realistic, band, weight, acc, extra):
     """Fuel, distance, energy terms (trapezoid), infeasible and standstill seconds and the tracking figures
     of the grid's points in one pass; ``extra`` (3 x n samples): engine torque (1), throttle area (u_d
     clipped to [A_min, A_max]) and the fuel flow booked (idle floor) at the first points.
@@ -424,6 +425,7 @@ def account(v, dv, vc, rows, left, right, dt, c, realistic, band, weight, acc, e
     The trapezoid sums are sums over the points of weight x integrand, ``weight`` (scratch, one per point)
     being the time each point stands for.
     """
+    c = recs[0]
     n = v.size
     for i in range(N_ACC):
         acc[i] = 0.0
@@ -530,7 +532,7 @@ def run(
         from ..model.maps import cached_engine_map
 
         schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
-    c = record(params)
+    c = kernel_records(params)
     ratios = total_ratios(params.transmission)
     coef = gear_coefficients(params)
     extended = mode == "realistic"

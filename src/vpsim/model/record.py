@@ -168,6 +168,12 @@ def record_array(params) -> np.ndarray:
     return memo(params, "record", lambda p: _record_of(p.vehicle, p.transmission, p.engine, p.simulation))
 
 
+def kernel_records(params) -> np.ndarray:
+    """The record of one parameter set as a plain structured array of shape (1,), which compiled kernels
+    take and index (``c = recs[0]``): the dispatch of an array is cheaper than that of a record."""
+    return memo(params, "kernel_records", lambda p: np.asarray(record_array(p)).view(np.ndarray))
+
+
 def record(params):
     """The record of one parameter set (``rec.mass``, ``rec.displacement``, ...), cached."""
     return memo(params, "record_0", lambda p: record_array(p)[0])
