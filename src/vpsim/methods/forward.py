@@ -98,6 +98,10 @@ _X_SW = 11
     _SW_FUEL_FLOOR,  # mdot_f - mdot_idle: the idle fuel floor (fuel cut-off)
 ) = range(8)
 N_SW = 8
+# a sign change is an event only where the switching function ends clearly on the other side (|g| above this):
+# a function that settles at zero (the slipping clutch's torque at idle, where A_idle gives T_cr = 0) would
+# otherwise give an event at every step
+SWITCH_SIGNIFICANCE = (1e-6, 1e-12, 1e-12, 1e-12, 1e-12, 1e-9, 1e-4, 1e-10)
 SWITCHES = (
     "clutch",
     "saturation_low",
@@ -510,7 +514,7 @@ _WM1, _WM3, _WM4 = 2.0, 1.0, 1.0  # m_2 = 0; y_new = stage 4 state + u_4 (stiffl
 _WG1, _WG2 = 0.5, 1.5  # gamma_i = sum_j gamma_ij (0 for stages 3, 4); alpha = (0, 0, 1, 1)
 ROS_ORDER = 3  # the step-size controller uses the embedded order 2: h ~ err^(-1/3); the error is u_4
 _FD_STEP = 1.4901161193847656e-08  # sqrt(eps): forward-difference increment relative to the state's scale
-EVENT_TOLERANCE_S = 1e-8  # events are located to this width (plus rounding of t)
+EVENT_TOLERANCE_S = 1e-6  # events are located to this width (plus rounding of t)
 
 
 @register_jitable
@@ -786,7 +790,7 @@ def _integrate_ros(
                     # as Hairer & Wanner (IV.8, (8.19)-(8.20)) do for stiff codes, so that its part in the
                     # damped stiff (manifold) direction is not taken for error; the quadrature rows by the
                     # same block inverse. Then the RMS norm over v, p_i, z (ode45's scales) and the fuel and
-                    # distance (relative to their accumulated values, floored: CVODES' quadrature control)
+                    # distance (relative to their increment over the step plus a rate scale times h)
                     _stage_solve(u4, winv, 1.0, ytmp, work[14], work[15], work[16])  # (I/hg - J)^-1 u_4
                     for i in range(N_DYN):
                         r[i] = ytmp[i] / hg
@@ -798,9 +802,11 @@ def _integrate_ros(
                         sc = abs(y[i])
                         if abs(ynew[i]) > sc:
                             sc = abs(ynew[i])
-                        floor = thr[i] if m < N_DYN else qthr[m - N_DYN]
-                        if floor > sc:
-                            sc = floor
+                        if m < N_DYN:
+                            if thr[i] > sc:
+                                sc = thr[i]
+                        else:
+                            sc = abs(ynew[i] - y[i]) + h * qthr[m - N_DYN]
                         q = r[i] / sc
                         err += q * q
                     err = math.sqrt(err / (N_ERR + 2))
@@ -835,8 +841,8 @@ def _integrate_ros(
                 # did the right side change form inside the step? locate the first such instant
                 tb_min = tnew
                 for k in range(N_SW):
-                    if (sw0[k] > 0.0) != (aux1[_X_SW + k] > 0.0):
-                        g_a, g_b = sw0[k], aux1[_X_SW + k]
+                    g_a, g_b = sw0[k], aux1[_X_SW + k]
+                    if (g_a > 0.0) != (g_b > 0.0) and abs(g_b) > SWITCH_SIGNIFICANCE[k]:
                         tb, n_it = _locate(
                             k, t, h, g_a, g_b, y, ynew, f0, f1, ytmp, scratch, aux, G, c, D, tab_t, tab_v
                         )
@@ -845,7 +851,8 @@ def _integrate_ros(
                             tb_min = tb
                 if tb_min < tnew and tb_min - t > EVENT_TOLERANCE_S + 1e-3 * h:
                     for k in range(N_SW):
-                        if (sw0[k] > 0.0) != (aux1[_X_SW + k] > 0.0):
+                        g_a, g_b = sw0[k], aux1[_X_SW + k]
+                        if (g_a > 0.0) != (g_b > 0.0) and abs(g_b) > SWITCH_SIGNIFICANCE[k]:
                             fstats[1 + k] += 1.0
                     events += 1
                     t_event = tb_min  # take the step again, to end there
@@ -944,15 +951,17 @@ def initial_state(cycle, params, ratio: float, pi: PIDriver, mode: str) -> np.nd
 
 
 ERROR_THRESHOLDS = np.array([1.0, 1.0e4, 1.0e-4])  # v (m/s), p_i (Pa), z (m²): ode45's atol/rtol per state
-FUEL_SCALE_KG = 1.0e-4  # the fuel's error is measured relative to max(|fuel|, this): about 1 s of idling
-DISTANCE_SCALE_M = 1.0  # ... and the distance's relative to max(|distance|, this)
+# the fuel's and the distance's error over a step is measured against their increment plus these rates times
+# the step: an error per unit of fuel burnt and distance driven, so the totals' relative error stays ~rtol
+FUEL_RATE_SCALE = 1.0e-3  # kg/s: about the flow of steady driving
+DISTANCE_RATE_SCALE = 10.0  # m/s
 SOLVERS = ("rosenbrock", "dopri5")
 DEFAULT_SOLVER = "rosenbrock"
 
 
 def quadrature_scales(c) -> np.ndarray:
-    """Floors of the fuel (kg) and distance (m) scales in the Rosenbrock error norm (CVODES-style)."""
-    return np.array([FUEL_SCALE_KG, DISTANCE_SCALE_M])
+    """Rate scales of the fuel (kg/s) and distance (m/s) in the Rosenbrock error norm."""
+    return np.array([FUEL_RATE_SCALE, DISTANCE_RATE_SCALE])
 
 
 def integrate(
@@ -1216,7 +1225,7 @@ def run(
         ]
     else:
         notes = [
-            f"Rosenbrock-W ROS34PW2, rtol {rtol:g}: {info['accepted_steps']} steps ({info['rejected_steps']} "
+            f"Rosenbrock RODAS3, rtol {rtol:g}: {info['accepted_steps']} steps ({info['rejected_steps']} "
             f"rejected), {info['restarts']} restarts at gear changes, {info['events']} located events",
         ]
     if outside:
