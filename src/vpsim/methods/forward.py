@@ -704,6 +704,12 @@ def _integrate_ros(
             t_stop = t_end
             if j_tab < n_tab and tab_t[j_tab] < t_stop:
                 t_stop = tab_t[j_tab]
+            # output times are stops too: the values there are the integrator's own, not interpolated
+            j_stop = j_out
+            while j_stop < n_out and out_t[j_stop] <= t + hmin:
+                j_stop += 1
+            if j_stop < n_out and out_t[j_stop] < t_stop:
+                t_stop = out_t[j_stop]
             if t_event > t:
                 tnew = t_event
                 to_stop = False
