@@ -108,7 +108,7 @@ def test_open_loop_matches_scipy_radau(params, gear, a_eff, solver):
     gear=st.integers(1, 5),
 )
 def test_right_side_is_the_affine_form_21(params, v, p, a_eff, gear):
-    """The kernel's dv/dt and dp_i/dt equal (21) with vpsim.model.vehicle.statespace_coefficients (open-loop throttle)."""
+    """The kernel's dv/dt and dp_i/dt equal (21) with vehicle.statespace_coefficients (open-loop throttle)."""
     ratio = params.transmission.ratios[gear - 1]
     c = record(params)
     D = forward.settings(params)
@@ -290,7 +290,7 @@ def test_cli_forward_json_has_the_backward_keys(capsys):
     assert fwd["method"] == "forward" and fwd["driver"] == "2" and fwd["steps"] > 1000
 
 
-# --- the integrators: the Rosenbrock default (RODAS3) and the paper's Dormand-Prince ---------------------------
+# --- the integrators: the Rosenbrock default (RODAS3) and the paper's Dormand-Prince ------------------------
 
 
 def _held_speed_record(params):
@@ -307,8 +307,8 @@ def _held_speed_record(params):
 
 def test_steady_state_matches_fqm_at_default_settings(params):
     """7 throttle areas x 8 engine speeds, throttle held (open loop), 10 s from p_i = p_a / 2 at the default
-    settings (solver, rtol, Simulink's max step): the crank torque is the FQM's to < 0.1 % (of the torque, or of
-    1 N m where it crosses zero) at every point, and agrees with SciPy's LSODA on the manifold equation (9)."""
+    settings (solver, rtol, Simulink's max step): the crank torque is the FQM's to < 0.1 % (of the torque,
+    or of 1 N m where it crosses zero) at every point, and agrees with SciPy's LSODA on the manifold (9)."""
     from scipy.integrate import solve_ivp
 
     from vpsim.model import maps

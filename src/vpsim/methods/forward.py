@@ -13,16 +13,28 @@ Right side, per gear (total ratio i; w_e = i v / r):
     m_eq dv/dt = (i eta_tm / r) T_cr(p_i, w_e) - 1/2 c_d rho A v^2 - m g c_r - F_brake,
 with T_cr from (2)-(8) solved for BMEP (as :func:`vpsim.physics.crank_torque`), m_eq = m + J_e i² eta_tm / r².
 
-Integrator: Dormand-Prince 5(4), which is what ode45 is, with ode45's error norm (max over the dynamic states
-of |error| / max(|y|, |y_new|, threshold)), step-size control (factor 0.8 (rtol/err)^(1/5) after a first
-rejection, halving after further ones, growth at most 5x), initial step selection, FSAL and its 4th-order
-continuous extension (ode45's ``ntrp45``) for output at the requested times. Gear changes happen at the
-prescribed instants: the integration stops exactly there and restarts in the new gear (new initial step).
-The default maximum step is Simulink's "auto", a fiftieth of the cycle's duration. The quadrature states do
-not enter the error norm (as in CVODES' default), their integrands are smooth where the dynamic states are.
-The kernel is plain scalar loops compiled with Numba (cached on disk); the right side calls the model's
-equations (:mod:`vpsim.model`) and nothing else. Tests check it against independent references (SciPy's
-LSODA/Radau on the model's equations, the FQM at steady state).
+Integrators (``solver=``; docs/methods.md explains both):
+
+* ``rosenbrock`` (default): RODAS3 (Sandu et al. 1997; Hairer & Wanner 1996, IV.7), a linearly implicit,
+  L-stable, stiffly accurate Rosenbrock method of order 3 with an embedded order-2 method, so that the step
+  follows the accuracy asked and not the stability of the fast manifold. Its Jacobian (v, p_i, z, and the
+  rows of the quadratures in these three) and df/dt are forward differences of the model's right side, once
+  per step. The error (filtered by (I - h gamma J)^-1) is measured in the RMS norm over v, p_i, z (ode45's
+  scales) and the fuel and distance (relative to their increment over the step plus a rate scale times h).
+  Steps end at every node of the cycle's table (where the cycle speed has a kink), at every output time, at
+  the gear changes (restarts) and at every event: a switching function of the right side (clutch
+  engage/slip, PI saturation, throttle floor, brakes on/off, moving/at rest, slipping clutch's torque sign,
+  idle fuel floor) that changed sign inside a step is located on the step's cubic Hermite dense output
+  (Illinois method) and the step is taken again to end there.
+* ``dopri5``: the paper's solver, Dormand-Prince 5(4) as ode45, with ode45's error norm (max over v, p_i, z
+  of |error| / max(|y|, |y_new|, threshold)), step-size control, initial step, FSAL and continuous extension
+  (``ntrp45``) for outputs; gear changes restart it; events are stepped over. Its step is bound by stability
+  (the manifold's time constant), about 5 steps per cycle second.
+
+Both are plain scalar loops compiled with Numba (cached on disk); the right side calls the model's equations
+(:mod:`vpsim.model`) and nothing else. The default maximum step is Simulink's "auto", a fiftieth of the
+cycle's duration. Tests check both against independent references (SciPy's LSODA/Radau on the model's
+equations, the FQM at steady state, Dormand-Prince at rtol 1e-8).
 
 Modes (one switch for every method):
 
@@ -505,8 +517,8 @@ def _integrate(
 #     (I / (h gamma) - J) u_i = f(t + alpha_i h, y + sum_j a_ij u_j) + sum_j (c_ij / h) u_j + gamma_i h df/dt,
 #     y_new = y + sum_i m_i u_i,     error = sum_i e_i u_i.
 # Four stages, three evaluations of f (stage 2 reuses stage 1's), order 3 with an embedded method of order 2;
-# both stiffly accurate and L-stable (R(inf) = 0), so the error estimate stays meaningful in the stiff (manifold)
-# component when the step is far beyond its time constant.
+# both stiffly accurate and L-stable (R(inf) = 0), so the error estimate stays meaningful in the stiff
+# (manifold) component when the step is far beyond its time constant.
 _ROS_GAMMA = 0.5
 _WA31, _WA41, _WA43 = 2.0, 2.0, 1.0  # a_ij (the others are zero)
 _WC21, _WC31, _WC32, _WC41, _WC42, _WC43 = 4.0, 1.0, -1.0, 1.0, -1.0, -8.0 / 3.0
@@ -551,7 +563,7 @@ def _stage_solve(r, winv, hg, u, q0, q1, q2):
 
 @register_jitable
 def _hermite(s, h, y, ynew, f0, f1, n, out):
-    """Cubic Hermite interpolant of the step (values and derivatives at both ends) at t + s h, first n states."""
+    """Cubic Hermite interpolant of the step (values, derivatives at both ends) at t + s h, first n states."""
     s2 = s * s
     s3 = s2 * s
     w_y0 = 2.0 * s3 - 3.0 * s2 + 1.0
@@ -1105,6 +1117,7 @@ def run(
 ) -> Result:
     """Run the FDM on ``cycle`` with PI driver ``driver`` in ``mode`` and return the :class:`Result`.
 
+    ``solver``: ``rosenbrock`` (RODAS3, the default) or ``dopri5`` (the paper's ode45; module docstring);
     ``rtol`` (default the parameter set's ``simulation.ode_relative_tolerance``, 1e-3 like Simulink),
     ``max_step`` (default: a fiftieth of the cycle duration, Simulink's "auto"); ``kp``/``ki`` (and the
     anti-windup ``tracking_time_s``) override the driver's gains, as the driver tuning does;
