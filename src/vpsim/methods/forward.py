@@ -660,6 +660,9 @@ def _integrate_ros(
     sw0 = work[12]
     scratch = work[13]
     ft = work[17]
+    gq0 = work[14]  # the quadratures' Jacobian columns in v, p_i, z
+    gq1 = work[15]
+    gq2 = work[16]
     for i in range(ny):
         y[i] = y0[i]
     pw = 1.0 / ROS_ORDER
@@ -766,10 +769,10 @@ def _integrate_ros(
                         _inverse3(jac, 1.0 / hg, winv)
                         for i in range(ny):
                             r[i] = f0[i] + (_WG1 * h) * ft[i]
-                        _stage_solve(r, winv, hg, u1, work[14], work[15], work[16])
+                        _stage_solve(r, winv, hg, u1, gq0, gq1, gq2)
                         for i in range(ny):  # stage 2 at (t, y): f is stage 1's
                             r[i] = f0[i] + (_WC21 / h) * u1[i] + (_WG2 * h) * ft[i]
-                        _stage_solve(r, winv, hg, u2, work[14], work[15], work[16])
+                        _stage_solve(r, winv, hg, u2, gq0, gq1, gq2)
                         for i in range(N_DYN):
                             ytmp[i] = y[i] + _WA31 * u1[i]
                     elif task == N_DYN + 2:
@@ -797,11 +800,11 @@ def _integrate_ros(
                 elif task == N_DYN + 1:
                     for i in range(ny):
                         r[i] += (_WC31 * u1[i] + _WC32 * u2[i]) / h
-                    _stage_solve(r, winv, hg, u3, work[14], work[15], work[16])
+                    _stage_solve(r, winv, hg, u3, gq0, gq1, gq2)
                 elif task == N_DYN + 2:
                     for i in range(ny):
                         r[i] += (_WC41 * u1[i] + _WC42 * u2[i] + _WC43 * u3[i]) / h
-                    _stage_solve(r, winv, hg, u4, work[14], work[15], work[16])
+                    _stage_solve(r, winv, hg, u4, gq0, gq1, gq2)
                     for i in range(ny):
                         ynew[i] = y[i] + _WM1 * u1[i] + _WM3 * u3[i] + _WM4 * u4[i]
                     # error estimate u_4 (y_new minus the embedded solution), filtered by (I - h gamma J)^-1
@@ -809,11 +812,11 @@ def _integrate_ros(
                     # damped stiff (manifold) direction is not taken for error; the quadrature rows by the
                     # same block inverse. Then the RMS norm over v, p_i, z (ode45's scales) and the fuel and
                     # distance (relative to their increment over the step plus a rate scale times h)
-                    _stage_solve(u4, winv, 1.0, ytmp, work[14], work[15], work[16])  # (I/hg - J)^-1 u_4
+                    _stage_solve(u4, winv, 1.0, ytmp, gq0, gq1, gq2)  # (I/hg - J)^-1 u_4
                     for i in range(N_DYN):
                         r[i] = ytmp[i] / hg
                     for i in range(N_DYN, ny):
-                        r[i] = u4[i] + hg * (work[14][i] * r[0] + work[15][i] * r[1] + work[16][i] * r[2])
+                        r[i] = u4[i] + hg * (gq0[i] * r[0] + gq1[i] * r[1] + gq2[i] * r[2])
                     err = 0.0
                     for m in range(N_ERR + 2):
                         i = m if m < N_DYN else (_FUEL if m == N_DYN else _DIST)
