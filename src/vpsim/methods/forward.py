@@ -13,16 +13,28 @@ Right side, per gear (total ratio i; w_e = i v / r):
     m_eq dv/dt = (i eta_tm / r) T_cr(p_i, w_e) - 1/2 c_d rho A v^2 - m g c_r - F_brake,
 with T_cr from (2)-(8) solved for BMEP (as :func:`vpsim.physics.crank_torque`), m_eq = m + J_e i² eta_tm / r².
 
-Integrator: Dormand-Prince 5(4), which is what ode45 is, with ode45's error norm (max over the dynamic states
-of |error| / max(|y|, |y_new|, threshold)), step-size control (factor 0.8 (rtol/err)^(1/5) after a first
-rejection, halving after further ones, growth at most 5x), initial step selection, FSAL and its 4th-order
-continuous extension (ode45's ``ntrp45``) for output at the requested times. Gear changes happen at the
-prescribed instants: the integration stops exactly there and restarts in the new gear (new initial step).
-The default maximum step is Simulink's "auto", a fiftieth of the cycle's duration. The quadrature states do
-not enter the error norm (as in CVODES' default), their integrands are smooth where the dynamic states are.
-The kernel is plain scalar loops compiled with Numba (cached on disk); the right side calls the model's
-equations (:mod:`vpsim.model`) and nothing else. Tests check it against independent references (SciPy's
-LSODA/Radau on the model's equations, the FQM at steady state).
+Integrators (``solver=``; docs/methods.md explains both):
+
+* ``rosenbrock`` (default): RODAS3 (Sandu et al. 1997; Hairer & Wanner 1996, IV.7), a linearly implicit,
+  L-stable, stiffly accurate Rosenbrock method of order 3 with an embedded order-2 method, so that the step
+  follows the accuracy asked and not the stability of the fast manifold. Its Jacobian (v, p_i, z, and the
+  rows of the quadratures in these three) and df/dt are forward differences of the model's right side, once
+  per step. The error (filtered by (I - h gamma J)^-1) is measured in the RMS norm over v, p_i, z (ode45's
+  scales) and the fuel and distance (relative to their increment over the step plus a rate scale times h).
+  Steps end at every node of the cycle's table (where the cycle speed has a kink), at every output time, at
+  the gear changes (restarts) and at every event: a switching function of the right side (clutch
+  engage/slip, PI saturation, throttle floor, brakes on/off, moving/at rest, slipping clutch's torque sign,
+  idle fuel floor) that changed sign inside a step is located on the step's cubic Hermite dense output
+  (Illinois method) and the step is taken again to end there.
+* ``dopri5``: the paper's solver, Dormand-Prince 5(4) as ode45, with ode45's error norm (max over v, p_i, z
+  of |error| / max(|y|, |y_new|, threshold)), step-size control, initial step, FSAL and continuous extension
+  (``ntrp45``) for outputs; gear changes restart it; events are stepped over. Its step is bound by stability
+  (the manifold's time constant), about 5 steps per cycle second.
+
+Both are plain scalar loops compiled with Numba (cached on disk); the right side calls the model's equations
+(:mod:`vpsim.model`) and nothing else. The default maximum step is Simulink's "auto", a fiftieth of the
+cycle's duration. Tests check both against independent references (SciPy's LSODA/Radau on the model's
+equations, the FQM at steady state, Dormand-Prince at rtol 1e-8).
 
 Modes (one switch for every method):
 
@@ -85,7 +97,35 @@ N_DYN = 3
 
 # --- auxiliary outputs ----------------------------------------------------------------------------------
 _X_THR, _X_W, _X_TCR, _X_TE, _X_MF, _X_MFU, _X_BRK, _X_ACC, _X_VREF, _X_CMD, _X_COUPLED = range(11)
-N_AUX = 11
+# switching functions: where one changes sign the right side changes form (a jump or a kink); the Rosenbrock
+# integrator locates these instants and restarts there (the Dormand-Prince path ignores them)
+_X_SW = 11
+(
+    _SW_CLUTCH,  # w_wheel - idle speed: clutch engaged / slipping (extended mode)
+    _SW_SAT_LO,  # u_raw - u_lo: PI command saturated at its lower limit
+    _SW_SAT_HI,  # u_hi - u_raw: ... at its upper limit
+    _SW_THROTTLE,  # u - A_min: throttle at its floor, pedal below it (extended mode)
+    _SW_BRAKE,  # u: brakes on below zero (extended mode)
+    _SW_MOVING,  # v: moving / at rest (static friction, v >= 0)
+    _SW_SLIP_TORQUE,  # T_cr while the clutch slips: it passes max(T_cr, 0)
+    _SW_FUEL_FLOOR,  # mdot_f - mdot_idle: the idle fuel floor (fuel cut-off)
+) = range(8)
+N_SW = 8
+# a sign change is an event only where the switching function ends clearly on the other side (|g| above this):
+# a function that settles at zero (the slipping clutch's torque at idle, where A_idle gives T_cr = 0) would
+# otherwise give an event at every step
+SWITCH_SIGNIFICANCE = (1e-6, 1e-12, 1e-12, 1e-12, 1e-12, 1e-9, 1e-4, 1e-10)
+SWITCHES = (
+    "clutch",
+    "saturation_low",
+    "saturation_high",
+    "throttle_floor",
+    "brake",
+    "moving",
+    "slip_torque",
+    "fuel_floor",
+)
+N_AUX = _X_SW + N_SW
 
 # --- Dormand-Prince 5(4) tableau -------------------------------------------------------------------------
 _C2, _C3, _C4, _C5 = 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0
@@ -148,10 +188,17 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
         throttle = cmd
         brake = 0.0
         dz = 0.0
+        for k in range(_SW_SAT_LO, _SW_BRAKE + 1):
+            aux[_X_SW + k] = 1.0
     else:
         v_ref = tb.interp_at(t, tab_t, tab_v, D[_TAB_INV])
         cmd, dz = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], D[_ULO], D[_UHI], D[_AWG])
         throttle, brake = pedal_split(cmd, D[_AMIN], D[_KB])
+        raw, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], -math.inf, math.inf, D[_AWG])  # unclipped
+        aux[_X_SW + _SW_SAT_LO] = raw - D[_ULO]
+        aux[_X_SW + _SW_SAT_HI] = D[_UHI] - raw
+        aux[_X_SW + _SW_THROTTLE] = cmd - D[_AMIN] if D[_EXT] != 0.0 else 1.0
+        aux[_X_SW + _SW_BRAKE] = cmd if D[_KB] != 0.0 else 1.0
     # driveline kinematics: stiff, or slipping clutch with the engine held at idle (extended mode)
     ratio = G[_G_I]
     w_wheel = vh.engine_speed(vv, ratio, c)  # (14),(17)
@@ -213,6 +260,10 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     aux[_X_VREF] = v_ref
     aux[_X_CMD] = cmd
     aux[_X_COUPLED] = 1.0 if coupled else 0.0
+    aux[_X_SW + _SW_CLUTCH] = w_wheel - c.idle_speed if D[_EXT] != 0.0 else 1.0
+    aux[_X_SW + _SW_MOVING] = v
+    aux[_X_SW + _SW_SLIP_TORQUE] = 1.0 if coupled else t_cr
+    aux[_X_SW + _SW_FUEL_FLOOR] = mdot_f - c.idle_fuel_flow
 
 
 # the same right side, inlined (at Numba-IR level) into its one call site, the integrator's stage loop: a call
@@ -463,6 +514,423 @@ def _integrate(
     return
 
 
+# --- RODAS3: the default integrator ---------------------------------------------------------------------
+# Sandu, Verwer, Blom, Spee, Carmichael & Potra (1997), Atmos. Environ. 31:3459-3472 (Rodas3), in the form of
+# Hairer & Wanner (1996), Solving ODEs II, IV.7, (7.25), that needs no products with the Jacobian:
+#     (I / (h gamma) - J) u_i = f(t + alpha_i h, y + sum_j a_ij u_j) + sum_j (c_ij / h) u_j + gamma_i h df/dt,
+#     y_new = y + sum_i m_i u_i,     error = sum_i e_i u_i.
+# Four stages, three evaluations of f (stage 2 reuses stage 1's), order 3 with an embedded method of order 2;
+# both stiffly accurate and L-stable (R(inf) = 0), so the error estimate stays meaningful in the stiff
+# (manifold) component when the step is far beyond its time constant.
+_ROS_GAMMA = 0.5
+_WA31, _WA41, _WA43 = 2.0, 2.0, 1.0  # a_ij (the others are zero)
+_WC21, _WC31, _WC32, _WC41, _WC42, _WC43 = 4.0, 1.0, -1.0, 1.0, -1.0, -8.0 / 3.0
+_WM1, _WM3, _WM4 = 2.0, 1.0, 1.0  # m_2 = 0; y_new = stage 4 state + u_4 (stiffly accurate)
+_WG1, _WG2 = 0.5, 1.5  # gamma_i = sum_j gamma_ij (0 for stages 3, 4); alpha = (0, 0, 1, 1)
+ROS_ORDER = 3  # the step-size controller uses the embedded order 2: h ~ err^(-1/3); the error is u_4
+_FD_STEP = 1.4901161193847656e-08  # sqrt(eps): forward-difference increment relative to the state's scale
+EVENT_TOLERANCE_S = 1e-6  # events are located to this width (plus rounding of t)
+
+
+@register_jitable
+def _inverse3(jac, q, winv):
+    """winv = (q I - J)^-1 for the 3 x 3 Jacobian ``jac`` (row-major), by cofactors."""
+    a, b, cc = q - jac[0], -jac[1], -jac[2]
+    d, e, f = -jac[3], q - jac[4], -jac[5]
+    g, hh, i = -jac[6], -jac[7], q - jac[8]
+    co0 = e * i - f * hh
+    co1 = f * g - d * i
+    co2 = d * hh - e * g
+    inv_det = 1.0 / (a * co0 + b * co1 + cc * co2)
+    winv[0] = co0 * inv_det
+    winv[1] = (cc * hh - b * i) * inv_det
+    winv[2] = (b * f - cc * e) * inv_det
+    winv[3] = co1 * inv_det
+    winv[4] = (a * i - cc * g) * inv_det
+    winv[5] = (cc * d - a * f) * inv_det
+    winv[6] = co2 * inv_det
+    winv[7] = (b * g - a * hh) * inv_det
+    winv[8] = (a * e - b * d) * inv_det
+
+
+@register_jitable
+def _stage_solve(r, winv, hg, u, q0, q1, q2):
+    """u = (I/(h gamma) - J)^-1 r: the 3 x 3 solve for v, p_i, z; the quadrature rows explicitly."""
+    r0, r1, r2 = r[0], r[1], r[2]
+    u[0] = winv[0] * r0 + winv[1] * r1 + winv[2] * r2
+    u[1] = winv[3] * r0 + winv[4] * r1 + winv[5] * r2
+    u[2] = winv[6] * r0 + winv[7] * r1 + winv[8] * r2
+    for i in range(N_DYN, r.size):
+        u[i] = hg * (r[i] + q0[i] * u[0] + q1[i] * u[1] + q2[i] * u[2])
+
+
+@register_jitable
+def _hermite(s, h, y, ynew, f0, f1, n, out):
+    """Cubic Hermite interpolant of the step (values, derivatives at both ends) at t + s h, first n states."""
+    s2 = s * s
+    s3 = s2 * s
+    w_y0 = 2.0 * s3 - 3.0 * s2 + 1.0
+    w_f0 = (s3 - 2.0 * s2 + s) * h
+    w_y1 = 3.0 * s2 - 2.0 * s3
+    w_f1 = (s3 - s2) * h
+    for i in range(n):
+        out[i] = w_y0 * y[i] + w_f0 * f0[i] + w_y1 * ynew[i] + w_f1 * f1[i]
+    if out[_V] < 0.0:
+        out[_V] = 0.0
+
+
+@register_jitable
+def _locate(k, t, h, ga, gb, y, ynew, f0, f1, ytmp, scratch, aux, G, c, D, tab_t, tab_v):
+    """First instant in (t, t + h] where switching function k has changed sign, on the step's dense output.
+
+    Illinois (regula falsi with halving of the stale end), bisection where the secant gives nothing; returns
+    (the right end of the final bracket, where the function has the new sign; right-side evaluations)."""
+    a, b = 0.0, 1.0
+    fa, fb = ga, gb
+    pa = fa > 0.0
+    side = 0
+    n = 0
+    tol = (EVENT_TOLERANCE_S + 8.0 * _EPS * abs(t)) / h
+    while b - a > tol and n < 60:
+        s = 0.5 * (a + b)
+        if fa != fb and fa != 0.0 and fb != 0.0:
+            sec = b - fb * (b - a) / (fb - fa)
+            if a < sec < b:
+                s = sec
+        _hermite(s, h, y, ynew, f0, f1, N_DYN, ytmp)
+        _rhs(t + s * h, ytmp, G, c, D, tab_t, tab_v, scratch, aux)
+        n += 1
+        fs = aux[_X_SW + k]
+        if (fs > 0.0) == pa:
+            a, fa = s, fs
+            if side == -1:
+                fb *= 0.5
+            side = -1
+        else:
+            b, fb = s, fs
+            if side == 1:
+                fa *= 0.5
+            side = 1
+    return t + b * h, n
+
+
+@kernel(_nrt=False)  # nogil: vpsim.batch runs variants on threads
+def _integrate_ros(
+    seg_t,
+    seg_ratio,
+    y0,
+    tab_t,
+    tab_v,
+    c,
+    D,
+    rtol,
+    h_max,
+    thr,
+    qthr,
+    max_steps,
+    out_t,
+    out_y,
+    out_aux,
+    stats,
+    fstats,
+    work,
+    aux,
+    aux1,
+    G,
+):
+    """ROS34PW2 from seg_t[0] to seg_t[-1], restarting at every seg_t[k] in gear seg_ratio[k].
+
+    Steps end at every node of the table (tab_t, tab_v) (where the cycle speed, or the open-loop throttle,
+    has a kink) and at every event (a switching function changing sign, located on the dense output; the
+    step is then taken again to end there). Arguments as :func:`_integrate`; ``qthr`` holds the rate scales
+    of the fuel and distance in the error norm; stats: [accepted, rejected, rhs evaluations, status, events,
+    Jacobians]. ``work`` (15 x len(y0)), ``aux`` and ``aux1`` (N_AUX), ``G`` (3) are scratch space; the state
+    reached is left in ``work[0]``.
+    """
+    ny = y0.size
+    y = work[0]
+    ynew = work[1]
+    ytmp = work[2]
+    f0 = work[3]
+    f1 = work[4]
+    u1 = work[5]
+    u2 = work[6]
+    u3 = work[7]
+    u4 = work[8]
+    r = work[9]
+    jac = work[10]
+    winv = work[11]
+    sw0 = work[12]
+    scratch = work[13]
+    ft = work[17]
+    gq0 = work[14]  # the quadratures' Jacobian columns in v, p_i, z
+    gq1 = work[15]
+    gq2 = work[16]
+    for i in range(ny):
+        y[i] = y0[i]
+    pw = 1.0 / ROS_ORDER
+    n_out = out_t.size
+    n_tab = tab_t.size
+    j_out = 0
+    j_tab = 0
+    accepted = 0
+    rejected = 0
+    nfev = 0
+    events = 0
+    n_jac = 0
+    n_seg = seg_t.size - 1
+    for sgi in range(n_seg):
+        t = seg_t[sgi]
+        t_end = seg_t[sgi + 1]
+        _gear(seg_ratio[sgi], c, G)
+        last = sgi == n_seg - 1
+        _rhs(t, y, G, c, D, tab_t, tab_v, f0, aux1)
+        nfev += 1
+        for k in range(N_SW):
+            sw0[k] = aux1[_X_SW + k]
+        while j_out < n_out and out_t[j_out] <= t:
+            for i in range(ny):
+                out_y[j_out, i] = y[i]
+            for i in range(aux1.size):
+                out_aux[j_out, i] = aux1[i]
+            j_out += 1
+        span = t_end - t
+        if span <= 0.0:
+            continue
+        hmax = h_max if h_max < span else span
+        # initial step (as ode45's, with the order of this method)
+        rh = 0.0
+        for i in range(N_DYN):
+            sc = abs(y[i])
+            if thr[i] > sc:
+                sc = thr[i]
+            q = abs(f0[i]) / sc
+            if q > rh:
+                rh = q
+        rh = rh / (0.8 * rtol**pw)
+        h = hmax
+        if h * rh > 1.0:
+            h = 1.0 / rh
+        have_jac = False
+        nofailed = True
+        t_event = -1.0  # > t: the step is being taken again to end at a located event
+        h_want = h
+        while True:
+            hmin = 16.0 * _EPS * abs(t)
+            while j_tab < n_tab and tab_t[j_tab] <= t + hmin:
+                j_tab += 1
+            t_stop = t_end
+            if j_tab < n_tab and tab_t[j_tab] < t_stop:
+                t_stop = tab_t[j_tab]
+            # output times are stops too: the values there are the integrator's own, not interpolated
+            j_stop = j_out
+            while j_stop < n_out and out_t[j_stop] <= t + hmin:
+                j_stop += 1
+            if j_stop < n_out and out_t[j_stop] < t_stop:
+                t_stop = out_t[j_stop]
+            if t_event > t:
+                tnew = t_event
+                to_stop = False
+            else:
+                if h > hmax:
+                    h = hmax
+                if h < hmin:
+                    h = hmin
+                h_want = h
+                to_stop = t + 1.1 * h >= t_stop
+                tnew = t_stop if to_stop else t + h
+            h = tnew - t
+            # evaluations of the right side, through one (inlined) call site: the Jacobian's forward
+            # differences in v, p_i, z and t (tasks 0-3, once per step; t inside the table's current interval,
+            # where f is smooth), then stages 3 and 4 (both at t + h; stage 2 reuses stage 1's f)
+            hg = h * _ROS_GAMMA
+            task = 0 if not have_jac else N_DYN + 1
+            d = 0.0
+            errn = 0.0
+            while task < N_DYN + 4:
+                tgt_f = r
+                tgt_a = aux
+                if task < N_DYN:
+                    sc = abs(y[task])
+                    if thr[task] > sc:
+                        sc = thr[task]
+                    for i in range(N_DYN):
+                        ytmp[i] = y[i]
+                    ytmp[task] = y[task] + _FD_STEP * sc
+                    d = ytmp[task] - y[task]
+                    ts = t
+                elif task == N_DYN:
+                    d = _FD_STEP * (abs(t) if abs(t) > 1.0 else 1.0)
+                    if d > 0.5 * (t_stop - t):
+                        d = 0.5 * (t_stop - t)
+                    ts = t + d
+                    d = ts - t
+                    for i in range(N_DYN):
+                        ytmp[i] = y[i]
+                else:
+                    if task == N_DYN + 1:
+                        _inverse3(jac, 1.0 / hg, winv)
+                        for i in range(ny):
+                            r[i] = f0[i] + (_WG1 * h) * ft[i]
+                        _stage_solve(r, winv, hg, u1, gq0, gq1, gq2)
+                        for i in range(ny):  # stage 2 at (t, y): f is stage 1's
+                            r[i] = f0[i] + (_WC21 / h) * u1[i] + (_WG2 * h) * ft[i]
+                        _stage_solve(r, winv, hg, u2, gq0, gq1, gq2)
+                        for i in range(N_DYN):
+                            ytmp[i] = y[i] + _WA31 * u1[i]
+                    elif task == N_DYN + 2:
+                        for i in range(N_DYN):
+                            ytmp[i] = y[i] + _WA41 * u1[i] + _WA43 * u3[i]
+                    else:  # the right side at the step's end (the next step's first stage)
+                        for i in range(N_DYN):
+                            ytmp[i] = ynew[i]
+                        tgt_f = f1
+                        tgt_a = aux1
+                    ts = tnew
+                _rhs_stage(ts, ytmp, G, c, D, tab_t, tab_v, tgt_f, tgt_a)
+                nfev += 1
+                if task < N_DYN:
+                    for i in range(N_DYN):
+                        jac[N_DYN * i + task] = (r[i] - f0[i]) / d
+                    qcol = work[14 + task]
+                    for i in range(N_DYN, ny):
+                        qcol[i] = (r[i] - f0[i]) / d
+                elif task == N_DYN:
+                    for i in range(ny):
+                        ft[i] = (r[i] - f0[i]) / d
+                    n_jac += 1
+                    have_jac = True
+                elif task == N_DYN + 1:
+                    for i in range(ny):
+                        r[i] += (_WC31 * u1[i] + _WC32 * u2[i]) / h
+                    _stage_solve(r, winv, hg, u3, gq0, gq1, gq2)
+                elif task == N_DYN + 2:
+                    for i in range(ny):
+                        r[i] += (_WC41 * u1[i] + _WC42 * u2[i] + _WC43 * u3[i]) / h
+                    _stage_solve(r, winv, hg, u4, gq0, gq1, gq2)
+                    for i in range(ny):
+                        ynew[i] = y[i] + _WM1 * u1[i] + _WM3 * u3[i] + _WM4 * u4[i]
+                    # error estimate u_4 (y_new minus the embedded solution), filtered by (I - h gamma J)^-1
+                    # as Hairer & Wanner (IV.8, (8.19)-(8.20)) do for stiff codes, so that its part in the
+                    # damped stiff (manifold) direction is not taken for error; the quadrature rows by the
+                    # same block inverse. Then the RMS norm over v, p_i, z (ode45's scales) and the fuel and
+                    # distance (relative to their increment over the step plus a rate scale times h)
+                    _stage_solve(u4, winv, 1.0, ytmp, gq0, gq1, gq2)  # (I/hg - J)^-1 u_4
+                    for i in range(N_DYN):
+                        r[i] = ytmp[i] / hg
+                    for i in range(N_DYN, ny):
+                        r[i] = u4[i] + hg * (gq0[i] * r[0] + gq1[i] * r[1] + gq2[i] * r[2])
+                    err = 0.0
+                    for m in range(N_ERR + 2):
+                        i = m if m < N_DYN else (_FUEL if m == N_DYN else _DIST)
+                        sc = abs(y[i])
+                        if abs(ynew[i]) > sc:
+                            sc = abs(ynew[i])
+                        if m < N_DYN:
+                            if thr[i] > sc:
+                                sc = thr[i]
+                        else:
+                            sc = abs(ynew[i] - y[i]) + h * qthr[m - N_DYN]
+                        q = r[i] / sc
+                        err += q * q
+                    err = math.sqrt(err / (N_ERR + 2))
+                    errn = err / rtol
+                    if not errn <= 1.0:  # also NaN: rejected, no evaluation at the end
+                        break
+                    if ynew[_V] < 0.0:  # keep v >= 0 (the car does not roll backwards)
+                        ynew[_V] = 0.0
+                task += 1
+            if not errn <= 1.0:  # also NaN
+                rejected += 1
+                if accepted + rejected >= max_steps:
+                    stats[0], stats[1], stats[2], stats[3] = accepted, rejected, nfev, STATUS_TOO_MANY_STEPS
+                    stats[4], stats[5] = events, n_jac
+                    return
+                if h <= hmin:
+                    stats[0], stats[1], stats[2], stats[3] = accepted, rejected, nfev, STATUS_STEP_TOO_SMALL
+                    stats[4], stats[5] = events, n_jac
+                    return
+                fac = 0.2
+                if errn == errn and nofailed:
+                    fac = 0.9 * errn ** (-pw)
+                    if fac < 0.2:
+                        fac = 0.2
+                elif errn == errn:
+                    fac = 0.5
+                h = h * fac
+                nofailed = False
+                t_event = -1.0
+                continue
+            if t_event < 0.0:
+                # did the right side change form inside the step? locate the first such instant
+                tb_min = tnew
+                for k in range(N_SW):
+                    g_a, g_b = sw0[k], aux1[_X_SW + k]
+                    if (g_a > 0.0) != (g_b > 0.0) and abs(g_b) > SWITCH_SIGNIFICANCE[k]:
+                        tb, n_it = _locate(
+                            k, t, h, g_a, g_b, y, ynew, f0, f1, ytmp, scratch, aux, G, c, D, tab_t, tab_v
+                        )
+                        nfev += n_it
+                        if tb < tb_min:
+                            tb_min = tb
+                if tb_min < tnew and tb_min - t > EVENT_TOLERANCE_S + 1e-3 * h:
+                    for k in range(N_SW):
+                        g_a, g_b = sw0[k], aux1[_X_SW + k]
+                        if (g_a > 0.0) != (g_b > 0.0) and abs(g_b) > SWITCH_SIGNIFICANCE[k]:
+                            fstats[1 + k] += 1.0
+                    events += 1
+                    t_event = tb_min  # take the step again, to end there
+                    continue
+            accepted += 1
+            if accepted + rejected >= max_steps:
+                stats[0], stats[1], stats[2], stats[3] = accepted, rejected, nfev, STATUS_TOO_MANY_STEPS
+                stats[4], stats[5] = events, n_jac
+                return
+            e_abs = abs(aux1[_X_VREF] - ynew[_V])
+            if e_abs > fstats[0]:
+                fstats[0] = e_abs
+            done = tnew >= t_end
+            while j_out < n_out and (out_t[j_out] < tnew or ((last or not done) and out_t[j_out] <= tnew)):
+                if out_t[j_out] == tnew:
+                    for i in range(ny):
+                        out_y[j_out, i] = ynew[i]
+                    for i in range(aux1.size):
+                        out_aux[j_out, i] = aux1[i]
+                else:
+                    _hermite((out_t[j_out] - t) / h, h, y, ynew, f0, f1, ny, out_y[j_out])
+                    _rhs(out_t[j_out], out_y[j_out], G, c, D, tab_t, tab_v, scratch, out_aux[j_out])
+                j_out += 1
+            # next step: the controller's proposal (no growth right after a rejection), or the step wanted
+            # before it was cut to a stop or an event
+            fac = 5.0
+            if errn > 0.0:
+                fac = 0.9 * errn ** (-pw)
+                if fac > 5.0:
+                    fac = 5.0
+                if fac < 0.2:
+                    fac = 0.2
+            if not nofailed and fac > 1.0:
+                fac = 1.0
+            h_next = h * fac
+            if (to_stop or t_event > t) and h_want > h_next:
+                h_next = h_want
+            t = tnew
+            for i in range(ny):
+                y[i] = ynew[i]
+                f0[i] = f1[i]
+            for k in range(N_SW):
+                sw0[k] = aux1[_X_SW + k]
+            have_jac = False
+            nofailed = True
+            t_event = -1.0
+            h = h_next
+            if done:
+                break
+    stats[0], stats[1], stats[2], stats[3] = accepted, rejected, nfev, STATUS_OK
+    stats[4], stats[5] = events, n_jac
+    return
+
+
 # --- the method -------------------------------------------------------------------------------------------
 
 
@@ -508,6 +976,17 @@ def initial_state(cycle, params, ratio: float, pi: PIDriver, mode: str) -> np.nd
 
 
 ERROR_THRESHOLDS = np.array([1.0, 1.0e4, 1.0e-4])  # v (m/s), p_i (Pa), z (m²): ode45's atol/rtol per state
+# the fuel's and the distance's error over a step is measured against their increment plus these rates times
+# the step: an error per unit of fuel burnt and distance driven, so the totals' relative error stays ~rtol
+FUEL_RATE_SCALE = 1.0e-3  # kg/s: about the flow of steady driving
+DISTANCE_RATE_SCALE = 10.0  # m/s
+SOLVERS = ("rosenbrock", "dopri5")
+DEFAULT_SOLVER = "rosenbrock"
+
+
+def quadrature_scales(c) -> np.ndarray:
+    """Rate scales of the fuel (kg/s) and distance (m/s) in the Rosenbrock error norm."""
+    return np.array([FUEL_RATE_SCALE, DISTANCE_RATE_SCALE])
 
 
 def integrate(
@@ -524,24 +1003,27 @@ def integrate(
     max_step=np.inf,
     out_t=None,
     max_steps=2_000_000,
+    solver=DEFAULT_SOLVER,
 ):
     """Run the kernel from seg_t[0] to seg_t[-1], restarting at each seg_t[k] with ratio seg_ratio[k].
 
     (table_t, table_v) is the cycle speed the PI driver follows or, with ``open_loop``, the throttle area
-    fed to the engine as it is. Returns (y_end, out_y, out_aux, info); raises VpsimError if the solver fails.
+    fed to the engine as it is. ``solver``: ``rosenbrock`` (ROS34PW2, the default) or ``dopri5`` (the
+    paper's ode45). Returns (y_end, out_y, out_aux, info); raises VpsimError if the solver fails.
     """
+    if solver not in SOLVERS:
+        raise VpsimError(f"unknown solver {solver!r}; expected one of {', '.join(SOLVERS)}")
     out_t = np.array(seg_t[-1:] if out_t is None else out_t, dtype=float)
     out_y = np.full((out_t.size, NY), np.nan)
     out_aux = np.full((out_t.size, N_AUX), np.nan)
-    stats = np.zeros(4, dtype=np.int64)
-    fstats = np.zeros(1)
+    stats = np.zeros(6, dtype=np.int64)
+    fstats = np.zeros(1 + N_SW)
     D = np.array(D, dtype=float)
     D[_OPEN] = 1.0 if open_loop else 0.0
     table_t = np.asarray(table_t, dtype=float)
     D[_TAB_INV] = (table_t.size - 1) / (table_t[-1] - table_t[0]) if table_t.size > 1 else 0.0
     # np.array copies: one compiled signature for all calls (read-only inputs would compile another)
-    work = np.zeros((11, NY))
-    _integrate(
+    args = (
         np.array(seg_t, dtype=float),
         np.array(seg_ratio, dtype=float),
         np.array(y0, dtype=float),
@@ -552,27 +1034,44 @@ def integrate(
         float(rtol),
         float(max_step),
         ERROR_THRESHOLDS,
-        int(max_steps),
-        out_t,
-        out_y,
-        out_aux,
-        stats,
-        fstats,
-        work,
-        np.empty(N_AUX),
-        np.empty(3),
     )
+    if solver == "dopri5":
+        work = np.zeros((11, NY))
+        _integrate(
+            *args, int(max_steps), out_t, out_y, out_aux, stats, fstats, work, np.empty(N_AUX), np.empty(3)
+        )
+    else:
+        work = np.zeros((18, NY))
+        _integrate_ros(
+            *args,
+            quadrature_scales(c),
+            int(max_steps),
+            out_t,
+            out_y,
+            out_aux,
+            stats,
+            fstats,
+            work,
+            np.empty(N_AUX),
+            np.empty(N_AUX),
+            np.empty(3),
+        )
     y_end = work[0].copy()
     if stats[3] == STATUS_STEP_TOO_SMALL:
         raise VpsimError(f"forward integration failed: step size below the minimum after t = {seg_t[0]:g} s")
     if stats[3] == STATUS_TOO_MANY_STEPS:
         raise VpsimError(f"forward integration stopped after {max_steps} steps (rtol {rtol:g})")
     info = {
+        "solver": solver,
         "accepted_steps": int(stats[0]),
         "rejected_steps": int(stats[1]),
         "rhs_evaluations": int(stats[2]),
         "max_speed_error_mps": float(fstats[0]),
     }
+    if solver == "rosenbrock":
+        info["events"] = int(stats[4])
+        info["jacobians"] = int(stats[5])
+        info["events_by_switch"] = {name: int(n) for name, n in zip(SWITCHES, fstats[1:], strict=True)}
     return y_end, out_y, out_aux, info
 
 
@@ -587,22 +1086,24 @@ def segments(cycle, schedule: GearSchedule, ratios) -> tuple[np.ndarray, np.ndar
 
 
 def warm_up() -> None:
-    """Load (or compile) the kernel, so that run times measure the simulation only."""
-    if _integrate.overloads:
+    """Load (or compile) the kernels of both solvers, so that run times measure the simulation only."""
+    if _integrate.overloads and _integrate_ros.overloads:
         return
     from ..params import load_parameters
 
     p = load_parameters("hofman2011")
-    integrate(
-        np.array([0.0, 1.0]),
-        np.array([10.0]),
-        np.zeros(NY),
-        record(p),
-        np.zeros(N_SETTINGS),
-        np.array([0.0, 1.0]),
-        np.zeros(2),
-        out_t=np.array([0.0, 1.0]),
-    )
+    for solver in SOLVERS:
+        integrate(
+            np.array([0.0, 1.0]),
+            np.array([10.0]),
+            np.zeros(NY),
+            record(p),
+            np.zeros(N_SETTINGS),
+            np.array([0.0, 1.0]),
+            np.zeros(2),
+            out_t=np.array([0.0, 1.0]),
+            solver=solver,
+        )
 
 
 def run(
@@ -619,9 +1120,11 @@ def run(
     kp: float | None = None,
     ki: float | None = None,
     tracking_time_s: float | None = None,
+    solver: str = DEFAULT_SOLVER,
 ) -> Result:
     """Run the FDM on ``cycle`` with PI driver ``driver`` in ``mode`` and return the :class:`Result`.
 
+    ``solver``: ``rosenbrock`` (RODAS3, the default) or ``dopri5`` (the paper's ode45; module docstring);
     ``rtol`` (default the parameter set's ``simulation.ode_relative_tolerance``, 1e-3 like Simulink),
     ``max_step`` (default: a fiftieth of the cycle duration, Simulink's "auto"); ``kp``/``ki`` (and the
     anti-windup ``tracking_time_s``) override the driver's gains, as the driver tuning does;
@@ -635,6 +1138,8 @@ def run(
     from dataclasses import replace
 
     mode = rules.canonical_mode(mode)
+    if solver not in SOLVERS:
+        raise VpsimError(f"unknown solver {solver!r}; expected one of {', '.join(SOLVERS)}")
     rtol = params.simulation.ode_relative_tolerance if rtol is None else float(rtol)
     if not (0.0 < rtol < 1.0):
         raise VpsimError(f"rtol = {rtol!r} must be in (0, 1)")
@@ -687,6 +1192,7 @@ def run(
         rtol=rtol,
         max_step=h_max,
         out_t=out_t,
+        solver=solver,
     )
     fuel_kg = float(y_end[_FUEL])
     distance = float(y_end[_DIST])
@@ -737,11 +1243,17 @@ def run(
             "driver_command_m2": x[:, _X_CMD],
             "clutch_engaged": x[:, _X_COUPLED] > 0.5,
         }
-    notes = [
-        f"Dormand-Prince 5(4), rtol {rtol:g}: {info['accepted_steps']} steps ({info['rejected_steps']} "
-        "rejected), "
-        f"{info['restarts']} restarts at gear changes",
-    ]
+    if solver == "dopri5":
+        notes = [
+            f"Dormand-Prince 5(4), rtol {rtol:g}: {info['accepted_steps']} steps ({info['rejected_steps']} "
+            "rejected), "
+            f"{info['restarts']} restarts at gear changes",
+        ]
+    else:
+        notes = [
+            f"Rosenbrock RODAS3, rtol {rtol:g}: {info['accepted_steps']} steps ({info['rejected_steps']} "
+            f"rejected), {info['restarts']} restarts at gear changes, {info['events']} located events",
+        ]
     if outside:
         notes.append(
             f"speed outside the +-{BAND_KMH:g} km/h band for {outside:.1f} s "
