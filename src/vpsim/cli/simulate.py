@@ -80,7 +80,14 @@ def _out_dir(out: str) -> Path:
     type=click.Path(file_okay=False),
     help="Write timeseries.csv, summary.json and timeseries.png into this folder.",
 )
-def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, out):
+@click.option(
+    "--solver",
+    type=click.Choice(["rosenbrock", "dopri5"]),
+    default=None,
+    help="Forward method's integrator: rosenbrock (default, stiffly stable RODAS3) or dopri5 (the paper's "
+    "ode45).",
+)
+def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, out, solver):
     """Simulate a vehicle on a drive cycle and report its fuel consumption."""
     from ..cycles import MIN_CONSUMPTION_DISTANCE_M, load_cycle
     from ..gears import load_schedule
@@ -101,7 +108,10 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         schedule = load_schedule(gears, params.transmission.n_gears, cycle=cyc)
     if out:
         path = _out_dir(out)
-    result = run(cyc, method=method, params=params, driver=driver, mode=mode, gears=schedule)
+    if solver is not None and method != "forward":
+        raise VpsimError("--solver applies to --method forward (the integrator of the dynamic model)")
+    options = {} if solver is None else {"solver": solver}
+    result = run(cyc, method=method, params=params, driver=driver, mode=mode, gears=schedule, **options)
     summary = result.summary()
     if not cyc.distance_m >= MIN_CONSUMPTION_DISTANCE_M:  # a method's creep is no basis for L/100 km
         summary["fuel_l_per_100km"] = float("nan")
