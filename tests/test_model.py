@@ -312,3 +312,11 @@ def test_boost_raises_full_load_and_respects_its_limit(params):
     assert np.nanmax(r.series["intake_pressure_pa"]) <= boost
     assert r.deviations.torque_beyond_full_load_s == 0.0  # the aspirated engine misses 3 s of US06
     assert abs(r.energy.residual) <= 1e-9 * r.energy.indicated
+
+
+def test_torque_is_affine_in_pressure_with_one_slope_at_every_speed(params):
+    """What the BQM's closed-form inversion relies on (engine.torque_slope)."""
+    c = record(params)
+    for w in (0.0, 80.0, 300.0, 700.0):
+        slope = (en.crank_torque(9.0e4, w, c) - en.crank_torque(1.0e4, w, c)) / 8.0e4
+        assert slope == pytest.approx(c.torque_slope, rel=1e-12)

@@ -462,51 +462,67 @@ def intervals(
     }
 
 
-def _sample_series(cycle, params, rows, gear, generated) -> dict:
-    """The per-interval quantities at the cycle's samples, the time base of every method.
+# columns of the per-sample series (the core columns of vpsim.result, at the cycle's samples)
+(S_ACC, S_GEAR, S_W, S_TCR, S_TE, S_P, S_THR, S_MDOT, S_USED, S_BRAKE, S_SHORT, S_ENGAGED) = range(12)
+N_SAMPLE_ROWS = 12
+
+
+@kernel(_nrt=False)
+def sample_rows(rows, gear, recs, generated, out):
+    """The per-interval rows at the cycle's samples (``out``: N_SAMPLE_ROWS x samples).
 
     A sample shows the mean of its two adjacent intervals (the first and last sample their one interval);
-    the speed is the cycle's own; gear and clutch state are those engaged from the sample on (as the other
-    methods report them, right-continuous); the torque shortfall is the larger of the two intervals'.
+    gear and clutch state are those engaged from the sample on (right-continuous, as the other methods
+    report them); the torque shortfall is the larger of the two intervals'; the intake pressure and the
+    steady throttle (the FQM inverted) exist where the clutch is engaged and the map is the model's.
     """
+    c = recs[0]
+    n = gear.size
+    for k in range(n + 1):
+        lo = k - 1 if k > 0 else 0
+        hi = k if k < n else n - 1
+        own = hi  # the interval that starts at the sample (the last sample: the last interval)
+        w = 0.5 * (rows[R_W, lo] + rows[R_W, hi])
+        t_cr = 0.5 * (rows[R_TCR, lo] + rows[R_TCR, hi])
+        dw = 0.5 * (rows[R_DW, lo] + rows[R_DW, hi])
+        mdot = 0.5 * (rows[R_MDOT, lo] + rows[R_MDOT, hi])
+        fired = 0.5 * (rows[R_FIRED, lo] + rows[R_FIRED, hi])
+        engaged = rows[R_CLUTCH, own] != rules.CLUTCH_OPEN
+        out[S_ACC, k] = 0.5 * (rows[R_A, lo] + rows[R_A, hi])
+        out[S_GEAR, k] = gear[own]
+        out[S_W, k] = w
+        out[S_TCR, k] = t_cr
+        out[S_TE, k] = t_cr - c.inertia * dw  # (1)
+        ok = generated and engaged
+        out[S_P, k] = 0.5 * (rows[R_P, lo] + rows[R_P, hi]) if ok else math.nan
+        out[S_THR, k] = 0.5 * (rows[R_THR, lo] + rows[R_THR, hi]) if ok else math.nan
+        out[S_MDOT, k] = mdot
+        out[S_USED, k] = rules.fuel_with_idle_floor(mdot, c) if fired > 0.0 else 0.0
+        out[S_BRAKE, k] = 0.5 * (rows[R_BRAKE, lo] + rows[R_BRAKE, hi])
+        out[S_SHORT, k] = max(rows[R_SHORT, lo], rows[R_SHORT, hi])
+        out[S_ENGAGED, k] = 1.0 if engaged else 0.0
 
-    def at_samples(x):
-        out = np.empty(x.size + 1)
-        out[0], out[-1] = x[0], x[-1]
-        out[1:-1] = 0.5 * (x[:-1] + x[1:])
-        return out
 
-    def held(x):
-        return np.concatenate([x, x[-1:]])
-
-    engaged = held(rows[R_CLUTCH]) != rules.CLUTCH_OPEN
-    w = at_samples(rows[R_W])
-    p = at_samples(rows[R_P])
-    t_cr = at_samples(rows[R_TCR])
-    mdot = at_samples(rows[R_MDOT])
-    short = np.maximum(np.concatenate([rows[R_SHORT][:1], rows[R_SHORT]]), held(rows[R_SHORT]))
-    if generated:  # the steady throttle of the operating point (the FQM inverted)
-        throttle = np.where(engaged, at_samples(rows[R_THR]), np.nan)
-    else:
-        throttle = np.full(w.size, np.nan)
+def _sample_series(cycle, params, rows, gear, generated) -> dict:
+    """The series at the cycle's samples, the time base of every method (:func:`sample_rows`)."""
+    out = np.empty((N_SAMPLE_ROWS, gear.size + 1))
+    sample_rows(rows, gear, kernel_records(params), generated, out)
     return {
         "time_s": cycle.time_s,
         "reference_speed_mps": cycle.speed_mps,
         "speed_mps": cycle.speed_mps,
-        "accel_mps2": at_samples(rows[R_A]),
-        "gear": held(gear),
-        "engine_speed_radps": w,
-        "crank_torque_nm": t_cr,
-        "engine_torque_nm": t_cr - params.engine.inertia * at_samples(rows[R_DW]),
-        "intake_pressure_pa": np.where(engaged, p, np.nan) if generated else np.full(w.size, np.nan),
-        "throttle_area_m2": throttle,
-        "fuel_flow_kgps": mdot,
-        "fuel_flow_used_kgps": np.where(
-            at_samples(rows[R_FIRED]) > 0.0, np.maximum(mdot, params.simulation.idle_fuel_flow), 0.0
-        ),
-        "brake_force_n": at_samples(rows[R_BRAKE]),
-        "torque_shortfall_nm": short,
-        "clutch_engaged": held(rows[R_CLUTCH]) != rules.CLUTCH_OPEN,
+        "accel_mps2": out[S_ACC],
+        "gear": out[S_GEAR].astype(np.int64),
+        "engine_speed_radps": out[S_W],
+        "crank_torque_nm": out[S_TCR],
+        "engine_torque_nm": out[S_TE],
+        "intake_pressure_pa": out[S_P],
+        "throttle_area_m2": out[S_THR],
+        "fuel_flow_kgps": out[S_MDOT],
+        "fuel_flow_used_kgps": out[S_USED],
+        "brake_force_n": out[S_BRAKE],
+        "torque_shortfall_nm": out[S_SHORT],
+        "clutch_engaged": out[S_ENGAGED] != 0.0,
     }
 
 

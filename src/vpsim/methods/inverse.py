@@ -59,7 +59,7 @@ from ..model import engine as en
 from ..model import rules
 from ..model import vehicle as vh
 from ..model._compile import kernel
-from ..model.engine import equation
+from ..model.engine import inline
 from ..model.record import kernel_records, memo, record
 from ..model.record import ratios as total_ratios
 from ..result import EnergyBalance, Result, TraceMiss, limits_of
@@ -252,7 +252,7 @@ _ROW_KEYS = (
 )
 
 
-@equation
+@inline
 def invert_point(v, dv, ddv, ratio, coef, extended, c):
     """(33), (31), (32), (30) at one point in the gear of total ratio ``ratio`` (``coef``: c1..c4 of (21) and
     the rolling-resistance part of c4), with the realistic car's rules in ``extended`` mode.

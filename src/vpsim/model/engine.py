@@ -178,11 +178,18 @@ def accessory_torque(w_e, c):
     return c.accessory_power / (w_e if w_e > c.idle_speed else c.idle_speed)
 
 
+def torque_slope(c):
+    """dT_cr/dp_i from two evaluations of :func:`crank_torque` (evaluated once per parameter set, the
+    record's ``torque_slope``). T_cr is affine in p_i by (2)-(8), with a slope that does not depend on w_e
+    (IMEP (4) and PMEP (6) are linear in p_i, FMEP's speed part (5) does not depend on p_i): every inversion
+    below follows the torque definition above. tests/test_model.py checks the slope at other speeds."""
+    return (crank_torque(c.ambient_pressure, 0.0, c) - crank_torque(0.0, 0.0, c)) / c.ambient_pressure
+
+
 @equation
 def torque_per_pressure(w_e, c):
-    """dT_cr/dp_i at fixed w_e. T_cr is affine in p_i by (2)-(8), so two evaluations of :func:`crank_torque`
-    give the slope exactly (to rounding): every inversion below follows the torque definition above."""
-    return (crank_torque(c.ambient_pressure, w_e, c) - crank_torque(0.0, w_e, c)) / c.ambient_pressure
+    """dT_cr/dp_i at fixed w_e (:func:`torque_slope`: the same at every speed)."""
+    return c.torque_slope
 
 
 @equation

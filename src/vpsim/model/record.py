@@ -80,6 +80,7 @@ DERIVED_FIELDS = (
     "psi_choked",  # Psi in the choked region (12)
     "rolling_force",  # m g c_r of (18), or the coast-down A
     "aero_coefficient",  # 1/2 c_d rho A of (18), or the coast-down C
+    "torque_slope",  # dT_cr/dp_i (engine.torque_slope)
 )
 FIELDS = tuple(f for fs in _PARAMETER_FIELDS.values() for f in fs) + (
     "map_speed_low",
@@ -120,6 +121,8 @@ def _fill(rec, vehicle, transmission, engine, simulation, n: int) -> None:
     rec["psi_choked"] = eq_engine.psi_choked(r.specific_heat_ratio)
     rec["rolling_force"] = eq_vehicle.rolling_force_moving(r)
     rec["aero_coefficient"] = eq_vehicle.aero_coefficient(r)
+    rec["torque_slope"] = 1.0  # a placeholder crank_torque does not read; the slope follows from it
+    rec["torque_slope"] = eq_engine.torque_slope(r)
 
 
 def _sections_len(*sections) -> int:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from . import engine as en
 from . import vehicle as vh
-from .engine import equation
+from .engine import equation, inline
 
 # the two modes every method offers: the realistic car (clutch, idle, brakes) and the paper's model
 MODES = ("realistic", "paper")
@@ -73,7 +73,7 @@ def brake_force(t_demand, t_closed, ratio, c):
     return vh.engine_to_wheel_force(excess, ratio, c) if excess > 0.0 else 0.0
 
 
-@equation
+@inline
 def operating_point(v, a, ratio, t_closed, extended, c):
     """Engine operating point that speed v and acceleration a impose through gear ratio ``ratio``.
 
@@ -137,7 +137,7 @@ ENERGY_TERMS = (
 N_TERMS = len(ENERGY_TERMS)
 
 
-@equation
+@inline
 def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired, t_acc, c):
     """Power (W) of every energy term at one instant, in the order of :data:`ENERGY_TERMS`.
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._compile import kernel
-from .engine import equation
+from .engine import equation, inline
 
 
 @equation
@@ -62,7 +62,7 @@ def _cell(xg, x, inv):
     return j
 
 
-@equation
+@inline
 def bilinear_at(xg, yg, table, x, y, inv_x, inv_y):
     """Bilinear interpolation of ``table[i, j]`` at (xg[i], yg[j]) for one point; linear outside."""
     i = _cell(xg, x, inv_x)
