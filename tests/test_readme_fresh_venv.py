@@ -22,8 +22,10 @@ from pathlib import Path
 
 import pytest
 
-from conftest import SHARED
 from test_docs import REPO, SKIP_PREFIXES, _blocks, make_scratch, shell_commands
+
+# as tests/conftest.py (importing that module by name would find tests/fuzz/conftest.py first)
+SHARED = Path(os.environ.get("VPSIM_SHARED", REPO.parent / "shared"))
 
 pytestmark = pytest.mark.fresh_venv
 
