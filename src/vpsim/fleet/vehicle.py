@@ -238,7 +238,7 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         "# (the module vpsim.fleet.vehicle documents the mapping and its defaults)",
         "# SI units. Edit freely; run with: vpsim simulate --vehicle THIS_FILE",
         "# Note: vpsim fleet shifts up at 130 rad/s (vpsim.fleet.run.GEAR_RULE); vpsim simulate uses the",
-        "# documented rule at 200 rad/s (no shift field in a vehicle file yet), so it predicts more fuel in town.",
+        "# documented rule at 200 rad/s (no shift field in a vehicle file yet): more fuel in town.",
         f'base = "{BASE_PRESET}"',
         f"name = {_toml_value(params.name)}",
         "",

@@ -11,7 +11,8 @@ energy balance along the solution, so the bookkeeping closes to the integrator's
 Right side, per gear (total ratio i; w_e = i v / r):
     dp_i/dt = (R T_i / V_i) [p_a A_eff Psi(p_i/p_a) / sqrt(R T_a) - w_e (s_i p_i - y_i) V_d / (2pi n_r R T_i)]
     m_eq dv/dt = (i eta_tm / r) T_cr(p_i, w_e) - 1/2 c_d rho A v^2 - m g c_r - F_brake,
-with T_cr from (2)-(8) solved for BMEP (:func:`vpsim.model.engine.crank_torque`), m_eq = m + J_e i² eta_tm / r².
+with T_cr from (2)-(8) solved for BMEP (:func:`vpsim.model.engine.crank_torque`),
+m_eq = m + J_e i² eta_tm / r².
 
 Integrators (``solver=``; docs/methods.md explains both):
 
