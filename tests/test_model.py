@@ -218,9 +218,12 @@ def _probe(src_root: Path, cache: Path | None) -> dict:
 def test_a_change_in_one_place_shows_up_in_every_method(tmp_path):
     """Add a constant accessory torque to the crank torque (2) in vpsim/model/engine.py only, in a copy of the
     package: backward, forward, inverse, batch and the generated maps all see it (more fuel, less full-load
-    torque), with no other file touched."""
+    torque), with no other file touched. The copy runs before and after the edit with the same on-disk kernel
+    cache, so this also checks that the cache does not serve kernels compiled from the old equation."""
     pkg = tmp_path / "src" / "vpsim"
     shutil.copytree(SRC, pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    cache = tmp_path / "cache"
+    base = _probe(tmp_path / "src", cache)
     engine_py = pkg / "model" / "engine.py"
     text = engine_py.read_text()
     old = "    return bmep_from_pressure(p_i, w_e, c) * c.mep_to_torque\n"
@@ -228,8 +231,7 @@ def test_a_change_in_one_place_shows_up_in_every_method(tmp_path):
     engine_py.write_text(
         text.replace(old, "    return bmep_from_pressure(p_i, w_e, c) * c.mep_to_torque - 5.0\n")
     )
-    base = _probe(SRC.parent, None)
-    changed = _probe(tmp_path / "src", tmp_path / "cache_changed")
+    changed = _probe(tmp_path / "src", cache)
     for key in ("backward", "forward", "inverse", "batch", "map_fuel"):
         assert changed[key] > base[key] * 1.005, key  # 5 N m more to make everywhere: more fuel
     assert changed["map_max_torque"] == pytest.approx(base["map_max_torque"] - 5.0, abs=0.05)

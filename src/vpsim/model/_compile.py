@@ -62,21 +62,26 @@ def _locator(base):
     return _VpsimLocator
 
 
-def _install() -> None:
-    impl = caching.CacheImpl if hasattr(caching, "CacheImpl") else caching._CacheImpl
-    names = (
-        ("UserProvidedCacheLocator", "_UserProvidedCacheLocator"),
-        ("InTreeCacheLocator", "_InTreeCacheLocator"),
-    )
-    bases = [getattr(caching, a, None) or getattr(caching, b) for a, b in names]
-    ours = [_locator(b) for b in bases]
-    if not any(getattr(c, "_vpsim", False) for c in impl._locator_classes):
-        for c in ours:
-            c._vpsim = True
-        impl._locator_classes = [*ours, *impl._locator_classes]
+def _install() -> bool:
+    """Put vpsim's locators first; False (numba's own, per-file stamps) if this Numba's internals differ."""
+    try:
+        impl = caching.CacheImpl if hasattr(caching, "CacheImpl") else caching._CacheImpl
+        names = (
+            ("UserProvidedCacheLocator", "_UserProvidedCacheLocator"),
+            ("InTreeCacheLocator", "_InTreeCacheLocator"),
+        )
+        bases = [getattr(caching, a, None) or getattr(caching, b) for a, b in names]
+        ours = [_locator(b) for b in bases]
+        if not any(getattr(c, "_vpsim", False) for c in impl._locator_classes):
+            for c in ours:
+                c._vpsim = True
+            impl._locator_classes = [*ours, *impl._locator_classes]
+    except AttributeError:  # pragma: no cover - a Numba whose caching module moved
+        return False
+    return True
 
 
-_install()
+WHOLE_SOURCE_STAMPS = _install()  # whether edits anywhere in the model recompile every kernel
 
 _OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
 
