@@ -284,35 +284,8 @@ def invert_point(v, dv, ddv, ratio, coef, extended, c):
         p_closed, _ = en.steady_pressure(c.min_throttle_area, w, c)
         t_closed = en.crank_torque(p_closed, w, c)
         if t_cr < t_closed:  # beyond engine braking: the engine on the closed-throttle line, brakes the rest
-            if c.fuel_cutoff_speed > 0.0 and w >= c.fuel_cutoff_speed:
-                t_motor = en.motoring_torque(p_closed, w, c)
-                if t_cr <= t_motor:  # overrun: fuel cut (vpsim.model.rules.operating_point)
-                    brake = rules.brake_force(t_cr, t_motor, ratio, c)
-                    return (
-                        p_closed,
-                        c.min_throttle_area,
-                        w,
-                        dw,
-                        w,
-                        t_motor,
-                        brake,
-                        rules.CLUTCH_ENGAGED,
-                        moving,
-                        False,
-                    )
-            brake = rules.brake_force(t_cr, t_closed, ratio, c)
-            return (
-                p_closed,
-                c.min_throttle_area,
-                w,
-                dw,
-                w,
-                t_closed,
-                brake,
-                rules.CLUTCH_ENGAGED,
-                moving,
-                True,
-            )
+            t_eng, brake, fired = rules.engine_braking(t_cr, t_closed, p_closed, w, ratio, c)
+            return p_closed, c.min_throttle_area, w, dw, w, t_eng, brake, rules.CLUTCH_ENGAGED, moving, fired
         return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, True
     # below idle speed: the clutch slips (engine at idle passes the wheel torque) or the engine idles
     force = vh.wheel_force(x1, dv, c)

@@ -73,6 +73,21 @@ def brake_force(t_demand, t_closed, ratio, c):
     return vh.engine_to_wheel_force(excess, ratio, c) if excess > 0.0 else 0.0
 
 
+@equation
+def engine_braking(t_demand, t_closed, p_closed, w_e, ratio, c):
+    """The engaged engine asked for less than its closed-throttle torque ``t_closed`` (manifold at
+    ``p_closed``): it runs on that line and the brakes take the rest; with fuel cut-off (above
+    ``c.fuel_cutoff_speed``) a demand at or below the motoring torque cuts the fuel, the unfired engine brakes
+    with its motoring torque and the brakes the rest. Returns (T_cr, brake force, fired)."""
+    if t_demand >= t_closed:
+        return t_demand, 0.0, True
+    if c.fuel_cutoff_speed > 0.0 and w_e >= c.fuel_cutoff_speed:
+        t_motor = en.motoring_torque(p_closed, w_e, c)
+        if t_demand <= t_motor:
+            return t_motor, brake_force(t_demand, t_motor, ratio, c), False
+    return t_closed, brake_force(t_demand, t_closed, ratio, c), True
+
+
 @inline
 def operating_point(v, a, ratio, t_closed, extended, c):
     """Engine operating point that speed v and acceleration a impose through gear ratio ``ratio``.
@@ -93,24 +108,9 @@ def operating_point(v, a, ratio, t_closed, extended, c):
         return w_wheel, dw, w_wheel, t_cr, 0.0, CLUTCH_ENGAGED, True, f_wheel
     if clutch_engaged(w_wheel, c):
         t_cr = t_cr + en.accessory_torque(w_wheel, c)
-        if c.fuel_cutoff_speed > 0.0 and w_wheel >= c.fuel_cutoff_speed and t_cr < t_closed:
-            p_closed = en.intake_pressure_for_torque(t_closed, w_wheel, c)
-            t_motor = en.motoring_torque(p_closed, w_wheel, c)
-            if t_cr <= t_motor:  # overrun: fuel cut, the unfired engine brakes, the brakes the rest
-                return (
-                    w_wheel,
-                    dw,
-                    w_wheel,
-                    t_motor,
-                    brake_force(t_cr, t_motor, ratio, c),
-                    CLUTCH_ENGAGED,
-                    False,
-                    f_wheel,
-                )
-        brake = brake_force(t_cr, t_closed, ratio, c)
-        if t_cr < t_closed:
-            t_cr = t_closed
-        return w_wheel, dw, w_wheel, t_cr, brake, CLUTCH_ENGAGED, True, f_wheel
+        p_closed = en.intake_pressure_for_torque(t_closed, w_wheel, c) if t_cr < t_closed else 0.0
+        t_cr, brake, fired = engine_braking(t_cr, t_closed, p_closed, w_wheel, ratio, c)
+        return w_wheel, dw, w_wheel, t_cr, brake, CLUTCH_ENGAGED, fired, f_wheel
     if f_wheel > 0.0:  # slipping: the engine at idle passes the wheel torque, its inertia decoupled
         t_clutch = vh.wheel_to_engine_torque(f_wheel, ratio, c) + en.accessory_torque(c.idle_speed, c)
         return c.idle_speed, 0.0, w_wheel, t_clutch, 0.0, CLUTCH_SLIPPING, True, f_wheel
