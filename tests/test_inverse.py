@@ -33,15 +33,28 @@ def runs(prepared):
     return res
 
 
+def _compiled_smoothing(c, a):
+    """(v_d, dv_d/dt, d2v_d/dt2) at the samples as the inverse method's compiled pass computes them."""
+    from vpsim.gears import GearSchedule
+
+    s = GearSchedule(c.time_s.copy(), np.ones(c.time_s.size, dtype=np.int64))
+    taps = inverse._sample_taps(a, float(c.time_s[1] - c.time_s[0]))
+    F, _ = inverse._grid_and_smoothing(c.time_s, c.speed_mps, s.time_s, s.gear, *taps)
+    n = c.time_s.size
+    return F[1, :n], F[2, :n], F[3, :n]
+
+
 @pytest.mark.parametrize("name", ["nedc", "ftp75", "udds", "short"])
 @pytest.mark.parametrize("a", [5.0, 1.0, 2.5, 0.7])
 def test_smoothing_on_samples_equals_the_smoothing_driver(name, a):
+    """The compiled convolution on the samples against the smoothing driver's windowed evaluation (another
+    algorithm, itself checked against quadrature in tests/test_smoothing.py)."""
     c = (
         Cycle("short", np.arange(4.0), np.array([0.0, 1.0, 3.0, 2.0]))
         if name == "short"
         else load_cycle(name)
     )
-    fast = inverse.smoothed_on_samples(c.time_s, c.speed_mps, a)
+    fast = _compiled_smoothing(c, a)
     ref = SmoothingDriver(c.time_s, c.speed_mps, a).evaluate(c.time_s)
     for f, r in zip(fast, ref, strict=True):
         np.testing.assert_allclose(f, r, rtol=0, atol=1e-12)
@@ -178,7 +191,7 @@ def test_bad_input(params, prepared):
 @pytest.mark.parametrize("name", ["nedc", "ftp75", "udds"])
 @pytest.mark.parametrize("a", [5.0, 1.0, 0.7])
 def test_compiled_grid_and_smoothing_match_numpy(name, a):
-    """The compiled grid, gear lookup and smoothing equal evaluation_grid and smoothed_on_samples."""
+    """The compiled grid, gear lookup and smoothing equal evaluation_grid and the smoothing driver."""
     c, p, s = resolve_inputs(name, "hofman2011")
     taps = inverse._sample_taps(a, float(c.time_s[1] - c.time_s[0]))
     assert inverse._is_uniform_compiled(c.time_s)
@@ -188,7 +201,8 @@ def test_compiled_grid_and_smoothing_match_numpy(name, a):
     t, gear, left, right, sample = inverse.evaluation_grid(c, s)
     for g, r in zip(got[:5], (t, gear, left, right, sample), strict=True):
         np.testing.assert_array_equal(g, r)
-    for g, r in zip(got[5:8], inverse.smoothed_on_samples(c.time_s, c.speed_mps, a), strict=True):
+    ref = SmoothingDriver(c.time_s, c.speed_mps, a).evaluate(c.time_s)
+    for g, r in zip(got[5:8], ref, strict=True):
         np.testing.assert_allclose(g, r[sample], rtol=1e-9, atol=1e-12)
     np.testing.assert_array_equal(got[8], s.gear_at(c.time_s))
     np.testing.assert_array_equal(got[9], np.diff(c.time_s))

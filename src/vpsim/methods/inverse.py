@@ -18,7 +18,7 @@ evaluated at every cycle sample (plus, at each gear change, the instant once mor
 x2 jumps there) and the fuel, distance and energy terms are integrated by the trapezoidal rule: against a
 0.05 s Simpson reference the fuel differs by under 0.05 % on NEDC and FTP-75 (a test keeps it under 0.1 %).
 ``steps`` is the number of evaluation points. The cost counts the smoothing, which on a uniformly sampled
-cycle is three discrete convolutions (:func:`smoothed_on_samples`). The grid, the smoothing on it, the
+cycle is three discrete convolutions (:func:`_sample_taps`). The grid, the smoothing on it, the
 inversion (:func:`invert_point`) and the bookkeeping (:func:`account`) are compiled; they call the model's
 equations (:mod:`vpsim.model`) and its rules for the realistic car, and restate none of them.
 
@@ -69,33 +69,13 @@ MAX_TAPS = 200_001  # largest discrete smoothing kernel (2a/dt + 1 samples) the 
 _MOVING = 1e-9  # m/s: v_d above this counts as moving (v_d is exactly 0 only where the cycle rests +-a)
 
 
-def smoothed_on_samples(time_s, speed_mps, a: float):
-    """(v_d, dv_d/dt, d2v_d/dt2) of the smoothing driver at the samples of a uniformly sampled cycle.
-
-    The same convolution as :meth:`SmoothingDriver.evaluate <vpsim.drivers.smoothing.SmoothingDriver>`,
-    with the same kernel functions, organised for this grid: with v_c(tau) = v_0 + sum_k dm_k (tau - t_k)_+
-    (dm_k the slope change at sample k, the ends held), the smoothed speed at a sample is
-    v_c(t_i) + sum_k dm_k C((i - k) dt), C(x) = x G(x) - M(x) - x_+ being zero for |x| >= a, so each of the
-    three outputs is one discrete convolution of dm with 2a/dt + 1 kernel samples (G: the kernel's
-    cumulative, M: its first moment). Agrees with ``SmoothingDriver.evaluate`` to rounding (tested).
-    """
-    t = np.asarray(time_s, float)
-    v = np.asarray(speed_mps, float)
-    dt = float(t[1] - t[0])
-    m = np.concatenate([[0.0], np.diff(v) / dt, [0.0]])  # slopes before/after each sample, ends held
-    dm = np.diff(m)
-    c_v, c_dv, c_ddv = _sample_taps(a, dt)
-    k = (c_v.size - 1) // 2  # the taps are centred: sample i takes the full convolution's entry i + k
-    n = v.size
-    v_d = v + np.convolve(dm, c_v)[k : k + n]
-    dv_d = 0.5 * (m[:-1] + m[1:]) + np.convolve(dm, c_dv)[k : k + n]
-    ddv_d = np.convolve(dm, c_ddv)[k : k + n]
-    return v_d, dv_d, ddv_d
-
-
 @functools.lru_cache(maxsize=16)
 def _sample_taps(a: float, dt: float):
-    """Kernel samples at offsets -K dt .. K dt for :func:`smoothed_on_samples` (cached per a, dt)."""
+    """Kernel samples at offsets -K dt .. K dt for the convolution of :func:`_grid_and_smoothing` (cached per
+    a, dt): with v_c(tau) = v_0 + sum_k dm_k (tau - t_k)_+ (dm_k the slope change at sample k, the ends held),
+    the smoothed speed at a sample is v_c(t_i) + sum_k dm_k C((i - k) dt), C(x) = x G(x) - M(x) - x_+ being
+    zero for |x| >= a (G: the kernel's cumulative, M: its first moment); so each of v_d and its two
+    derivatives is one discrete convolution of dm with 2a/dt + 1 taps."""
     k = int(np.ceil(a / dt))
     x = np.arange(-k, k + 1) * dt
     inside = np.abs(x) < a
@@ -124,8 +104,8 @@ def _is_uniform_compiled(t):
 
 @kernel
 def _grid_and_smoothing(t_s, v_s, sched_t, sched_g, c_v, c_dv, c_ddv):
-    """:func:`evaluation_grid` and :func:`smoothed_on_samples` (indexed by the grid's samples) in one
-    compiled pass, for a uniformly sampled cycle.
+    """:func:`evaluation_grid` and the smoothing at the samples (the convolutions of :func:`_sample_taps`)
+    in one compiled pass, for a uniformly sampled cycle.
 
     Returns two arrays (few objects to hand back: this is part of a call's fixed cost), ``F`` (6 x points):
     t, v_d, dv_d/dt, d2v_d/dt2, the cycle speed at the points, the interval lengths (first n - 1 entries);
