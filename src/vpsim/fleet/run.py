@@ -210,40 +210,19 @@ class _Pool:
             yield f.result()
 
 
-class _Dask:
-    def __init__(self, scheduler: str | None, local: int | None):
-        self.scheduler, self.local = scheduler, local
-        self.client = self.cluster = None
-        self.name = f"dask local cluster of {local}" if local else f"dask scheduler {scheduler}"
+def _dask(scheduler: str | None, local: int | None):
+    """The sweeps' Dask executor (connection, local cluster, clean-up), mapping in submission order."""
+    from ..sweep.runner import _DaskExecutor
 
-    def __enter__(self):
-        try:
-            from dask.distributed import Client, LocalCluster
-        except ImportError:
-            raise VpsimError("a Dask cluster needs dask[distributed]: pip install 'vpsim[cluster]'") from None
-        if self.local is not None:
-            self.cluster = LocalCluster(
-                n_workers=self.local, threads_per_worker=1, processes=True, dashboard_address=":0"
-            )
-            self.client = Client(self.cluster)
-        else:
-            try:
-                self.client = Client(self.scheduler, timeout="20s")
-            except (OSError, TimeoutError) as exc:
-                raise VpsimError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from None
-        return self
+    class _FleetDask(_DaskExecutor):
+        name = f"dask local cluster of {local}" if local else f"dask scheduler {scheduler}"
 
-    def __exit__(self, *exc):
-        if self.client is not None:
-            self.client.close()
-        if self.cluster is not None:
-            self.cluster.close()
-        return False
+        def map(self, fn, chunks, *args):
+            futures = [self.client.submit(fn, c, *args, pure=False) for c in chunks]
+            for f in futures:  # in submission order: the rows come out in the same order as serial
+                yield f.result()
 
-    def map(self, fn, chunks, *args):
-        futures = [self.client.submit(fn, c, *args, pure=False) for c in chunks]
-        for f in futures:  # in submission order: the rows come out in the same order as serial
-            yield f.result()
+    return _FleetDask(scheduler, local)
 
 
 def _progress(label: str, done: int, total: int, t0: float, enabled: bool) -> None:
@@ -306,7 +285,7 @@ def run_fleet(
     work = [(v, tuple(c for c in cycles if c in v.measured_mpg)) for v in vehicles]
     chunks = [work[i : i + CHUNK] for i in range(0, len(work), CHUNK)]
     if scheduler is not None or local_cluster is not None:
-        executor = _Dask(scheduler, local_cluster)
+        executor = _dask(scheduler, local_cluster)
     else:
         import os
 
