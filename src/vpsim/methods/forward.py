@@ -71,7 +71,7 @@ from ..model import rules
 from ..model import tables as tb
 from ..model import vehicle as vh
 from ..model._compile import kernel
-from ..model.record import record
+from ..model.record import memo, record
 from ..result import EnergyBalance, Result, TraceMiss, limits_of
 
 BAND_KMH = 2.0  # the regulation's speed tolerance (UN ECE R83 / EPA: +-2 km/h resp. +-2 mph)
@@ -555,14 +555,26 @@ def _inverse3(jac, q, winv):
 
 
 @register_jitable
-def _stage_solve(r, winv, hg, u, q0, q1, q2):
-    """u = (I/(h gamma) - J)^-1 r: the 3 x 3 solve for v, p_i, z; the quadrature rows explicitly."""
+def _solve3(r, winv, u):
+    """u = (I/(h gamma) - J)^-1 r for v, p_i, z."""
     r0, r1, r2 = r[0], r[1], r[2]
     u[0] = winv[0] * r0 + winv[1] * r1 + winv[2] * r2
     u[1] = winv[3] * r0 + winv[4] * r1 + winv[5] * r2
     u[2] = winv[6] * r0 + winv[7] * r1 + winv[8] * r2
-    for i in range(N_DYN, r.size):
-        u[i] = hg * (r[i] + q0[i] * u[0] + q1[i] * u[1] + q2[i] * u[2])
+
+
+@register_jitable(inline="always")
+def _quadrature_stages(i, h, hg, y, ynew, f0, k3, k4, ft, u1, u2, u3, u4, e, g0, g1, g2, err):
+    """The four stages of quadrature state i (its column of J is zero, its row G_i = (g0, g1, g2)[i] in v,
+    p_i, z): u_j = hg (f_j + sum_k c_jk u_k / h + gamma_j h df/dt + G_i u_j[v, p_i, z]); sets ynew[i] and
+    err[i], the filtered error estimate u_4 + hg G_i e (e: the filtered estimate of v, p_i, z over hg)."""
+    a, b, cc = g0[i], g1[i], g2[i]
+    q1 = hg * (f0[i] + (_WG1 * h) * ft[i] + a * u1[0] + b * u1[1] + cc * u1[2])
+    q2 = hg * (f0[i] + (_WC21 / h) * q1 + (_WG2 * h) * ft[i] + a * u2[0] + b * u2[1] + cc * u2[2])
+    q3 = hg * (k3[i] + (_WC31 * q1 + _WC32 * q2) / h + a * u3[0] + b * u3[1] + cc * u3[2])
+    q4 = hg * (k4[i] + (_WC41 * q1 + _WC42 * q2 + _WC43 * q3) / h + a * u4[0] + b * u4[1] + cc * u4[2])
+    ynew[i] = y[i] + _WM1 * q1 + _WM3 * q3 + _WM4 * q4
+    err[i] = q4 + hg * (a * e[0] + b * e[1] + cc * e[2])
 
 
 @register_jitable
@@ -645,7 +657,7 @@ def _integrate_ros(
     has a kink) and at every event (a switching function changing sign, located on the dense output; the
     step is then taken again to end there). Arguments as :func:`_integrate`; ``qthr`` holds the rate scales
     of the fuel and distance in the error norm; stats: [accepted, rejected, rhs evaluations, status, events,
-    Jacobians]. ``work`` (15 x len(y0)), ``aux`` and ``aux1`` (N_AUX), ``G`` (3) are scratch space; the state
+    Jacobians]. ``work`` (20 x len(y0)), ``aux`` and ``aux1`` (N_AUX), ``G`` (3) are scratch space; the state
     reached is left in ``work[0]``.
     """
     ny = y0.size
@@ -664,6 +676,8 @@ def _integrate_ros(
     sw0 = work[12]
     scratch = work[13]
     ft = work[17]
+    k3 = work[18]  # f at stages 3 and 4
+    k4 = work[19]
     gq0 = work[14]  # the quadratures' Jacobian columns in v, p_i, z
     gq1 = work[15]
     gq2 = work[16]
@@ -680,6 +694,7 @@ def _integrate_ros(
     events = 0
     n_jac = 0
     n_seg = seg_t.size - 1
+    h_carry = 0.0
     for sgi in range(n_seg):
         t = seg_t[sgi]
         t_end = seg_t[sgi + 1]
@@ -712,6 +727,8 @@ def _integrate_ros(
         h = hmax
         if h * rh > 1.0:
             h = 1.0 / rh
+        if h_carry > h:  # a gear change: the step the previous gear ended with, if larger
+            h = h_carry if h_carry < hmax else hmax
         have_jac = False
         nofailed = True
         t_event = -1.0  # > t: the step is being taken again to end at a located event
@@ -742,13 +759,33 @@ def _integrate_ros(
                 tnew = t_stop if to_stop else t + h
             h = tnew - t
             # evaluations of the right side, through one (inlined) call site: the Jacobian's forward
-            # differences in v, p_i, z and t (tasks 0-3, once per step; t inside the table's current interval,
-            # where f is smooth), then stages 3 and 4 (both at t + h; stage 2 reuses stage 1's f)
+            # differences in v, p_i, z (tasks 0-2, once per step) and, open loop only, in t (task 3, inside
+            # the table's current interval, where f is smooth); then stages 3 and 4 (both at t + h; stage 2
+            # reuses stage 1's f) and the right side at the step's end (the next step's first stage)
             hg = h * _ROS_GAMMA
             task = 0 if not have_jac else N_DYN + 1
             d = 0.0
             errn = 0.0
             while task < N_DYN + 4:
+                if task == N_DYN and D[_OPEN] == 0.0:
+                    # closed loop, f depends on t only through the PI error e = v_ref(t) - v, and on (e, z)
+                    # only through u_raw = K_p e + z, except dz/dt = K_i e + (u - u_raw)/T_t and e^2 (pi_law):
+                    # df/dt = v_ref' df/de = v_ref' (K_p df/dz + K_i on the z row + 2e on the e^2 row)
+                    slope = 0.0
+                    if 0 < j_tab < n_tab:
+                        slope = (tab_v[j_tab] - tab_v[j_tab - 1]) / (tab_t[j_tab] - tab_t[j_tab - 1])
+                    kp = D[_KP]
+                    for i in range(N_DYN):
+                        ft[i] = slope * kp * jac[N_DYN * i + _Z]
+                    for i in range(N_DYN, ny):
+                        ft[i] = slope * kp * gq2[i]
+                    ft[_Z] += slope * D[_KI]
+                    vv0 = y[_V] if y[_V] > 0.0 else 0.0
+                    ft[_ERR2] += slope * 2.0 * (aux1[_X_VREF] - vv0)
+                    n_jac += 1
+                    have_jac = True
+                    task += 1
+                    continue
                 tgt_f = r
                 tgt_a = aux
                 if task < N_DYN:
@@ -770,18 +807,21 @@ def _integrate_ros(
                         ytmp[i] = y[i]
                 else:
                     if task == N_DYN + 1:
+                        # stages 1 and 2 of v, p_i, z (the quadratures' stages follow after the error test)
                         _inverse3(jac, 1.0 / hg, winv)
-                        for i in range(ny):
+                        for i in range(N_DYN):
                             r[i] = f0[i] + (_WG1 * h) * ft[i]
-                        _stage_solve(r, winv, hg, u1, gq0, gq1, gq2)
-                        for i in range(ny):  # stage 2 at (t, y): f is stage 1's
+                        _solve3(r, winv, u1)
+                        for i in range(N_DYN):  # stage 2 at (t, y): f is stage 1's
                             r[i] = f0[i] + (_WC21 / h) * u1[i] + (_WG2 * h) * ft[i]
-                        _stage_solve(r, winv, hg, u2, gq0, gq1, gq2)
+                        _solve3(r, winv, u2)
                         for i in range(N_DYN):
                             ytmp[i] = y[i] + _WA31 * u1[i]
+                        tgt_f = k3
                     elif task == N_DYN + 2:
                         for i in range(N_DYN):
                             ytmp[i] = y[i] + _WA41 * u1[i] + _WA43 * u3[i]
+                        tgt_f = k4
                     else:  # the right side at the step's end (the next step's first stage)
                         for i in range(N_DYN):
                             ytmp[i] = ynew[i]
@@ -802,25 +842,29 @@ def _integrate_ros(
                     n_jac += 1
                     have_jac = True
                 elif task == N_DYN + 1:
-                    for i in range(ny):
-                        r[i] += (_WC31 * u1[i] + _WC32 * u2[i]) / h
-                    _stage_solve(r, winv, hg, u3, gq0, gq1, gq2)
+                    for i in range(N_DYN):
+                        r[i] = k3[i] + (_WC31 * u1[i] + _WC32 * u2[i]) / h
+                    _solve3(r, winv, u3)
                 elif task == N_DYN + 2:
-                    for i in range(ny):
-                        r[i] += (_WC41 * u1[i] + _WC42 * u2[i] + _WC43 * u3[i]) / h
-                    _stage_solve(r, winv, hg, u4, gq0, gq1, gq2)
-                    for i in range(ny):
+                    for i in range(N_DYN):
+                        r[i] = k4[i] + (_WC41 * u1[i] + _WC42 * u2[i] + _WC43 * u3[i]) / h
+                    _solve3(r, winv, u4)
+                    for i in range(N_DYN):
                         ynew[i] = y[i] + _WM1 * u1[i] + _WM3 * u3[i] + _WM4 * u4[i]
                     # error estimate u_4 (y_new minus the embedded solution), filtered by (I - h gamma J)^-1
                     # as Hairer & Wanner (IV.8, (8.19)-(8.20)) do for stiff codes, so that its part in the
-                    # damped stiff (manifold) direction is not taken for error; the quadrature rows by the
-                    # same block inverse. Then the RMS norm over v, p_i, z (ode45's scales) and the fuel and
-                    # distance (relative to their increment over the step plus a rate scale times h)
-                    _stage_solve(u4, winv, 1.0, ytmp, gq0, gq1, gq2)  # (I/hg - J)^-1 u_4
+                    # damped stiff (manifold) direction is not taken for error: e = (I/hg - J)^-1 u_4 / hg
+                    _solve3(u4, winv, ytmp)
                     for i in range(N_DYN):
-                        r[i] = ytmp[i] / hg
-                    for i in range(N_DYN, ny):
-                        r[i] = u4[i] + hg * (gq0[i] * r[0] + gq1[i] * r[1] + gq2[i] * r[2])
+                        ytmp[i] = ytmp[i] / hg
+                    # the quadratures' stages, explicit (their columns of J are zero): for the fuel and the
+                    # distance now (their errors are in the norm), for the others once the step is accepted
+                    for i in (_FUEL, _DIST):
+                        _quadrature_stages(
+                            i, h, hg, y, ynew, f0, k3, k4, ft, u1, u2, u3, u4, ytmp, gq0, gq1, gq2, r
+                        )
+                    # the RMS norm over v, p_i, z (ode45's scales) and the fuel and distance (relative to
+                    # their increment over the step plus a rate scale times h)
                     err = 0.0
                     for m in range(N_ERR + 2):
                         i = m if m < N_DYN else (_FUEL if m == N_DYN else _DIST)
@@ -830,14 +874,20 @@ def _integrate_ros(
                         if m < N_DYN:
                             if thr[i] > sc:
                                 sc = thr[i]
+                            q = ytmp[i] / sc
                         else:
                             sc = abs(ynew[i] - y[i]) + h * qthr[m - N_DYN]
-                        q = r[i] / sc
+                            q = r[i] / sc
                         err += q * q
                     err = math.sqrt(err / (N_ERR + 2))
                     errn = err / rtol
                     if not errn <= 1.0:  # also NaN: rejected, no evaluation at the end
                         break
+                    for i in range(N_DYN, ny):
+                        if i != _FUEL and i != _DIST:
+                            _quadrature_stages(
+                                i, h, hg, y, ynew, f0, k3, k4, ft, u1, u2, u3, u4, ytmp, gq0, gq1, gq2, r
+                            )
                     if ynew[_V] < 0.0:  # keep v >= 0 (the car does not roll backwards)
                         ynew[_V] = 0.0
                 task += 1
@@ -926,6 +976,7 @@ def _integrate_ros(
             t_event = -1.0
             h = h_next
             if done:
+                h_carry = h_next
                 break
     stats[0], stats[1], stats[2], stats[3] = accepted, rejected, nfev, STATUS_OK
     stats[4], stats[5] = events, n_jac
@@ -943,7 +994,7 @@ def settings(params, pi: PIDriver | None = None, mode: str = "paper") -> np.ndar
         D[_KP : _KB + 1] = pi.as_array()
     realistic = rules.canonical_mode(mode) == "realistic"
     D[_EXT] = 1.0 if realistic else 0.0
-    D[_AIDLE] = en.idle_throttle(record(params)) if realistic else 0.0
+    D[_AIDLE] = memo(params, "idle_throttle", lambda q: en.idle_throttle(record(q))) if realistic else 0.0
     D[_BAND] = BAND_KMH / 3.6
     return D
 
@@ -1042,7 +1093,7 @@ def integrate(
             *args, int(max_steps), out_t, out_y, out_aux, stats, fstats, work, np.empty(N_AUX), np.empty(3)
         )
     else:
-        work = np.zeros((18, NY))
+        work = np.zeros((20, NY))
         _integrate_ros(
             *args,
             quadrature_scales(c),

@@ -223,7 +223,8 @@ def psi(p_r, c):
     if p_r >= 1.0:
         return 0.0
     g = c.specific_heat_ratio
-    f = 2.0 * g / (g - 1.0) * (p_r ** (2.0 / g) - p_r ** ((g + 1.0) / g))
+    x = p_r ** (1.0 / g)  # one power: p_r^(2/g) = x^2, p_r^((g+1)/g) = p_r x
+    f = 2.0 * g / (g - 1.0) * (x * x - p_r * x)
     return math.sqrt(f) if f > 0.0 else 0.0
 
 
@@ -233,8 +234,9 @@ def dpsi_dpr(p_r, c):
     if p_r <= c.critical_ratio or p_r >= 1.0:
         return 0.0
     g = c.specific_heat_ratio
-    f = 2.0 * g / (g - 1.0) * (p_r ** (2.0 / g) - p_r ** ((g + 1.0) / g))
-    df = 2.0 * g / (g - 1.0) * ((2.0 / g) * p_r ** (2.0 / g - 1.0) - ((g + 1.0) / g) * p_r ** (1.0 / g))
+    x = p_r ** (1.0 / g)
+    f = 2.0 * g / (g - 1.0) * (x * x - p_r * x)
+    df = 2.0 * g / (g - 1.0) * ((2.0 / g) * x * x / p_r - ((g + 1.0) / g) * x)
     return df / (2.0 * math.sqrt(f if f > 1e-300 else 1e-300))
 
 
