@@ -389,13 +389,15 @@ def test_rosenbrock_steps_follow_accuracy_not_stability(mode):
 
 
 def test_events_are_located(prepared):
-    """Extended mode: clutch engage/slip, brakes on/off, the throttle floor and the fuel floor are located
-    (the step is taken again to end there); paper mode has the PI's saturation at A_min and the fuel floor."""
+    """Extended mode: clutch engage/slip, brakes on/off and the throttle floor are located (the step is taken
+    again to end there); paper mode has the PI's saturation at A_min. The idle fuel floor is no event (only
+    the fuel quadrature sees it)."""
     c, p, s = prepared["nedc"]
     ext = forward.run(c, p, schedule=s, mode="extended", keep_series=False).solver["events_by_switch"]
-    assert ext["clutch"] > 0 and ext["brake"] > 0 and ext["throttle_floor"] > 0 and ext["fuel_floor"] > 0
+    assert ext["clutch"] > 0 and ext["brake"] > 0 and ext["throttle_floor"] > 0
     paper = forward.run(c, p, schedule=s, mode="paper", keep_series=False).solver["events_by_switch"]
     assert paper["saturation_low"] > 0 and paper["clutch"] == paper["brake"] == 0
+    assert "fuel_floor" not in paper
 
 
 def test_outputs_at_step_ends_and_between_agree_with_the_reference(params):
