@@ -389,13 +389,17 @@ def _forward(cycle, params, names, values, schedules, schedule_of_variant, mode,
     driver = "1" if driver is None else str(driver)
     params.driver(driver)  # validates the name
     n = values.shape[0]
-    variants = [variant_parameters(params, names, values[i]) for i in range(n)]
     shared = schedule_of_variant.max(initial=0) == 0
     gear_schedules = [GearSchedule(cycle.time_s.copy(), g, source="batch") for g in schedules]
 
     def one(i):
+        # the variant's parameters are built in its thread: that Python work (it holds the GIL) overlaps the
+        # other threads' integrations (they release it)
+        variant = variant_parameters(params, names, values[i])
         sched = gear_schedules[0 if shared else int(schedule_of_variant[i])]
-        return forward.run(cycle, variants[i], driver=driver, schedule=sched, mode=mode, rtol=rtol)
+        return forward.run(
+            cycle, variant, driver=driver, schedule=sched, mode=mode, rtol=rtol, keep_series=False
+        )
 
     forward.warm_up()
     workers = max(1, min(n, numba.config.NUMBA_NUM_THREADS, os.cpu_count() or 1))

@@ -93,36 +93,49 @@ DTYPE = np.dtype([(name, np.float64) for name in FIELDS], align=True)
 IDLE_SPEED = 80.0  # rad/s: the engine speed held below which the clutch slips or opens (extended mode)
 
 
+def _scalar(v) -> float:
+    return float(v) if not isinstance(v, np.ndarray) or v.ndim == 0 else float(v.reshape(-1)[0])
+
+
 def _fill(rec, vehicle, transmission, engine, simulation, n: int) -> None:
+    import types
+
     from . import engine as eq_engine
     from . import vehicle as eq_vehicle
 
+    # the fields on a plain namespace (floats, or arrays of the n variants), which the model's equations read
+    # as they read a record, at a fraction of the cost of a record's attribute access; written once at the end
+    r = types.SimpleNamespace()
     sections = {"vehicle": vehicle, "transmission": transmission, "engine": engine, "simulation": simulation}
     for sec, names in _PARAMETER_FIELDS.items():
         obj = sections[sec]
         for name in names:
-            rec[name] = np.broadcast_to(np.asarray(getattr(obj, name), dtype=float), (n,))
-    lo, hi = engine.map_speed_range
-    rec["map_speed_low"] = lo
-    rec["map_speed_high"] = hi
-    rec["idle_speed"] = IDLE_SPEED
-    r = rec.view(np.recarray)
+            v = getattr(obj, name)
+            scalar = n == 1 and not (isinstance(v, np.ndarray) and v.ndim > 0)
+            setattr(r, name, float(v) if scalar else np.asarray(v, dtype=float))
+    r.map_speed_low, r.map_speed_high = engine.map_speed_range
+    r.idle_speed = IDLE_SPEED
     # derived values, each computed by the model's own equation (in dependency order)
-    rec["displacement"] = eq_engine.displacement(r)
-    rec["friction_factor"] = eq_engine.friction_factor(r)
-    rec["one_plus_kf"] = eq_engine.bmep_divisor(r)
-    rec["rt_intake"] = r.gas_constant * r.intake_temperature
-    rec["afr"] = r.stoich_air_fuel_ratio * r.lambda_
-    rec["heat_factor"] = eq_engine.heat_factor(r)
-    rec["mep_to_torque"] = eq_engine.mep_to_torque(1.0, r)
-    rec["air_per_charge"] = r.displacement / r.rt_intake
-    rec["sqrt_rt_ambient"] = np.sqrt(r.gas_constant * r.ambient_temperature)
-    rec["critical_ratio"] = eq_engine.critical_pressure_ratio(r.specific_heat_ratio)
-    rec["psi_choked"] = eq_engine.psi_choked(r.specific_heat_ratio)
-    rec["rolling_force"] = eq_vehicle.rolling_force_moving(r)
-    rec["aero_coefficient"] = eq_vehicle.aero_coefficient(r)
-    rec["torque_slope"] = 1.0  # a placeholder crank_torque does not read; the slope follows from it
-    rec["torque_slope"] = eq_engine.torque_slope(r)
+    r.displacement = eq_engine.displacement(r)
+    r.friction_factor = eq_engine.friction_factor(r)
+    r.one_plus_kf = eq_engine.bmep_divisor(r)
+    r.rt_intake = r.gas_constant * r.intake_temperature
+    r.afr = r.stoich_air_fuel_ratio * r.lambda_
+    r.heat_factor = eq_engine.heat_factor(r)
+    r.mep_to_torque = eq_engine.mep_to_torque(1.0, r)
+    r.air_per_charge = r.displacement / r.rt_intake
+    r.sqrt_rt_ambient = np.sqrt(r.gas_constant * r.ambient_temperature)
+    r.critical_ratio = eq_engine.critical_pressure_ratio(r.specific_heat_ratio)
+    r.psi_choked = eq_engine.psi_choked(r.specific_heat_ratio)
+    r.rolling_force = eq_vehicle.rolling_force_moving(r)
+    r.aero_coefficient = eq_vehicle.aero_coefficient(r)
+    r.torque_slope = 1.0  # a placeholder crank_torque does not read; the slope follows from it
+    r.torque_slope = eq_engine.torque_slope(r)
+    if n == 1:
+        rec[0] = tuple(_scalar(getattr(r, name)) for name in FIELDS)
+    else:
+        for name in FIELDS:
+            rec[name] = np.broadcast_to(np.asarray(getattr(r, name), dtype=float), (n,))
 
 
 def _sections_len(*sections) -> int:
