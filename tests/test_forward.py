@@ -388,6 +388,53 @@ def test_rosenbrock_steps_follow_accuracy_not_stability(mode):
     assert r.solver["jacobians"] == r.steps
 
 
+@pytest.mark.parametrize("mode", ["paper", "extended"])
+@pytest.mark.parametrize("driver", ["1", "2"])
+@pytest.mark.parametrize(
+    "v, p_i, z, t",
+    [
+        (0.5, 3.0e4, 2.0e-5, 21.3),  # launch: slipping clutch (extended)
+        (8.0, 4.5e4, 4.0e-5, 30.4),  # accelerating, command inside its range
+        (12.0, 2.5e4, -5.0e-5, 41.6),  # decelerating: brakes (extended), saturated low (paper)
+        (20.0, 9.0e4, 2.0e-3, 66.2),  # command beyond A_max: saturated high
+    ],
+)
+def test_time_derivative_from_the_pi_structure(params, mode, driver, v, p_i, z, t):
+    """The Rosenbrock step takes df/dt = v_cycle' (K_p df/dz + K_i on the z row + 2e on the e^2 row) instead
+    of a difference in t: checked against central differences in t and z of the right side itself."""
+    cyc = load_cycle("udds")
+    c = record(params)
+    pi = PIDriver.from_params(params, driver, mode, None)
+    D = forward.settings(params, pi, mode)
+    D[forward._TAB_INV] = (cyc.time_s.size - 1) / (cyc.time_s[-1] - cyc.time_s[0])
+    G = np.zeros(3)
+    forward._gear(params.transmission.ratios[1] * params.transmission.final_drive, c, G)
+    y = np.zeros(forward.NY)
+    y[[forward._V, forward._P, forward._Z]] = v, p_i, z
+
+    def f(tt, yy):
+        dy, aux = np.zeros(forward.NY), np.zeros(forward.N_AUX)
+        forward._rhs(tt, yy, G, c, D, cyc.time_s, cyc.speed_mps, dy, aux)
+        return dy, aux
+
+    f0, aux0 = f(t, y)
+    dt, dz = 1e-4, 1e-11  # inside the cycle's interval; clear of the command's kinks
+    f_t = (f(t + dt, y)[0] - f(t - dt, y)[0]) / (2 * dt)
+    yp, ym = y.copy(), y.copy()
+    yp[forward._Z] += dz
+    ym[forward._Z] -= dz
+    f_z = (f(t, yp)[0] - f(t, ym)[0]) / (2 * dz)
+    k = int(t)
+    slope = (cyc.speed_mps[k + 1] - cyc.speed_mps[k]) / (cyc.time_s[k + 1] - cyc.time_s[k])
+    identity = slope * D[forward._KP] * f_z
+    identity[forward._Z] += slope * D[forward._KI]
+    identity[forward._ERR2] += slope * 2.0 * (aux0[forward._X_VREF] - v)
+    rows = [i for i in range(forward.NY) if i != forward._OUTSIDE]  # an indicator: no derivative
+    scale = np.maximum(np.abs(f_t[rows]), np.abs(identity[rows])) + 1e-12 + 1e-6 * np.abs(f0[rows])
+    assert np.all(np.abs(f_t[rows] - identity[rows]) <= 1e-5 * scale), (f_t[rows], identity[rows])
+    assert slope != 0.0 and np.any(np.abs(f_t[rows]) > 0)
+
+
 def test_events_are_located(prepared):
     """Extended mode: clutch engage/slip, brakes on/off and the throttle floor are located (the step is taken
     again to end there); paper mode has the PI's saturation at A_min. The idle fuel floor is no event (only

@@ -650,7 +650,7 @@ def _integrate_ros(
     aux1,
     G,
 ):
-    """ROS34PW2 from seg_t[0] to seg_t[-1], restarting at every seg_t[k] in gear seg_ratio[k].
+    """RODAS3 from seg_t[0] to seg_t[-1], restarting at every seg_t[k] in gear seg_ratio[k].
 
     Steps end at every node of the table (tab_t, tab_v) (where the cycle speed, or the open-loop throttle,
     has a kink) and at every event (a switching function changing sign, located on the dense output; the
@@ -1063,7 +1063,7 @@ def integrate(
     """Run the kernel from seg_t[0] to seg_t[-1], restarting at each seg_t[k] with ratio seg_ratio[k].
 
     (table_t, table_v) is the cycle speed the PI driver follows or, with ``open_loop``, the throttle area
-    fed to the engine as it is. ``solver``: ``rosenbrock`` (ROS34PW2, the default) or ``dopri5`` (the
+    fed to the engine as it is. ``solver``: ``rosenbrock`` (RODAS3, the default) or ``dopri5`` (the
     paper's ode45). Returns (y_end, out_y, out_aux, info); raises VpsimError if the solver fails.
     """
     if solver not in SOLVERS:
