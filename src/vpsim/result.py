@@ -243,14 +243,17 @@ def flags(series: dict, limits: dict) -> dict[str, np.ndarray]:
     brake = col("brake_force_n")
     braked = zero if brake is None else brake > 0.0
     a_min, a_max = limits.get("min_throttle_area_m2"), limits.get("max_throttle_area_m2")
+    u_max = limits.get("max_throttle_command_m2", a_max)  # a boosted engine's command goes on to full boost
     moving = (v > 1e-9) if v is not None else zero
     if demand is not None and a_min is not None:  # the inverse method's throttle demand
         below |= moving & ~braked & ~(demand >= a_min)
-        beyond |= moving & (demand > a_max)
+        beyond |= moving & (demand > u_max)
     elif short is not None and thr is not None and a_min is not None:  # backward: the steady throttle asked
         below |= moving & ~braked & (thr < a_min * (1 - 1e-6))
     elif thr is not None and a_max is not None and ref is not None:  # a driver at its limits, still behind
-        beyond |= (thr >= a_max * (1 - 1e-9)) & (v < ref - band)
+        cmd = col("driver_command_m2")
+        at_top = thr >= a_max * (1 - 1e-9) if cmd is None else cmd >= u_max * (1 - 1e-9)
+        beyond |= at_top & (v < ref - band)
         below |= (thr <= a_min * (1 + 1e-9)) & ~braked & (v > ref + band)
     out["torque_beyond_full_load"] = beyond
     out["throttle_below_minimum"] = below
@@ -321,11 +324,15 @@ def _union_s(w, f, exact) -> float:
 
 def limits_of(params) -> dict:
     """The physical limits a run is assessed against (:func:`flags`)."""
+    from .model import engine as en
+    from .model.record import record
+
     e = params.engine
     return {
         "max_engine_speed_radps": float(e.map_speed_range[1]),
         "min_throttle_area_m2": float(e.min_throttle_area),
         "max_throttle_area_m2": float(e.max_throttle_area),
+        "max_throttle_command_m2": float(en.max_command(record(params))),
     }
 
 

@@ -13,6 +13,8 @@ T_t defaults to half the integral time K_p / K_i.
 How the command acts (see :func:`pedal_split`):
 
 * ``paper`` mode (no brakes): u_lo = A_min, u_hi = A_max and the throttle area is u.
+* A boosted engine's command continues above A_max to 2 A_max: the throttle stays wide open and the boost
+  rises (:func:`vpsim.model.engine.throttle_upstream`).
 * ``extended`` mode: the range continues below zero into the brake pedal, u_lo = -A_max. The throttle is
   max(u, A_min); for u < 0 the friction brakes give the force ``brake_gain * (-u)`` with
   ``brake_gain = m g / A_max``, so the full negative range is a 1 g stop. Brakes act only once the throttle is
@@ -80,31 +82,22 @@ class PIDriver:
         cls, params, driver, mode: str = "paper", tracking_time_s: float | None = None
     ) -> PIDriver:
         """The driver ``driver`` ("1", "2") of a parameter set, for ``mode`` ``paper`` or ``extended``."""
+        from ..model import engine as en
+        from ..model.record import record
+
         d = params.driver(driver)
         eng, veh = params.engine, params.vehicle
+        u_max = float(en.max_command(record(params)))  # A_max; 2 A_max for a boosted engine (full boost)
         tt = 0.5 * d.forward_kp / d.forward_ki if tracking_time_s is None else float(tracking_time_s)
         from ..model.rules import canonical_mode
 
         mode = canonical_mode(mode)
         if mode == "paper":
-            return cls(
-                d.forward_kp,
-                d.forward_ki,
-                eng.min_throttle_area,
-                eng.max_throttle_area,
-                eng.min_throttle_area,
-                tt,
-            )
+            return cls(d.forward_kp, d.forward_ki, eng.min_throttle_area, u_max, eng.min_throttle_area, tt)
         if mode == "realistic":
             gain = veh.mass * veh.gravity / eng.max_throttle_area
             return cls(
-                d.forward_kp,
-                d.forward_ki,
-                -eng.max_throttle_area,
-                eng.max_throttle_area,
-                eng.min_throttle_area,
-                tt,
-                gain,
+                d.forward_kp, d.forward_ki, -eng.max_throttle_area, u_max, eng.min_throttle_area, tt, gain
             )
         raise VpsimError(f"unknown mode {mode!r}; expected paper or extended")
 

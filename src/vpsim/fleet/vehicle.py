@@ -251,7 +251,7 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         "vehicle.road_load_b": "record: target coast-down B (N per m/s)",
         "vehicle.road_load_c": "record: target coast-down C (N per (m/s)^2)",
         "engine.accessory_power": "default: alternator base load (W)",
-        "engine.boost_pressure": "boosted: the pressure of the rated power at 5500 rpm (Pa); 0: aspirated",
+        "engine.boost_pressure": "boosted: the boost of the rated power at 5500 rpm (Pa); 0: aspirated",
         "engine.rated_power": "record: rated power (W), caps the full-load line",
         "simulation.fuel_cutoff_speed": "default: fuel cut on overrun above 1200 rpm (rad/s)",
         "vehicle.frontal_area": "default: nominal",

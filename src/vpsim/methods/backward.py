@@ -127,7 +127,10 @@ def _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fi
     rows[R_FIRED, k] = 1.0 if fired else 0.0
     rows[R_P, k] = p
     rows[R_MDOT, k] = mdot
-    rows[R_THR, k] = en.throttle_for_flow(p, en.cylinder_air_flow(p, w, c), c)  # the FQM's steady throttle
+    # the FQM's steady throttle (its area: a boosted engine's command beyond A_max is boost)
+    rows[R_THR, k] = en.throttle_upstream(en.command_for_flow(p, en.cylinder_air_flow(p, w, c), w, c), w, c)[
+        0
+    ]
 
 
 @inline

@@ -250,7 +250,7 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     err = v_ref - vv
     dy[_ERR2] = err * err
     dy[_OUTSIDE] = 1.0 if abs(err) > D[_BAND] else 0.0
-    aux[_X_THR] = a_eng
+    aux[_X_THR] = en.throttle_upstream(a_eng, w, c)[0]  # the throttle's area (a boosted engine: <= A_max)
     aux[_X_W] = w
     aux[_X_TCR] = t_cr
     aux[_X_TE] = t_e
@@ -1017,8 +1017,8 @@ def initial_state(cycle, params, ratio: float, pi: PIDriver, mode: str) -> np.nd
         f = vh.equivalent_mass(ratio, c) * a0 + vh.road_load(v0, c)
         w = vh.engine_speed(v0, ratio, c)
         p = float(en.intake_pressure_for_torque(vh.wheel_to_engine_torque(f, ratio, c), w, c))
-        p = min(p, 0.99 * c.ambient_pressure)
-        u = float(en.throttle_for_flow(p, en.cylinder_air_flow(p, w, c), c))
+        p = min(p, 0.99 * (en.full_load_pressure(w, c) if en.is_boosted(c) else c.ambient_pressure))
+        u = float(en.command_for_flow(p, en.cylinder_air_flow(p, w, c), w, c))
         y[_P] = p
         y[_Z] = float(np.clip(u, pi.u_lo, pi.u_hi))
     elif mode == "paper":

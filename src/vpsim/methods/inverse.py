@@ -39,7 +39,9 @@ throttle. This is reported (``TraceMiss.infeasible_throttle_s``, with the time b
   (it passes the torque the vehicle needs) or opens when no traction is needed (engine idling, brakes).
 
 Demand beyond full load (u_d > A_max, or x2 >= p_a where Psi = 0) is reported the same way; the fuel is then
-that of the demanded trajectory.
+that of the demanded trajectory. A boosted engine's demand u_d is the throttle command
+(:func:`vpsim.model.engine.throttle_upstream`): beyond A_max the throttle is wide open and the boost rises, to
+full boost at 2 A_max; beyond full load means u_d > 2 A_max there.
 """
 
 from __future__ import annotations
@@ -439,7 +441,7 @@ def account(v, dv, vc, rows, left, right, dt, recs, realistic, band, weight, acc
             n_moving += 1
             if brake <= 0.0 and not (u >= c.min_throttle_area):  # (NaN counts as infeasible)
                 acc[_A_BELOW] += wk
-            if u > c.max_throttle_area:
+            if u > en.max_command(c):  # (a boosted engine's command goes on to full boost)
                 acc[_A_ABOVE] += wk
             if not math.isnan(u):
                 n_moving_u += 1
@@ -458,7 +460,7 @@ def account(v, dv, vc, rows, left, right, dt, recs, realistic, band, weight, acc
                 extra[0, k] = t_cr - c.inertia * rows[R_DWENG, k]
             else:
                 extra[0, k] = rules.slipping_clutch_torque(t_cr)
-            extra[1, k] = min(max(u, c.min_throttle_area), c.max_throttle_area) if u == u else u
+            extra[1, k] = min(max(u, c.min_throttle_area), c.max_throttle_area) if u == u else u  # the area
             extra[2, k] = used
     if n_moving_u == 0:  # as np.nanmin / np.nanmax of the moving points' demands
         acc[_A_UMIN] = 0.0 if n_moving == 0 else math.nan
@@ -580,7 +582,8 @@ def run(
         what = "deceleration beyond engine braking (no brakes)" if mode == "paper" else "manifold too slow"
         notes.append(f"throttle demand below A_min for {below_s:.1f} s while moving: {what}")
     if above_s:
-        notes.append(f"throttle demand above A_max for {above_s:.1f} s: beyond full load; fuel of the demand")
+        top = "full boost" if en.is_boosted(record(params)) else "A_max"
+        notes.append(f"throttle demand above {top} for {above_s:.1f} s: beyond full load; fuel of the demand")
     return Result(
         method="inverse",
         cycle=cycle.name,

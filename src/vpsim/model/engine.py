@@ -241,9 +241,16 @@ def dpsi_dpr(p_r, c):
 
 
 @equation
+def throttle_flow_per_area_from(p_up, p_i, c):
+    """mdot_at / A_eff = p_up Psi(p_i/p_up) / sqrt(R T_a)   (10) with the pressure p_up upstream of the
+    throttle (ambient, or a boosted engine's compressor outlet, intercooled to the ambient temperature)."""
+    return p_up * psi(p_i / p_up, c) / c.sqrt_rt_ambient
+
+
+@equation
 def throttle_flow_per_area(p_i, c):
     """mdot_at / A_eff = p_a Psi(p_i/p_a) / sqrt(R T_a)   (10)."""
-    return c.ambient_pressure * psi(p_i / c.ambient_pressure, c) / c.sqrt_rt_ambient
+    return throttle_flow_per_area_from(c.ambient_pressure, p_i, c)
 
 
 @equation
@@ -252,11 +259,59 @@ def throttle_mass_flow(a_eff, p_i, c):
     return a_eff * throttle_flow_per_area(p_i, c)
 
 
+# --- boost: the throttle command beyond A_max ---------------------------------------------------------------
+# A boosted engine's air path is driven by one command u (m², what the driver or the inverse asks): up to
+# A_max it is the throttle area with ambient pressure upstream, as in an aspirated engine; beyond, the
+# throttle stays wide open and the boost control (wastegate) raises the pressure upstream of it, linearly in
+# u, to the boost the turbocharger can give at that speed at u = 2 A_max. Ideal boost control: no turbo lag,
+# no compressor work in the balance (the exhaust drives it). Aspirated engines (boost_pressure <= p_a) are
+# unchanged.
+
+BOOST_SPOOL_SPEED = 200.0  # rad/s (1,900 rpm): a modern turbocharger's full boost from about here up
+
+
+@equation
+def is_boosted(c):
+    return c.boost_pressure > c.ambient_pressure
+
+
+@equation
+def boost_available(w_e, c):
+    """Pressure upstream of the throttle at full boost: ``c.boost_pressure`` from :data:`BOOST_SPOOL_SPEED`
+    up, linearly from ambient below (where the exhaust cannot yet drive the turbine); ambient if aspirated."""
+    if not is_boosted(c):
+        return c.ambient_pressure
+    spool = w_e / BOOST_SPOOL_SPEED if w_e < BOOST_SPOOL_SPEED else 1.0
+    if spool < 0.0:
+        spool = 0.0
+    return c.ambient_pressure + (c.boost_pressure - c.ambient_pressure) * spool
+
+
+@equation
+def max_command(c):
+    """Upper end of the throttle command: A_max aspirated, 2 A_max boosted (full boost)."""
+    return 2.0 * c.max_throttle_area if is_boosted(c) else c.max_throttle_area
+
+
+@equation
+def throttle_upstream(u, w_e, c):
+    """(throttle area, pressure upstream of it) for the command u at engine speed w_e."""
+    a_max = c.max_throttle_area
+    if u <= a_max or not is_boosted(c):
+        return u, c.ambient_pressure
+    frac = (u - a_max) / a_max
+    if frac > 1.0:
+        frac = 1.0
+    return a_max, c.ambient_pressure + frac * (boost_available(w_e, c) - c.ambient_pressure)
+
+
 @equation
 def manifold_pressure_rate(p_i, a_eff, w_e, c):
-    """dp_i/dt = (R T_i / V_i) [mdot_at - w_e m_ac / (2 pi n_r)]   (9)."""
+    """dp_i/dt = (R T_i / V_i) [mdot_at - w_e m_ac / (2 pi n_r)]   (9); ``a_eff`` is the throttle command
+    (the throttle area, and beyond A_max the boost of a boosted engine: :func:`throttle_upstream`)."""
+    a, p_up = throttle_upstream(a_eff, w_e, c)
     return (c.rt_intake / c.intake_manifold_volume) * (
-        throttle_mass_flow(a_eff, p_i, c) - cylinder_air_flow(p_i, w_e, c)
+        a * throttle_flow_per_area_from(p_up, p_i, c) - cylinder_air_flow(p_i, w_e, c)
     )
 
 
@@ -267,6 +322,44 @@ def throttle_for_flow(p_i, air_flow, c):
     if per_area > 0.0:
         return air_flow / per_area
     return math.inf if air_flow > 0.0 else 0.0
+
+
+@equation
+def upstream_for_flow(p_i, air_flow, a_eff, c):
+    """Pressure upstream of a throttle of area ``a_eff`` that passes ``air_flow`` into p_i: (10) solved for
+    p_up (its flow p_up Psi(p_i/p_up) grows with p_up): closed form where choked, bisection otherwise."""
+    k = air_flow * c.sqrt_rt_ambient / a_eff  # p_up Psi(p_i / p_up) asked
+    if not k > 0.0:
+        return p_i
+    p_choked = k / c.psi_choked
+    if p_i / p_choked <= c.critical_ratio:
+        return p_choked
+    lo, hi = p_i, p_i / c.critical_ratio  # subcritical: between no flow and the onset of choking
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if mid * psi(p_i / mid, c) < k:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-13 * hi:
+            break
+    return 0.5 * (lo + hi)
+
+
+@equation
+def command_for_flow(p_i, air_flow, w_e, c):
+    """Throttle command that passes ``air_flow`` at manifold pressure p_i and engine speed w_e: the throttle
+    area (:func:`throttle_for_flow`) or, for a boosted engine beyond A_max, the boost command
+    (:func:`throttle_upstream` inverted); beyond full boost the command extrapolates past 2 A_max."""
+    u = throttle_for_flow(p_i, air_flow, c)
+    if u <= c.max_throttle_area or not is_boosted(c):
+        return u
+    a_max = c.max_throttle_area
+    span = boost_available(w_e, c) - c.ambient_pressure
+    p_up = upstream_for_flow(p_i, air_flow, a_max, c)
+    if not span > 0.0:
+        return math.inf if p_up > c.ambient_pressure else a_max
+    return a_max * (1.0 + (p_up - c.ambient_pressure) / span)
 
 
 # --- the forward quasi-static model (FQM): steady state of (9) -------------------------------------------
@@ -287,10 +380,10 @@ def steady_pressure(a_eff, w_e, c):
     or just below p_a) converges monotonically. At w_e = 0 nothing leaves the manifold and p_i = p_a.
     Iterations: -1 where the solve did not converge.
     """
-    p_a = c.ambient_pressure
+    a_eff, p_a = throttle_upstream(a_eff, w_e, c)  # (ambient upstream, or a boosted engine's boost)
     if not w_e > 0.0:
         return p_a, 0
-    k_thr = a_eff * c.ambient_pressure * c.psi_choked / c.sqrt_rt_ambient  # choked throttle flow
+    k_thr = a_eff * p_a * c.psi_choked / c.sqrt_rt_ambient  # choked throttle flow
     k_cyl = cycles_per_second(w_e, c) * c.air_per_charge  # cylinder flow per unit (s_i p_i - y_i)
     p_choked = (k_thr / k_cyl + c.air_charge_intercept) / c.air_charge_slope
     if p_choked / p_a <= c.critical_ratio:
@@ -300,11 +393,8 @@ def steady_pressure(a_eff, w_e, c):
     hi = p_a * (1.0 - 1e-15)
     for k in range(NEWTON_MAX_ITERATIONS):
         pr = x / p_a
-        theta = a_eff * throttle_flow_per_area(x, c) - k_cyl * charge_pressure(x, c)  # (19)
-        dtheta = (
-            a_eff * c.ambient_pressure * dpsi_dpr(pr, c) / c.sqrt_rt_ambient / p_a
-            - k_cyl * c.air_charge_slope
-        )
+        theta = a_eff * throttle_flow_per_area_from(p_a, x, c) - k_cyl * charge_pressure(x, c)  # (19)
+        dtheta = a_eff * p_a * dpsi_dpr(pr, c) / c.sqrt_rt_ambient / p_a - k_cyl * c.air_charge_slope
         x_new = min(max(x - theta / dtheta, lo), hi)
         done = abs(x_new - x) <= NEWTON_RELATIVE_TOLERANCE * abs(x_new)
         x = x_new
@@ -320,20 +410,12 @@ def steady_torque(a_eff, w_e, c):
     return crank_torque(p, w_e, c)
 
 
-BOOST_SPOOL_SPEED = 200.0  # rad/s (1,900 rpm): a modern turbocharger's full boost from about here up
-
-
 @equation
 def full_load_pressure(w_e, c):
-    """Intake pressure at full load: the FQM at A_max for an aspirated engine; a boosted engine's boost
-    control raises it to ``c.boost_pressure``, reached at :data:`BOOST_SPOOL_SPEED` (linearly from ambient
-    below, where the exhaust cannot yet drive the turbine), never below the aspirated pressure."""
-    p_na, _ = steady_pressure(c.max_throttle_area, w_e, c)
-    if c.boost_pressure <= c.ambient_pressure:
-        return p_na
-    spool = w_e / BOOST_SPOOL_SPEED if w_e < BOOST_SPOOL_SPEED else 1.0
-    p_boost = c.ambient_pressure + (c.boost_pressure - c.ambient_pressure) * spool
-    return p_boost if p_boost > p_na else p_na
+    """Intake pressure at full load: the FQM at the command's upper end (:func:`max_command`): A_max for an
+    aspirated engine; for a boosted one the throttle wide open at full boost (:func:`boost_available`)."""
+    p, _ = steady_pressure(max_command(c), w_e, c)
+    return p
 
 
 @equation
@@ -348,9 +430,11 @@ def full_load_torque(w_e, c):
 
 @equation
 def boost_for_power(power, w_e, c):
-    """The full-load intake pressure that gives ``power`` at engine speed w_e: (2)-(8) inverted (the boost
-    limit that follows from a rated power)."""
-    return intake_pressure_for_torque(power / w_e, w_e, c)
+    """The boost (pressure upstream of the wide-open throttle) that gives ``power`` at engine speed w_e
+    (from :data:`BOOST_SPOOL_SPEED` up): the intake pressure of that torque, (2)-(8) inverted, and the
+    pressure that pushes its cylinder flow through A_max, (10) inverted."""
+    p_i = intake_pressure_for_torque(power / w_e, w_e, c)
+    return upstream_for_flow(p_i, cylinder_air_flow(p_i, w_e, c), c.max_throttle_area, c)
 
 
 @equation
@@ -442,12 +526,16 @@ def steady_pressure_array(a_eff, w_e, c):
 def throttle_for_pressure_rate(p_i, dp_dt, w_e, c):
     """A_eff that gives the manifold pressure rate ``dp_dt`` at (p_i, w_e): (9) solved for A_eff.
 
-    dp_i/dt is affine in A_eff, so the slope and offset come from :func:`manifold_pressure_rate` itself.
-    Where no flow can raise the pressure (p_i >= p_a, Psi = 0) the demand is +-inf (0 if none is asked).
+    The cylinders' outflow comes from :func:`manifold_pressure_rate` itself; the throttle flow asked is then
+    passed by the throttle command (:func:`command_for_flow`: the area, or beyond A_max a boosted engine's
+    boost). Where no flow can raise the pressure (an aspirated engine at p_i >= p_a, Psi = 0) the demand is
+    +-inf (0 if none is asked); a negative flow asked gives a negative area (infeasible, flagged).
     """
-    rate_0 = manifold_pressure_rate(p_i, 0.0, w_e, c)
-    per_area = manifold_pressure_rate(p_i, 1.0, w_e, c) - rate_0
-    need = dp_dt - rate_0
+    rate_0 = manifold_pressure_rate(p_i, 0.0, w_e, c)  # the cylinders' outflow alone
+    need = (dp_dt - rate_0) / (c.rt_intake / c.intake_manifold_volume)  # the throttle flow asked
+    if need > 0.0 and is_boosted(c):
+        return command_for_flow(p_i, need, w_e, c)
+    per_area = throttle_flow_per_area(p_i, c)
     if per_area > 0.0:
         return need / per_area
     if need == 0.0:
@@ -459,10 +547,9 @@ def throttle_for_pressure_rate(p_i, dp_dt, w_e, c):
 def manifold_rate_dp(p_i, a_eff, w_e, c):
     """d(dp_i/dt)/dp_i of (9) at fixed A_eff and w_e: the manifold's own (stiff) eigenvalue."""
     k = c.rt_intake / c.intake_manifold_volume
-    throttle = a_eff * c.ambient_pressure * dpsi_dpr(p_i / c.ambient_pressure, c) / c.sqrt_rt_ambient
-    return k * (
-        throttle / c.ambient_pressure - cycles_per_second(w_e, c) * c.air_per_charge * c.air_charge_slope
-    )
+    a, p_up = throttle_upstream(a_eff, w_e, c)
+    throttle = a * p_up * dpsi_dpr(p_i / p_up, c) / c.sqrt_rt_ambient
+    return k * (throttle / p_up - cycles_per_second(w_e, c) * c.air_per_charge * c.air_charge_slope)
 
 
 @kernel
