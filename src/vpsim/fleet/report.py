@@ -148,7 +148,7 @@ def mechanisms(df):
         elif r["transmission"] == "automatic":
             parts.append("automatic (model: no torque converter)")
         elif r["transmission"] == "manual":
-            parts.append("manual (model upshifts at 1240 rpm; the tested schedule shifts later in town)")
+            parts.append("manual (model: 2500 rpm shift point while accelerating; tested schedule unknown)")
         if r["boosted"]:
             parts.append("boosted (model: NA)")
         if r["mass"] >= m90:
