@@ -209,3 +209,29 @@ def test_a_manual_gets_the_drivers_shift_point(tmp_path):
         for s in (s_auto, s_man)
     ]
     assert fuel[1] > 1.05 * fuel[0]
+
+
+def test_automatics_and_cvts_get_a_converter_manuals_and_dcts_none(tmp_path):
+    """The converter follows the transmission type; a forward fleet leaves it out (the forward method has
+    none) and so still runs the automatics."""
+    from dataclasses import replace
+
+    from vpsim.fleet.epa import read_test_car_list
+    from vpsim.fleet.vehicle import (
+        CONVERTER_STALL_RPM,
+        RATED_SPEED_RADPS,
+        converter_fields,
+        record_parameters,
+    )
+
+    cars = read_test_car_list(write_list(tmp_path / "a.csv"))
+    auto = next(v for v in cars.vehicles if v.transmission_kind == "automatic")
+    p = record_parameters(auto)
+    k = p.transmission.converter_capacity_factor
+    torque = auto.rated_power_kw * 1e3 / RATED_SPEED_RADPS
+    assert k * np.sqrt(torque) == pytest.approx(CONVERTER_STALL_RPM * np.pi / 30)  # stalls at 2400 rpm
+    assert p.transmission.lockup_min_gear == 2 and p.transmission.lockup_min_speed == pytest.approx(25 / 3.6)
+    assert record_parameters(auto, converter=False).transmission.converter_capacity_factor == 0.0
+    assert converter_fields(replace(auto, transmission_kind="cvt"))
+    for kind in ("manual", "amt_dct"):
+        assert converter_fields(replace(auto, transmission_kind=kind)) == {}
