@@ -144,3 +144,26 @@ def test_load_dependent_shift_rule_holds_lower_gears_under_load(params):
     accel = np.r_[np.diff(c.speed_mps) > 0.5, False]
     assert loaded[accel].mean() < const[accel].mean() - 0.3
     assert np.mean(loaded < const) > 5 * np.mean(loaded > const)  # (merging and the no-upshift rule aside)
+
+
+def test_manual_shift_point_holds_each_gear_to_the_shift_speed_while_accelerating(params):
+    """A driver's shift point (rule 4): while accelerating, gear g only once the engine in gear g - 1 has
+    reached the shift speed; cruising (0 <= a <= cruise_acceleration) keeps the automatic's gear."""
+    from vpsim.gears import GearRule, default_schedule, interval_demand
+
+    c = load_cycle("ftp75")
+    base = GearRule(min_engine_speed=130.0, min_hold_s=0.0)
+    manual = GearRule(min_engine_speed=130.0, min_hold_s=0.0, upshift_engine_speed=262.0)
+    g_auto = default_schedule(c, params, rule=base).gear[:-1]
+    g_man = default_schedule(c, params, rule=manual).gear[:-1]
+    ratios = np.asarray(params.transmission.ratios)
+    _, a, w_e, _, _, _ = interval_demand(c, ratios[:, None], params)
+    accel = a > manual.cruise_acceleration
+    up = accel & (g_man >= 2)
+    assert up.sum() > 100
+    assert np.all(w_e[g_man[up] - 2, np.flatnonzero(up)] >= 262.0)
+    assert np.mean(g_man[accel] < g_auto[accel]) > 0.3  # the shift point keeps lower gears
+    cruise = (a >= 0) & ~accel
+    np.testing.assert_array_equal(g_man[cruise], g_auto[cruise])
+    with pytest.raises(vpsim.CycleError, match="upshift_engine_speed"):
+        GearRule(upshift_engine_speed=-1.0)

@@ -179,3 +179,59 @@ def test_fleet_on_the_real_list(shared_dir, tmp_path, capsys):
     s, df = _check_outputs(out, ("ftp_bag2", "hwy"))
     assert s["n_vehicles"] == 25
     assert s["excluded"]["electric"] > 50 and s["excluded"]["hybrid"] > 20
+
+
+def test_a_manual_gets_the_drivers_shift_point(tmp_path):
+    """A manual shifts at MANUAL_SHIFT_RPM while accelerating (lower gears in town, more fuel); the other
+    transmission types keep the controller's rule."""
+    from dataclasses import replace
+
+    from vpsim.batch import run_batch
+    from vpsim.fleet.cycles import fleet_cycle
+    from vpsim.fleet.epa import read_test_car_list
+    from vpsim.fleet.run import GEAR_RULE, MANUAL_GEAR_RULE, MANUAL_SHIFT_RPM, gear_rule
+    from vpsim.fleet.vehicle import record_parameters
+    from vpsim.gears import default_schedule
+
+    cars = read_test_car_list(write_list(tmp_path / "a.csv"))
+    auto = next(v for v in cars.vehicles if v.transmission_kind == "automatic")
+    manual = replace(auto, transmission_kind="manual", transmission_code="M")
+    assert gear_rule(auto) is GEAR_RULE
+    assert gear_rule(manual) is MANUAL_GEAR_RULE
+    assert MANUAL_GEAR_RULE.upshift_engine_speed == pytest.approx(MANUAL_SHIFT_RPM * np.pi / 30)
+    cyc = fleet_cycle("ftp_bag2")
+    p = record_parameters(manual, [cyc])
+    s_auto = default_schedule(cyc, p, rule=gear_rule(auto))
+    s_man = default_schedule(cyc, p, rule=gear_rule(manual))
+    assert np.mean(s_man.gear < s_auto.gear) > 0.1
+    fuel = [
+        run_batch(cyc, None, params=p, mode="extended", gears=s)["fuel_l_per_100km"].iloc[0]
+        for s in (s_auto, s_man)
+    ]
+    assert fuel[1] > 1.05 * fuel[0]
+
+
+def test_automatics_and_cvts_get_a_converter_manuals_and_dcts_none(tmp_path):
+    """The converter follows the transmission type; a forward fleet leaves it out (the forward method has
+    none) and so still runs the automatics."""
+    from dataclasses import replace
+
+    from vpsim.fleet.epa import read_test_car_list
+    from vpsim.fleet.vehicle import (
+        CONVERTER_STALL_RPM,
+        RATED_SPEED_RADPS,
+        converter_fields,
+        record_parameters,
+    )
+
+    cars = read_test_car_list(write_list(tmp_path / "a.csv"))
+    auto = next(v for v in cars.vehicles if v.transmission_kind == "automatic")
+    p = record_parameters(auto)
+    k = p.transmission.converter_capacity_factor
+    torque = auto.rated_power_kw * 1e3 / RATED_SPEED_RADPS
+    assert k * np.sqrt(torque) == pytest.approx(CONVERTER_STALL_RPM * np.pi / 30)  # stalls at 2400 rpm
+    assert p.transmission.lockup_min_gear == 2 and p.transmission.lockup_min_speed == pytest.approx(25 / 3.6)
+    assert record_parameters(auto, converter=False).transmission.converter_capacity_factor == 0.0
+    assert converter_fields(replace(auto, transmission_kind="cvt"))
+    for kind in ("manual", "amt_dct"):
+        assert converter_fields(replace(auto, transmission_kind=kind)) == {}

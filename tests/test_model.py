@@ -24,6 +24,7 @@ import vpsim
 from vpsim.batch import run_batch
 from vpsim.methods import backward, forward, inverse
 from vpsim.model import engine as en
+from vpsim.model import rules
 from vpsim.model import vehicle as vh
 from vpsim.model.maps import cached_engine_map
 from vpsim.model.record import record
@@ -364,3 +365,101 @@ def test_torque_is_affine_in_pressure_with_one_slope_at_every_speed(params):
     for w in (0.0, 80.0, 300.0, 700.0):
         slope = (en.crank_torque(9.0e4, w, c) - en.crank_torque(1.0e4, w, c)) / 8.0e4
         assert slope == pytest.approx(c.torque_slope, rel=1e-12)
+
+
+# --- the torque converter --------------------------------------------------------------------------------
+
+CONVERTER = {"converter_capacity_factor": 15.0, "lockup_min_gear": 2, "lockup_min_speed": 7.0}
+
+
+def test_converter_curves_and_speed_ratio_by_hand(params):
+    """mu and phi at hand values; the closed-form speed ratio solves T_t = mu phi (w_t / nu)^2 on both
+    branches, and nu lies in (0, 1) (slip > 0) for any traction."""
+    c = record(params.with_changes(transmission=CONVERTER))
+    assert vh.converter_torque_ratio(0.0, c) == 2.0
+    assert vh.converter_torque_ratio(0.425, c) == pytest.approx(1.5, rel=1e-14)
+    assert vh.converter_torque_ratio(0.9, c) == 1.0
+    assert vh.converter_capacity(0.3, c) == pytest.approx(1 / 225, rel=1e-14)
+    assert vh.converter_capacity(0.925, c) == pytest.approx(0.5 / 225, rel=1e-14)
+    assert vh.converter_capacity(1.0, c) == 0.0
+    for w_t in (5.0, 50.0, 150.0, 400.0):
+        for t_t in (0.5, 20.0, 150.0, 600.0):
+            nu = vh.converter_speed_ratio(t_t, w_t, c)
+            assert 0.0 < nu < 1.0
+            back = vh.converter_torque_ratio(nu, c) * vh.converter_capacity(nu, c) * (w_t / nu) ** 2
+            assert back == pytest.approx(t_t, rel=1e-10)
+
+
+@pytest.mark.parametrize("method", ["backward", "inverse"])
+@pytest.mark.parametrize("cycle", ["udds", "us06"])
+def test_converter_slips_in_traction_costs_fuel_and_closes_the_balance(params, method, cycle):
+    """Below lock-up the engine runs at or above the turbine speed (slip >= 0) while it drives, the fuel
+    rises, and the energy balance (converter loss in the driveline term) closes to rounding."""
+    q = params.with_changes(transmission=CONVERTER)
+    base = vpsim.simulate(cycle, method=method, params=params)
+    conv = vpsim.simulate(cycle, method=method, params=q)
+    assert conv.fuel_kg > base.fuel_kg * 1.002
+    e = conv.energy
+    assert abs(e.residual) <= 1e-9 * e.indicated
+    assert e.driveline_loss > base.energy.driveline_loss
+    if method == "backward":  # per interval: the pump never turns slower than the turbine while it drives
+        c, _, sched = resolve_inputs(cycle, q)
+        rows = backward.run(c, q, schedule=sched, mode="extended", _rows=True).solver["rows"]
+        conv_rows = rows[backward.R_CLUTCH] == rules.CLUTCH_CONVERTER
+        assert conv_rows.sum() > 20
+        w_pump, w_turbine = rows[backward.R_W, conv_rows], rows[backward.R_WWHEEL, conv_rows]
+        assert np.all(w_pump >= w_turbine)
+        assert np.median(w_pump / w_turbine) > 1.02
+
+
+def test_converter_slip_is_positive_in_traction_in_the_inverse_method(params):
+    """The inversion through the unlocked converter: engine speed above the wheel-side speed wherever the
+    car accelerates below lock-up (first gear at any speed), equal above it."""
+    q = params.with_changes(transmission=CONVERTER)
+    v = np.repeat(np.linspace(0.0, 20.0, 41), 3)
+    dv = np.tile([0.2, 1.0, 2.0], 41)
+    for gear in (1, 2):
+        out = inverse.invert(v, dv, np.zeros_like(v), np.full(v.size, gear), q, mode="realistic")
+        w_e, w_t = out["engine_speed_radps"], out["wheel_side_speed_radps"]
+        unlocked = (gear == 1) | (v < 7.0)
+        assert np.all(w_e[unlocked] > w_t[unlocked])
+        np.testing.assert_array_equal(w_e[~unlocked], w_t[~unlocked])
+
+
+def test_a_locked_or_absent_converter_is_the_stiff_driveline_bit_for_bit(params):
+    """Locked everywhere (gear 1 from standstill on) the converter changes nothing; capacity 0 leaves the
+    other converter fields without effect; the paper mode never has one."""
+    locked = params.with_changes(transmission={**CONVERTER, "lockup_min_gear": 1, "lockup_min_speed": 0.0})
+    absent = params.with_changes(transmission={"lockup_min_gear": 5, "lockup_min_speed": 30.0})
+    for method in ("backward", "inverse"):
+        ref = vpsim.simulate("ftp75", method=method, params=params)
+        for q in (locked, absent):
+            r = vpsim.simulate("ftp75", method=method, params=q)
+            assert r.fuel_kg == ref.fuel_kg
+            np.testing.assert_array_equal(r.series["engine_speed_radps"], ref.series["engine_speed_radps"])
+    q = params.with_changes(transmission=CONVERTER)
+    for method in ("backward", "inverse"):
+        assert (
+            vpsim.simulate("nedc", method=method, params=q, mode="paper").fuel_kg
+            == vpsim.simulate("nedc", method=method, params=params, mode="paper").fuel_kg
+        )
+    df = run_batch("udds", {"vehicle.mass": [1300.0, 1500.0]}, params=q, mode="extended")
+    for k, m in enumerate((1300.0, 1500.0)):
+        d = q.with_changes(vehicle={"mass": m})
+        c, _, s = resolve_inputs("udds", params)
+        r = backward.run(
+            c, d, engine_map=cached_engine_map(d.engine).with_exact(), schedule=s, mode="extended"
+        )
+        assert df["fuel_kg"][k] == pytest.approx(r.fuel_kg, rel=1e-12)
+
+
+def test_the_forward_method_refuses_a_converter_in_one_line(params):
+    q = params.with_changes(transmission=CONVERTER)
+    with pytest.raises(vpsim.VpsimError, match="forward method has no torque converter") as exc:
+        vpsim.simulate("udds", method="forward", params=q)
+    assert "\n" not in str(exc.value)
+    with pytest.raises(vpsim.VpsimError, match="forward method has no torque converter"):
+        run_batch(
+            "udds", {"transmission.converter_capacity_factor": [0.0, 12.0]}, method="forward", mode="extended"
+        )
+    assert vpsim.simulate("udds", method="forward", params=q, mode="paper").fuel_kg > 0  # none in paper mode

@@ -59,6 +59,12 @@ def test_user_file_overrides_base(tmp_path):
         ("[drivers.3]\nforward_kp = 1e-4\n", r"drivers\.3 is missing"),
         ("base = 'nope'\n", r"base = 'nope' is not a preset"),
         ("[vehicle\nmass=1\n", r"not valid TOML"),
+        (
+            "[transmission]\nconverter_coupling_speed_ratio = 1.2\n",
+            r"converter_coupling_speed_ratio = 1\.2 is outside the plausible range \[0\.5, 0\.99\]",
+        ),
+        ("[transmission]\nconverter_capacity_factor = -3\n", r"converter_capacity_factor = -3"),
+        ("[transmission]\nlockup_min_gear = 0\n", r"lockup_min_gear = 0 must be a positive whole number"),
     ],
 )
 def test_validation_errors_are_one_line_and_specific(tmp_path, text, match):

@@ -13,8 +13,13 @@ The default rule (documented in docs/methods.md):
    times that gear's maximum torque.
 3. The chosen gear is the highest admissible gear whose engine speed is at least ``min_engine_speed``;
    if none reaches it, the lowest admissible gear (gear 1 at standstill and crawling).
-4. While decelerating, the engine does not upshift (a driver holds or downshifts when braking).
-5. Short engagements (< ``min_hold_s``) are merged into the preceding gear where that gear is admissible.
+4. With ``upshift_engine_speed`` (a driver's shift point, as a manual is driven): while the vehicle
+   accelerates (more than ``cruise_acceleration``), gear k + 1 is used only once the engine in gear k has
+   reached that speed; in cruise and deceleration rule 3 alone applies (owner's manuals give shift speeds
+   "for acceleration" and allow earlier upshifts at steady speed). The gear is then the highest admissible
+   gear within that limit (the lowest admissible gear if none).
+5. While decelerating, the engine does not upshift (a driver holds or downshifts when braking).
+6. Short engagements (< ``min_hold_s``) are merged into the preceding gear where that gear is admissible.
 """
 
 from __future__ import annotations
@@ -82,6 +87,15 @@ class GearRule:
     full_load_engine_speed: float | None = None
     torque_reserve: float = 0.9
     min_hold_s: float = 3.0
+    # a driver's shift point (rule 4): while accelerating, leave gear k only once the engine in it reaches
+    # this speed; None: no shift point (an automatic's schedule)
+    upshift_engine_speed: float | None = None
+    cruise_acceleration: float = 0.1  # m/s^2: at or below this the vehicle cruises or decelerates (rule 4)
+
+    def __post_init__(self):
+        w = self.upshift_engine_speed
+        if w is not None and not (math.isfinite(w) and w > 0):
+            raise CycleError(f"gear rule: upshift_engine_speed must be a positive speed in rad/s, got {w!r}")
 
 
 def interval_demand(cycle: Cycle, ratio, params):
@@ -140,6 +154,13 @@ def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | Non
     best_high = np.where(high_enough, gears, 0).max(axis=0)
     lowest_adm = np.where(admissible, gears, n_g + 1).min(axis=0)
     gear = np.where(best_high > 0, best_high, lowest_adm)
+    if rule.upshift_engine_speed is not None:
+        # gear g is reached once the engine in gear g - 1 has reached the shift point (w_e falls with the
+        # gear, so the gears reached are 1..cap)
+        cap = 1 + np.sum(w_e[:-1] >= rule.upshift_engine_speed, axis=0)
+        cap = np.where(a > rule.cruise_acceleration, cap, n_g)
+        capped = np.where(admissible & (gears <= cap[None, :]), gears, 0).max(axis=0)
+        gear = np.where(capped > 0, np.minimum(gear, capped), lowest_adm)
     n = gear.size
     # no upshift while decelerating
     for k in range(1, n):

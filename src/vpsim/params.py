@@ -64,6 +64,15 @@ class Transmission:
     efficiency: float
     gearbox_ratios: tuple[float, ...]
     final_drive: float
+    # torque converter between engine and gearbox (realistic mode; docs/model.md): capacity factor
+    # K = w_pump / sqrt(T_pump) at stall, rad/s per sqrt(N m) (0: none, the driveline of the paper);
+    # torque ratio at stall and the speed ratio of the coupling point
+    converter_capacity_factor: float = 0.0
+    converter_stall_torque_ratio: float = 2.0
+    converter_coupling_speed_ratio: float = 0.85
+    # the lock-up clutch closes from this gear at or above this vehicle speed (m/s)
+    lockup_min_gear: int = 2
+    lockup_min_speed: float = 0.0
 
     @property
     def ratios(self) -> tuple[float, ...]:
@@ -197,6 +206,10 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "vehicle.gravity": (0.0, 30.0, False),
     "vehicle.wheel_radius": (0.05, 2.0, False),
     "transmission.final_drive": (0.0, 50.0, False),
+    "transmission.converter_capacity_factor": (0.0, 200.0, True),
+    "transmission.converter_stall_torque_ratio": (1.0, 4.0, True),
+    "transmission.converter_coupling_speed_ratio": (0.5, 0.99, True),
+    "transmission.lockup_min_speed": (0.0, 100.0, True),
     "engine.bore": (0.02, 0.5, False),
     "engine.stroke": (0.02, 0.5, False),
     "engine.inertia": (0.0, 50.0, False),
@@ -233,6 +246,7 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
 _INT_RANGES: dict[str, tuple[int, int]] = {
     "engine.cylinders": (1, 16),
     "engine.revolutions_per_cycle": (1, 2),
+    "transmission.lockup_min_gear": (1, 21),  # above the number of gears: never locked
 }
 _MAX_LIST = 20  # gears of a gearbox (heavy trucks have up to 18)
 _LIST_LENGTHS = {"engine.map_speed_range": 2}

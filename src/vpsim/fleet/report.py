@@ -144,13 +144,13 @@ def mechanisms(df):
         if r["sp"] >= sp90:
             parts.append(f"high specific power {r['sp']:.0f} kW/L (high-output engine)")
         if r["transmission"] == "cvt":
-            parts.append("CVT (model: 8 fixed ratios)")
+            parts.append("CVT (model: 8 fixed ratios, default converter)")
         elif r["transmission"] == "automatic":
-            parts.append("automatic (model: no torque converter)")
+            parts.append("automatic (model: default converter and lock-up, one shift rule)")
         elif r["transmission"] == "manual":
-            parts.append("manual (model upshifts at 1240 rpm; the tested schedule shifts later in town)")
+            parts.append("manual (model: 2500 rpm shift point while accelerating; tested schedule unknown)")
         if r["boosted"]:
-            parts.append("boosted (model: NA)")
+            parts.append("boosted (model: the boost of its rated power)")
         if r["mass"] >= m90:
             parts.append(f"heavy: {r['mass']:.0f} kg")
         if r["cyl"] >= 8:

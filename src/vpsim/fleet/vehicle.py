@@ -53,6 +53,16 @@ TRANSMISSION_EFFICIENCY = 0.92
 RATIO_SPREAD = {3: 2.8, 4: 4.0, 5: 4.5, 6: 6.0, 7: 7.0, 8: 7.0, 9: 9.0, 10: 7.4, 11: 8.0, 12: 8.0}
 CVT_VIRTUAL_GEARS = 8
 CVT_SPREAD = 6.5  # ratio range of a typical belt CVT
+# torque converter of automatics and CVTs (automated manuals / DCTs and manuals have clutches): sized so
+# that it stalls at CONVERTER_STALL_RPM under the torque the engine makes at its rated power (rated power over
+# RATED_SPEED_RADPS, a proxy of its torque level known from the record), the middle of the 2,000-2,800 rpm
+# stall speeds of passenger-car converters; the lock-up clutch closes from gear LOCKUP_MIN_GEAR above
+# LOCKUP_MIN_SPEED_KMH (the early lock-up of 6- to 10-speed automatics and CVTs); stall torque ratio and
+# coupling point: the model's defaults (2.0, 0.85)
+CONVERTER_KINDS = ("automatic", "cvt")
+CONVERTER_STALL_RPM = 2400.0
+LOCKUP_MIN_GEAR = 2
+LOCKUP_MIN_SPEED_KMH = 25.0
 FUEL_DENSITY_KG_PER_L = 0.743  # Tier 2 certification gasoline
 FUEL_LHV_J_PER_KG = 42.9e6
 GRAVITY = 9.81
@@ -126,16 +136,30 @@ def fold_road_load(rec: VehicleRecord, cycles) -> tuple[float, float, float]:
     return c_r, c_d, misfit
 
 
+def converter_fields(rec: VehicleRecord) -> dict:
+    """The torque converter fields of a record's transmission ({} for none: manuals, DCTs)."""
+    rated = rec.rated_power_kw * 1e3
+    if rec.transmission_kind not in CONVERTER_KINDS or not (math.isfinite(rated) and rated > 0):
+        return {}
+    w_stall = CONVERTER_STALL_RPM * math.pi / 30.0
+    return {
+        "converter_capacity_factor": w_stall / math.sqrt(rated / RATED_SPEED_RADPS),
+        "lockup_min_gear": LOCKUP_MIN_GEAR,
+        "lockup_min_speed": LOCKUP_MIN_SPEED_KMH / 3.6,
+    }
+
+
 @lru_cache(maxsize=1)
 def _base() -> Parameters:
     return load_parameters(BASE_PRESET)
 
 
 def record_parameters(
-    rec: VehicleRecord, cycles=None, technology: dict[str, float] | None = None
+    rec: VehicleRecord, cycles=None, technology: dict[str, float] | None = None, *, converter: bool = True
 ) -> Parameters:
     """The :class:`~vpsim.params.Parameters` of a record; road load folded over ``cycles`` (default: all
-    four fleet cycles). ``technology``: ``{"engine.thermal_efficiency": ..., ...}`` overrides."""
+    four fleet cycles). ``technology``: ``{"engine.thermal_efficiency": ..., ...}`` overrides.
+    ``converter`` False leaves the torque converter out (for the forward method, which has none)."""
     from ..scaling import scale_engine
     from .cycles import FLEET_CYCLES, fleet_cycle
 
@@ -176,6 +200,7 @@ def record_parameters(
             "efficiency": TRANSMISSION_EFFICIENCY,
             "gearbox_ratios": ratios,
             "final_drive": final,
+            **(converter_fields(rec) if converter else {}),
         },
         "engine": engine,
         "simulation": {
@@ -237,8 +262,9 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         f"# built by vpsim vehicle from-epa from {source or 'an EPA test car list'}",
         "# (the module vpsim.fleet.vehicle documents the mapping and its defaults)",
         "# SI units. Edit freely; run with: vpsim simulate --vehicle THIS_FILE",
-        "# Note: vpsim fleet shifts up at 130 rad/s (vpsim.fleet.run.GEAR_RULE); vpsim simulate uses the",
-        "# documented rule at 200 rad/s (no shift field in a vehicle file yet): more fuel in town.",
+        "# Note: vpsim fleet shifts up at 130 rad/s, a manual also at a 2500 rpm shift point while",
+        "# accelerating (vpsim.fleet.run.gear_rule); vpsim simulate uses the documented rule at 200 rad/s",
+        "# (no shift field in a vehicle file yet): another gear pattern, so another town fuel.",
         f'base = "{BASE_PRESET}"',
         f"name = {_toml_value(params.name)}",
         "",
@@ -261,6 +287,10 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         if math.isfinite(rec.axle_ratio)
         else "default: N/V with a 0.70 top gear",
         "transmission.efficiency": "default",
+        "transmission.converter_capacity_factor": f"default: stalls at {CONVERTER_STALL_RPM:g} rpm under the "
+        "torque of the rated power (rad/s per sqrt(N m); the forward method has no converter: set 0)",
+        "transmission.lockup_min_gear": "default: lock-up clutch closed from this gear",
+        "transmission.lockup_min_speed": f"default: ... and above {LOCKUP_MIN_SPEED_KMH:g} km/h (m/s)",
         "engine.bore": f"record: {rec.displacement_l:g} L, {rec.cylinders} cyl., S/B {STROKE_BORE_RATIO}",
         "engine.thermal_efficiency": technology_note or "preset",
         "engine.friction_coefficient": technology_note or "preset",
@@ -285,7 +315,11 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
                 "road_load_c",
             ),
         ),
-        ("transmission", ("efficiency", "gearbox_ratios", "final_drive")),
+        (
+            "transmission",
+            ("efficiency", "gearbox_ratios", "final_drive")
+            + (tuple(converter_fields(rec)) if params.transmission.converter_capacity_factor > 0 else ()),
+        ),
         (
             "engine",
             (

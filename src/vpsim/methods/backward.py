@@ -94,7 +94,9 @@ def _point(
     t_closed = 0.0
     if extended:
         t_closed = tb.interp_at(i * v / c.wheel_radius, line_speed, line_min, inv_line)
-    w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(v, a, i, t_closed, extended, c)
+    w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(
+        v, a, i, g + 1, t_closed, extended, c
+    )
     t_max = tb.interp_at(w, line_speed, line_max, inv_line)
     short = t_req - t_max if t_req > t_max else 0.0
     t_cr = t_req - short
@@ -643,7 +645,7 @@ def _variant(c, rat, gear, dt, v, a, v_top_gear, extended, out):
         if extended:
             t_closed = _lazy_line(i * v[k] / c.wheel_radius, False, cache_min, n_line, w_end, c)
         w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(
-            v[k], a[k], i, t_closed, extended, c
+            v[k], a[k], i, gear[k] + 1, t_closed, extended, c
         )
         p = en.intake_pressure_for_torque(t_req, w, c)
         short = 0.0

@@ -235,9 +235,11 @@ _ROW_KEYS = (
 
 
 @inline
-def invert_point(v, dv, ddv, ratio, coef, extended, c):
-    """(33), (31), (32), (30) at one point in the gear of total ratio ``ratio`` (``coef``: c1..c4 of (21) and
-    the rolling-resistance part of c4), with the realistic car's rules in ``extended`` mode.
+def invert_point(v, dv, ddv, ratio, gear, coef, extended, c):
+    """(33), (31), (32), (30) at one point in gear ``gear`` (1-based) of total ratio ``ratio`` (``coef``:
+    c1..c4 of (21) and the rolling-resistance part of c4), with the realistic car's rules in ``extended``
+    mode. Through an unlocked torque converter the point is the quasi-static one of
+    :func:`vpsim.model.rules.converter_point` (the throttle the steady one; no traction: as below idle).
 
     Returns p_i, u_d, w_e, dw_e/dt, w_wheel, T_cr, brake force, clutch state, moving.
     The throttle u_d is the one that gives the required dp_i/dt in the manifold equation (9)
@@ -254,7 +256,15 @@ def invert_point(v, dv, ddv, ratio, coef, extended, c):
     dx2 = (ddv - (2.0 * c1 * x1 + 1.8 * c2 * x108 + cb) * dv) / c3  # (31): dp_i/dt the trajectory needs
     w = vh.engine_speed(x1, ratio, c)
     dw = vh.engine_speed(dv, ratio, c)
-    if extended and rules.clutch_engaged(w, c):  # the accessories' torque on top (realistic car)
+    unlocked = extended and not vh.converter_locked(gear, x1, c)
+    if unlocked:
+        force = vh.wheel_force(x1, dv, c)
+        if force > 0.0:
+            w_p, dw_p, t_p, brake = rules.converter_point(force, w, dw, ratio, c)
+            p = en.intake_pressure_for_torque(t_p, w_p, c)
+            u = en.throttle_for_pressure_rate(p, 0.0, w_p, c)
+            return p, u, w_p, dw_p, w, t_p, brake, rules.CLUTCH_CONVERTER, moving, True
+    if extended and rules.clutch_engaged(w, c) and not unlocked:  # the accessories' torque on top
         tpp = en.torque_per_pressure(w, c)
         x2 += en.accessory_torque(w, c) / tpp
         dx2 += en.accessory_torque_rate(w, dw, c) / tpp
@@ -262,14 +272,15 @@ def invert_point(v, dv, ddv, ratio, coef, extended, c):
     t_cr = en.crank_torque(x2, w, c)
     if not extended:
         return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, True
-    if rules.clutch_engaged(w, c):
+    if rules.clutch_engaged(w, c) and not unlocked:
         p_closed, _ = en.steady_pressure(c.min_throttle_area, w, c)
         t_closed = en.crank_torque(p_closed, w, c)
         if t_cr < t_closed:  # beyond engine braking: the engine on the closed-throttle line, brakes the rest
             t_eng, brake, fired = rules.engine_braking(t_cr, t_closed, p_closed, w, ratio, c)
             return p_closed, c.min_throttle_area, w, dw, w, t_eng, brake, rules.CLUTCH_ENGAGED, moving, fired
         return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, True
-    # below idle speed: the clutch slips (engine at idle passes the wheel torque) or the engine idles
+    # below idle speed: the clutch slips (engine at idle passes the wheel torque) or the engine idles (so
+    # too behind an unlocked converter without traction)
     force = vh.wheel_force(x1, dv, c)
     traction = force > 0.0
     t_c = (
@@ -296,7 +307,7 @@ def invert_points(v, dv, ddv, gear, ratios, coef, extended, recs, rows):
     for k in range(v.size):
         g = gear[k] - 1
         p, u, w_e, dw_e, w, t_cr, brake, clutch, moving, fired = invert_point(
-            v[k], dv[k], ddv[k], ratios[g], coef[g], extended, c
+            v[k], dv[k], ddv[k], ratios[g], g + 1, coef[g], extended, c
         )
         rows[R_P, k] = p
         rows[R_U, k] = u
@@ -456,7 +467,7 @@ def account(v, dv, vc, rows, left, right, dt, recs, realistic, band, weight, acc
         if err > band:
             acc[_A_OUT] += wk
         if k < extra.shape[1]:
-            if clutch == rules.CLUTCH_ENGAGED:
+            if clutch == rules.CLUTCH_ENGAGED or clutch == rules.CLUTCH_CONVERTER:
                 extra[0, k] = t_cr - c.inertia * rows[R_DWENG, k]
             else:
                 extra[0, k] = rules.slipping_clutch_torque(t_cr)

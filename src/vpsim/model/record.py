@@ -34,7 +34,15 @@ _PARAMETER_FIELDS = {
         "road_load_b",
         "road_load_c",
     ),
-    "transmission": ("efficiency", "final_drive"),
+    "transmission": (
+        "efficiency",
+        "final_drive",
+        "converter_capacity_factor",
+        "converter_stall_torque_ratio",
+        "converter_coupling_speed_ratio",
+        "lockup_min_gear",
+        "lockup_min_speed",
+    ),
     "engine": (
         "bore",
         "stroke",

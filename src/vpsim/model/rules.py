@@ -10,6 +10,12 @@ car has, and every method applies the same rules:
   idles. The slip dissipates T_clutch (w_e - w_wheel).
 * **brakes**: friction brakes take what engine braking (the closed-throttle line, the FQM at A_min) cannot.
 * **idle floor**: the fuel booked is max(mdot_f, mdot_idle); a declutched engine burns the idle flow.
+* **torque converter** (a transmission with ``converter_capacity_factor`` > 0, quasi-static methods): while
+  its lock-up clutch is open (:func:`.vehicle.converter_locked`) the converter takes the clutch's place.
+  With traction the engine runs at the pump speed w_t / nu (nu from :func:`.vehicle.converter_speed_ratio`,
+  slip 1 - nu > 0) and gives the pump torque T_t / mu(nu); if that speed is below idle the engine idles,
+  the converter passes more than asked and the brakes hold the rest (creep). Without traction the engine
+  idles, decoupled. The converter dissipates T_p w_p (1 - mu nu), booked in the driveline loss.
 
 Quasi-static methods (backward) impose the operating point (:func:`operating_point`); the dynamic methods
 integrate or invert the same physics with the same clutch test (:func:`clutch_engaged`) and clutch torque
@@ -18,6 +24,8 @@ energy balance of :class:`vpsim.result.EnergyBalance` from one definition.
 """
 
 from __future__ import annotations
+
+import math
 
 from . import engine as en
 from . import vehicle as vh
@@ -38,7 +46,7 @@ def canonical_mode(mode) -> str:
     return m
 
 
-CLUTCH_OPEN, CLUTCH_ENGAGED, CLUTCH_SLIPPING = 0, 1, 2
+CLUTCH_OPEN, CLUTCH_ENGAGED, CLUTCH_SLIPPING, CLUTCH_CONVERTER = 0, 1, 2, 3
 
 
 @equation
@@ -89,16 +97,42 @@ def engine_braking(t_demand, t_closed, p_closed, w_e, ratio, c):
 
 
 @inline
-def operating_point(v, a, ratio, t_closed, extended, c):
-    """Engine operating point that speed v and acceleration a impose through gear ratio ``ratio``.
+def converter_point(f_wheel, w_wheel, dw_wheel, ratio, c):
+    """The unlocked torque converter's operating point with traction (``f_wheel`` > 0, turbine speed
+    ``w_wheel`` >= 0; at 0 the converter stalls): (pump speed w_e, dw_e/dt, T_cr demanded, brake force). The
+    pump's acceleration is the turbine's over nu (quasi-static: the slip's own change is left out)."""
+    t_t = vh.wheel_to_engine_torque(f_wheel, ratio, c)  # turbine = gearbox input torque (15),(16)
+    if w_wheel > 0.0:
+        nu = vh.converter_speed_ratio(t_t, w_wheel, c)
+        w_p = w_wheel / nu
+    else:  # stall: T_t = mu_s phi_s w_p^2
+        nu = 0.0
+        w_p = math.sqrt(t_t / (vh.converter_torque_ratio(0.0, c) * vh.converter_capacity(0.0, c)))
+    if w_p >= c.idle_speed:
+        t_p = t_t / vh.converter_torque_ratio(nu, c)
+        dw_p = dw_wheel / nu if nu > 0.0 else 0.0
+        return w_p, dw_p, t_p + c.inertia * dw_p + en.accessory_torque(w_p, c), 0.0
+    # the engine idles: at idle speed the converter passes more than the wheels ask, the brakes hold it
+    nu = w_wheel / c.idle_speed
+    t_p = vh.converter_capacity(nu, c) * c.idle_speed * c.idle_speed
+    t_passed = vh.converter_torque_ratio(nu, c) * t_p
+    brake = vh.engine_to_wheel_force(t_passed, ratio, c) - f_wheel
+    return c.idle_speed, 0.0, t_p + en.accessory_torque(c.idle_speed, c), (brake if brake > 0.0 else 0.0)
+
+
+@inline
+def operating_point(v, a, ratio, gear, t_closed, extended, c):
+    """Engine operating point that speed v and acceleration a impose through gear ``gear`` (1-based) of
+    total ratio ``ratio``.
 
     Paper mode: the stiff driveline (1),(14)-(18). Realistic (extended) mode: brakes below the closed-throttle
     torque ``t_closed`` (the FQM at A_min at the wheel-side speed), the clutch below idle speed, the
     accessories' torque on the crank, and fuel cut-off in overrun: above ``c.fuel_cutoff_speed`` (if set) a
     demand at or below the motoring torque (the unfired engine at closed throttle) cuts the fuel; the engine
-    then brakes with its motoring torque and the brakes take the rest.
+    then brakes with its motoring torque and the brakes take the rest. With a torque converter whose lock-up
+    clutch is open, :func:`converter_point` (traction) or the idling engine (none).
     Returns (w_e, dw_e/dt, w_wheel, T_cr demanded, brake force, clutch state, fired, wheel force); the clutch
-    state is CLUTCH_ENGAGED, CLUTCH_SLIPPING or CLUTCH_OPEN.
+    state is CLUTCH_ENGAGED, CLUTCH_SLIPPING, CLUTCH_CONVERTER or CLUTCH_OPEN.
     """
     f_wheel = vh.wheel_force(v, a, c)  # (18)
     w_wheel = vh.engine_speed(v, ratio, c)  # (14),(17)
@@ -106,6 +140,20 @@ def operating_point(v, a, ratio, t_closed, extended, c):
     t_cr = vh.crank_torque_demand(f_wheel, ratio, dw, c)  # (1),(15),(16)
     if not extended:
         return w_wheel, dw, w_wheel, t_cr, 0.0, CLUTCH_ENGAGED, True, f_wheel
+    if not vh.converter_locked(gear, v, c):
+        if f_wheel > 0.0:
+            w_p, dw_p, t_p, brake = converter_point(f_wheel, w_wheel, dw, ratio, c)
+            return w_p, dw_p, w_wheel, t_p, brake, CLUTCH_CONVERTER, True, f_wheel
+        return (
+            c.idle_speed,
+            0.0,
+            w_wheel,
+            0.0,
+            (-f_wheel if f_wheel < 0.0 else 0.0),
+            CLUTCH_OPEN,
+            True,
+            f_wheel,
+        )
     if clutch_engaged(w_wheel, c):
         t_cr = t_cr + en.accessory_torque(w_wheel, c)
         p_closed = en.intake_pressure_for_torque(t_closed, w_wheel, c) if t_cr < t_closed else 0.0
@@ -144,10 +192,12 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
     ``t_cr`` is the crank torque the engine makes and ``t_missing`` what the demand asked beyond it (trace
     miss of a quasi-static method; 0 otherwise). The accessories take their torque from the crank; with the
     clutch engaged the gearbox takes the rest of the flywheel torque T_e = T_cr + missing - J_e dw_e - T_acc
-    (1) at w_e; while it slips, the clutch torque (the engine's, if positive) at the wheel-side speed, and
-    the slip dissipates T_clutch (w_e - w_wheel); an idealised idle governor supplies what a negative crank
-    torque of the declutched engine would take (``idle_control``). With the clutch open (quasi-static methods
-    at rest) the idling engine is outside the balance. ``fired`` False: fuel cut, no indicated work.
+    (1) at w_e (through an unlocked converter, the turbine's mu nu of it, the converter's loss booked in
+    the driveline term); while it slips, the clutch torque (the engine's, if positive) at the wheel-side
+    speed, and the slip dissipates T_clutch (w_e - w_wheel); an idealised idle governor supplies what a
+    negative crank torque of the declutched engine would take (``idle_control``). With the clutch open
+    (quasi-static methods at rest, or an unlocked converter without traction) the idling engine is outside
+    the balance. ``fired`` False: fuel cut, no indicated work.
     ``t_acc``: the accessories' torque (:func:`accessories_torque`).
     """
     vv = v if v > 0.0 else 0.0
@@ -164,6 +214,13 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
     if clutch == CLUTCH_ENGAGED:
         engine_kinetic = c.inertia * w_e * dw_e
         driveline = (1.0 - c.efficiency) * (t_asked - c.inertia * dw_e) * w_e  # (1),(15)
+        idle = 0.0
+    elif clutch == CLUTCH_CONVERTER:  # the pump takes the flywheel's power, the turbine passes mu nu of it
+        engine_kinetic = c.inertia * w_e * dw_e
+        nu = w_wheel / w_e
+        driveline = (
+            (1.0 - c.efficiency * vh.converter_torque_ratio(nu, c) * nu) * (t_asked - c.inertia * dw_e) * w_e
+        )
         idle = 0.0
     else:
         engine_kinetic = 0.0

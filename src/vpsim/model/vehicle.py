@@ -1,4 +1,5 @@
-"""Driveline and vehicle, equations (1) and (14)-(18) of Hofman et al. (2011), and the affine form (21).
+"""Driveline and vehicle, equations (1) and (14)-(18) of Hofman et al. (2011), and the affine form (21);
+the realistic car's torque converter.
 
 Written once, as :mod:`vpsim.model.engine` is: plain functions of scalars (or arrays) and the parameter
 record ``c``, inlined by every compiled kernel. SI units; ``ratio`` is the total ratio i (gearbox x final
@@ -6,6 +7,8 @@ drive) of the engaged gear.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -130,3 +133,59 @@ def acceleration(f_drive, v, brake, mass, c):
 def wheel_force_rate(v, a, jerk, c):
     """d/dt of the wheel force (18) along a trajectory (v, dv/dt, d2v/dt2): m jerk + d(drag)/dv a."""
     return c.mass * jerk + 2.0 * c.aero_coefficient * abs(v) * a
+
+
+# --- torque converter (realistic mode) ------------------------------------------------------------------
+# The quasi-static converter of Kotwicki (1982, SAE 820393) and Guzzella & Sciarretta (Vehicle Propulsion
+# Systems, section on torque converters): over the speed ratio nu = w_turbine / w_pump, the pump torque is
+# T_p = phi(nu) w_p^2 (phi = 1 / K^2, K the capacity factor) and the turbine torque T_t = mu(nu) T_p. The
+# curves here are the typical shape of a passenger-car converter: mu falls linearly from the stall torque
+# ratio at nu = 0 to 1 at the coupling point nu_c and is 1 above (fluid coupling); phi is its stall value up
+# to nu_c and falls linearly to 0 at nu = 1 (no torque without slip).
+
+
+@equation
+def converter_torque_ratio(nu, c):
+    """mu(nu) = T_turbine / T_pump: the stall ratio at nu = 0, linearly to 1 at the coupling point, then 1."""
+    nc = c.converter_coupling_speed_ratio
+    if nu >= nc:
+        return 1.0
+    return c.converter_stall_torque_ratio + (1.0 - c.converter_stall_torque_ratio) * nu / nc
+
+
+@equation
+def converter_capacity(nu, c):
+    """phi(nu) = T_pump / w_pump^2 = 1 / K(nu)^2: 1 / K_stall^2 up to the coupling point, then linearly to 0
+    at nu = 1."""
+    k = 1.0 / (c.converter_capacity_factor * c.converter_capacity_factor)
+    nc = c.converter_coupling_speed_ratio
+    if nu <= nc:
+        return k
+    if nu >= 1.0:
+        return 0.0
+    return k * (1.0 - nu) / (1.0 - nc)
+
+
+@equation
+def converter_speed_ratio(t_t, w_t, c):
+    """The speed ratio nu at which the converter passes turbine torque ``t_t`` > 0 at turbine speed ``w_t``
+    > 0: the root of t_t = mu(nu) phi(nu) (w_t / nu)^2, unique since mu phi / nu^2 falls with nu; each
+    branch is a quadratic in nu, solved in closed form. The slip 1 - nu is positive."""
+    nc = c.converter_coupling_speed_ratio
+    s = w_t * w_t / (c.converter_capacity_factor * c.converter_capacity_factor)
+    # coupling branch: t_t nu^2 = s (1 - nu) / (1 - nc), i.e. q nu^2 + nu - 1 = 0
+    q = t_t * (1.0 - nc) / s
+    nu = 2.0 / (1.0 + math.sqrt(1.0 + 4.0 * q))
+    if nu >= nc:
+        return nu
+    # multiplication branch: t_t nu^2 = s (mu_s + (1 - mu_s) nu / nc)
+    mu_s = c.converter_stall_torque_ratio
+    b = s * (1.0 - mu_s) / nc
+    return (b + math.sqrt(b * b + 4.0 * t_t * s * mu_s)) / (2.0 * t_t)
+
+
+@equation
+def converter_locked(gear, v, c):
+    """No converter, or its lock-up clutch closed: in gear ``gear`` (1-based) >= ``lockup_min_gear`` at or
+    above ``lockup_min_speed``."""
+    return c.converter_capacity_factor <= 0.0 or (gear >= c.lockup_min_gear and v >= c.lockup_min_speed)
