@@ -22,6 +22,7 @@ import pytest
 
 import vpsim
 from vpsim.batch import run_batch
+from vpsim.cycles import load_cycle
 from vpsim.methods import backward, forward, inverse
 from vpsim.model import engine as en
 from vpsim.model import rules
@@ -462,4 +463,6 @@ def test_the_forward_method_refuses_a_converter_in_one_line(params):
         run_batch(
             "udds", {"transmission.converter_capacity_factor": [0.0, 12.0]}, method="forward", mode="extended"
         )
+    with pytest.raises(vpsim.VpsimError, match="forward method has no torque converter"):
+        forward.run(load_cycle("udds"), q, mode="realistic")  # the method itself, not only its callers
     assert vpsim.simulate("udds", method="forward", params=q, mode="paper").fuel_kg > 0  # none in paper mode

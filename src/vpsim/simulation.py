@@ -86,7 +86,6 @@ def simulate(
     if method == "forward":
         from .methods import forward
 
-        refuse_converter_forward(mode, [params.transmission.converter_capacity_factor])
         return forward.run(cycle, params, driver=driver, schedule=schedule, mode=mode, **options)
     from .methods import inverse
 

@@ -1193,6 +1193,9 @@ def run(
     from dataclasses import replace
 
     mode = rules.canonical_mode(mode)
+    from ..simulation import refuse_converter_forward
+
+    refuse_converter_forward(mode, [params.transmission.converter_capacity_factor])
     if solver not in SOLVERS:
         raise VpsimError(f"unknown solver {solver!r}; expected one of {', '.join(SOLVERS)}")
     rtol = params.simulation.ode_relative_tolerance if rtol is None else float(rtol)
