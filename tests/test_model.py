@@ -290,6 +290,16 @@ def test_fuel_cutoff_burns_nothing_in_overrun(params, method):
     assert cut.deviations.negative_fuel_flow_s == 0.0
 
 
+def test_forward_says_it_has_no_fuel_cutoff(params):
+    """Not modelled in the forward method yet (a hard cut at the pedal's floor chatters with the PI driver):
+    the run says so instead of passing the setting over in silence, and its fuel is the uncut one."""
+    q = params.with_changes(simulation={"fuel_cutoff_speed": 100.0})
+    r = vpsim.simulate("nedc", method="forward", params=q)
+    assert any("fuel_cutoff_speed = 100 rad/s is not applied" in n for n in r.notes)
+    assert r.fuel_kg == vpsim.simulate("nedc", method="forward", params=params).fuel_kg
+    assert not any("fuel_cutoff" in n for n in vpsim.simulate("nedc", method="forward", params=params).notes)
+
+
 def test_paper_mode_ignores_the_realistic_extras(params):
     """The paper's model has no accessories and no cut-off: its numbers do not move."""
     q = params.with_changes(engine={"accessory_power": 800.0}, simulation={"fuel_cutoff_speed": 100.0})

@@ -1322,6 +1322,13 @@ def run(
             "paper mode: no clutch and no brakes; at standstill the engine stands with the car, which creeps "
             "and oscillates (as the paper reports; see docs/methods.md)"
         )
+    elif params.simulation.fuel_cutoff_speed > 0.0:
+        cutoff = params.simulation.fuel_cutoff_speed
+        notes.append(
+            f"simulation.fuel_cutoff_speed = {cutoff:g} rad/s is not applied: the forward method has no fuel "
+            "cut-off yet (the engine burns its closed-throttle fuel in overrun; the backward and inverse "
+            "methods cut it)"
+        )
     return Result(
         method="forward",
         cycle=cycle.name,
