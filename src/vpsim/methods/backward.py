@@ -100,17 +100,17 @@ def _point(
     t_max = tb.interp_at(w, line_speed, line_max, inv_line)
     short = t_req - t_max if t_req > t_max else 0.0
     t_cr = t_req - short
-    p = en.intake_pressure_for_torque(t_cr if fired else t_closed, w, c)  # fuel cut: the closed throttle's
+    t_fired = t_cr if fired >= 1.0 else t_closed  # cylinders cut: the throttle is closed (manifold, fuel)
+    p = en.intake_pressure_for_torque(t_fired, w, c)
     if fuel_kind == FUEL_EXACT:
         mdot = en.fuel_flow(p, w, c)
     elif fuel_kind == FUEL_TABLE:
-        mdot = tb.bilinear_at(map_speed, map_torque, table, w, t_cr, inv_ms, inv_mt)
+        mdot = tb.bilinear_at(map_speed, map_torque, table, w, t_fired, inv_ms, inv_mt)
     else:
         mdot = math.nan
     if clutch == rules.CLUTCH_OPEN:
         mdot = c.idle_fuel_flow
-    if not fired:  # fuel cut-off in overrun
-        mdot = 0.0
+    mdot = fired * mdot  # fuel cut-off in overrun: the fired cylinders' part
     return v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot
 
 
@@ -126,7 +126,7 @@ def _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fi
     rows[R_SHORT, k] = short
     rows[R_BRAKE, k] = brake
     rows[R_CLUTCH, k] = clutch
-    rows[R_FIRED, k] = 1.0 if fired else 0.0
+    rows[R_FIRED, k] = fired
     rows[R_P, k] = p
     rows[R_MDOT, k] = mdot
     # the FQM's steady throttle (its area: a boosted engine's command beyond A_max is boost)
@@ -169,7 +169,7 @@ def _book(
 ):
     """Add interval's fuel, distance, energy terms and trace miss to the sums; returns the speed deficit of
     the current contiguous miss (``cur``)."""
-    _kahan(acc, comp, A_FUEL, (rules.fuel_with_idle_floor(mdot, c) if fired else 0.0) * dt)
+    _kahan(acc, comp, A_FUEL, rules.fuel_used(mdot, fired, c) * dt)
     _kahan(acc, comp, A_DIST, v * dt)
     pw = rules.powers(
         p,
@@ -503,7 +503,7 @@ def sample_rows(rows, gear, recs, generated, out):
         out[S_P, k] = 0.5 * (rows[R_P, lo] + rows[R_P, hi]) if ok else math.nan
         out[S_THR, k] = 0.5 * (rows[R_THR, lo] + rows[R_THR, hi]) if ok else math.nan
         out[S_MDOT, k] = mdot
-        out[S_USED, k] = rules.fuel_with_idle_floor(mdot, c) if fired > 0.0 else 0.0
+        out[S_USED, k] = rules.fuel_used(mdot, fired, c)
         out[S_BRAKE, k] = 0.5 * (rows[R_BRAKE, lo] + rows[R_BRAKE, hi])
         out[S_SHORT, k] = max(rows[R_SHORT, lo], rows[R_SHORT, hi])
         out[S_ENGAGED, k] = 1.0 if engaged else 0.0
@@ -647,7 +647,7 @@ def _variant(c, rat, gear, dt, v, a, v_top_gear, extended, out):
         w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(
             v[k], a[k], i, gear[k] + 1, t_closed, extended, c
         )
-        p = en.intake_pressure_for_torque(t_req, w, c)
+        p = en.intake_pressure_for_torque(t_req if fired >= 1.0 else t_closed, w, c)
         short = 0.0
         if not (w <= w_end and p <= p_screen):
             t_max = _lazy_line(w, True, cache_max, n_line, w_end, c)
@@ -663,8 +663,7 @@ def _variant(c, rat, gear, dt, v, a, v_top_gear, extended, out):
             max_short = max(max_short, short)
             cur = 0.0
         mdot = en.fuel_flow(p, w, c) if clutch != rules.CLUTCH_OPEN else c.idle_fuel_flow
-        if fired:
-            fuel += rules.fuel_with_idle_floor(mdot, c) * dt[k]
+        fuel += rules.fuel_used(fired * mdot, fired, c) * dt[k]
     out[B_FUEL] = fuel
     out[B_MISS_S] = miss_s
     out[B_MAX_SHORT] = max_short

@@ -210,10 +210,15 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     else:
         w = c.idle_speed
         a_eng = throttle if throttle > D[_AIDLE] else D[_AIDLE]
-    # engine: manifold (9),(10), torque (2)-(8), fuel (7)
-    t_cr = en.crank_torque(p, w, c)
+    # engine: manifold (9),(10), torque (2)-(8), fuel (7); fuel cut-off in overrun (realistic mode, engaged):
+    # the pedal's floor band cuts cylinders (rules.fired_fraction_of_command: engine_braking's line at a
+    # steady state)
+    fired = 1.0
+    if coupled and D[_EXT] != 0.0 and D[_OPEN] == 0.0:
+        fired = rules.fired_fraction_of_command(cmd, D[_AMIN], w, c)
+    t_cr = en.partly_fired_torque(p, w, fired, c) if fired < 1.0 else en.crank_torque(p, w, c)
     dp = en.manifold_pressure_rate(p, a_eng, w, c)
-    mdot_f = en.fuel_flow(p, w, c)
+    mdot_f = fired * en.fuel_flow(p, w, c)
     # vehicle (18) with the engine inertia (1),(14)-(17)
     t_acc = rules.accessories_torque(w, D[_EXT] != 0.0, c)
     if coupled:
@@ -232,10 +237,10 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     dy[_P] = dp
     dy[_Z] = dz
     # quadratures: fuel, distance, energy terms (powers, W)
-    used = rules.fuel_with_idle_floor(mdot_f, c)
+    used = rules.fuel_used(mdot_f, fired, c)
     dy[_FUEL] = used
     dy[_DIST] = vv
-    pw = rules.powers(p, w, dw, t_cr, 0.0, w_wheel, vv, acc, brake, clutch, True, t_acc, c)
+    pw = rules.powers(p, w, dw, t_cr, 0.0, w_wheel, vv, acc, brake, clutch, fired, t_acc, c)
     dy[_E_IND] = pw[0]
     dy[_E_FRIC] = pw[1]
     dy[_E_PUMP] = pw[2]
@@ -1321,13 +1326,6 @@ def run(
         notes.append(
             "paper mode: no clutch and no brakes; at standstill the engine stands with the car, which creeps "
             "and oscillates (as the paper reports; see docs/methods.md)"
-        )
-    elif params.simulation.fuel_cutoff_speed > 0.0:
-        cutoff = params.simulation.fuel_cutoff_speed
-        notes.append(
-            f"simulation.fuel_cutoff_speed = {cutoff:g} rad/s is not applied: the forward method has no fuel "
-            "cut-off yet (the engine burns its closed-throttle fuel in overrun; the backward and inverse "
-            "methods cut it)"
         )
     return Result(
         method="forward",

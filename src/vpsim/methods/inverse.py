@@ -263,7 +263,7 @@ def invert_point(v, dv, ddv, ratio, gear, coef, extended, c):
             w_p, dw_p, t_p, brake = rules.converter_point(force, w, dw, ratio, c)
             p = en.intake_pressure_for_torque(t_p, w_p, c)
             u = en.throttle_for_pressure_rate(p, 0.0, w_p, c)
-            return p, u, w_p, dw_p, w, t_p, brake, rules.CLUTCH_CONVERTER, moving, True
+            return p, u, w_p, dw_p, w, t_p, brake, rules.CLUTCH_CONVERTER, moving, 1.0
     if extended and rules.clutch_engaged(w, c) and not unlocked:  # the accessories' torque on top
         tpp = en.torque_per_pressure(w, c)
         x2 += en.accessory_torque(w, c) / tpp
@@ -271,14 +271,14 @@ def invert_point(v, dv, ddv, ratio, gear, coef, extended, c):
     u = en.throttle_for_pressure_rate(x2, dx2, w, c)  # (30),(32)
     t_cr = en.crank_torque(x2, w, c)
     if not extended:
-        return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, True
+        return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, 1.0
     if rules.clutch_engaged(w, c) and not unlocked:
         p_closed, _ = en.steady_pressure(c.min_throttle_area, w, c)
         t_closed = en.crank_torque(p_closed, w, c)
         if t_cr < t_closed:  # beyond engine braking: the engine on the closed-throttle line, brakes the rest
             t_eng, brake, fired = rules.engine_braking(t_cr, t_closed, p_closed, w, ratio, c)
             return p_closed, c.min_throttle_area, w, dw, w, t_eng, brake, rules.CLUTCH_ENGAGED, moving, fired
-        return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, True
+        return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, 1.0
     # below idle speed: the clutch slips (engine at idle passes the wheel torque) or the engine idles (so
     # too behind an unlocked converter without traction)
     force = vh.wheel_force(x1, dv, c)
@@ -294,7 +294,7 @@ def invert_point(v, dv, ddv, ratio, gear, coef, extended, c):
         dp = dt_c / en.torque_per_pressure(w_idle, c)
     u_idle = en.throttle_for_pressure_rate(p, dp, w_idle, c)
     brake = -force if force < 0.0 else 0.0
-    return p, u_idle, w_idle, 0.0, w, t_c, brake, rules.CLUTCH_SLIPPING, moving, True
+    return p, u_idle, w_idle, 0.0, w, t_c, brake, rules.CLUTCH_SLIPPING, moving, 1.0
 
 
 @kernel
@@ -315,11 +315,11 @@ def invert_points(v, dv, ddv, gear, ratios, coef, extended, recs, rows):
         rows[R_DWENG, k] = dw_e
         rows[R_W, k] = w
         rows[R_TCR, k] = t_cr
-        rows[R_MDOT, k] = en.fuel_flow(p, w_e, c) if fired else 0.0
+        rows[R_MDOT, k] = fired * en.fuel_flow(p, w_e, c)  # fuel cut-off: the fired cylinders' part
         rows[R_BRAKE, k] = brake
         rows[R_CLUTCH, k] = clutch
         rows[R_MOVING, k] = 1.0 if moving else 0.0
-        rows[R_FIRED, k] = 1.0 if fired else 0.0
+        rows[R_FIRED, k] = fired
     return True
 
 
@@ -413,8 +413,8 @@ def account(v, dv, vc, rows, left, right, dt, recs, realistic, band, weight, acc
         mdot = rows[R_MDOT, k]
         brake = rows[R_BRAKE, k]
         moving = rows[R_MOVING, k] != 0.0
-        fired = rows[R_FIRED, k] != 0.0
-        used = rules.fuel_with_idle_floor(mdot, c) if fired else 0.0
+        fired = rows[R_FIRED, k]
+        used = rules.fuel_used(mdot, fired, c)
         pw = rules.powers(
             rows[R_P, k],
             rows[R_WENG, k],

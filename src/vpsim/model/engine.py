@@ -172,6 +172,14 @@ def motoring_torque(p_i, w_e, c):
 
 
 @equation
+def partly_fired_torque(p_i, w_e, fired, c):
+    """Crank torque with the fraction ``fired`` of the cylinders fired (fuel cut-off in overrun): the
+    motoring torque plus that fraction of what the fuel adds, (2)-(6) with IMEP (4) scaled."""
+    t_motor = motoring_torque(p_i, w_e, c)
+    return t_motor + fired * (crank_torque(p_i, w_e, c) - t_motor)
+
+
+@equation
 def accessory_torque(w_e, c):
     """Torque the accessories (alternator, pumps) take from the crankshaft: their power over the engine
     speed, the speed taken no lower than idle (a running engine)."""

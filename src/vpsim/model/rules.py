@@ -81,19 +81,61 @@ def brake_force(t_demand, t_closed, ratio, c):
     return vh.engine_to_wheel_force(excess, ratio, c) if excess > 0.0 else 0.0
 
 
+CUTOFF_RESUME_BAND = 0.2  # the cut ramps in over the 20 % above c.fuel_cutoff_speed (see cutoff_share)
+
+
+@equation
+def cutoff_share(w_e, c):
+    """How far fuel cut-off in overrun may go at engine speed w_e: 0 below ``c.fuel_cutoff_speed`` (or with
+    it 0: no cut-off), 1 from :data:`CUTOFF_RESUME_BAND` above it, linear between. Engine controls re-fire
+    below a resume speed some 200-400 rpm under the cut-off speed (a hysteresis); the ramp is its continuous
+    stand-in, which a dynamic method can integrate (a hard switch chatters there)."""
+    w_cut = c.fuel_cutoff_speed
+    if not w_cut > 0.0 or w_e <= w_cut:
+        return 0.0
+    x = (w_e - w_cut) / (CUTOFF_RESUME_BAND * w_cut)
+    return x if x < 1.0 else 1.0
+
+
 @equation
 def engine_braking(t_demand, t_closed, p_closed, w_e, ratio, c):
     """The engaged engine asked for less than its closed-throttle torque ``t_closed`` (manifold at
-    ``p_closed``): it runs on that line and the brakes take the rest; with fuel cut-off (above
-    ``c.fuel_cutoff_speed``) a demand at or below the motoring torque cuts the fuel, the unfired engine brakes
-    with its motoring torque and the brakes the rest. Returns (T_cr, brake force, fired)."""
+    ``p_closed``). Without fuel cut-off it runs on that line and the brakes take the rest. With it the control
+    cuts cylinders progressively: the fired fraction needed falls linearly from 1 at ``t_closed`` to 0 at the
+    motoring torque (the unfired engine at that pressure), the cut being allowed as far as
+    :func:`cutoff_share` of the engine speed; the brakes take what the engine does not. Returns (T_cr, brake
+    force, fired fraction in [0, 1])."""
     if t_demand >= t_closed:
-        return t_demand, 0.0, True
-    if c.fuel_cutoff_speed > 0.0 and w_e >= c.fuel_cutoff_speed:
-        t_motor = en.motoring_torque(p_closed, w_e, c)
-        if t_demand <= t_motor:
-            return t_motor, brake_force(t_demand, t_motor, ratio, c), False
-    return t_closed, brake_force(t_demand, t_closed, ratio, c), True
+        return t_demand, 0.0, 1.0
+    share = cutoff_share(w_e, c)
+    if share <= 0.0:
+        return t_closed, brake_force(t_demand, t_closed, ratio, c), 1.0
+    t_motor = en.motoring_torque(p_closed, w_e, c)
+    need = (t_demand - t_motor) / (t_closed - t_motor) if t_demand > t_motor else 0.0
+    fired = 1.0 - share * (1.0 - need)
+    t_eng = t_motor + fired * (t_closed - t_motor)
+    return t_eng, brake_force(t_demand, t_eng, ratio, c), fired
+
+
+@equation
+def fired_fraction_of_command(u, a_min, w_e, c):
+    """The fired fraction a pedal command u (m²; the forward method's PI) asks for: the pedal's floor band
+    [0, A_min] (throttle closed, no brakes) is the cylinders' cut, u / A_min of them fired there, none with
+    the brakes on (u <= 0), all from A_min up; the cut allowed as far as :func:`cutoff_share`. At a steady
+    state the PI sets u where the torque meets the demand: the fraction of :func:`engine_braking`."""
+    share = cutoff_share(w_e, c)
+    if u >= a_min or share <= 0.0:
+        return 1.0
+    need = u / a_min if u > 0.0 else 0.0
+    return 1.0 - share * (1.0 - need)
+
+
+@equation
+def fuel_used(mdot_f, fired, c):
+    """Fuel booked for the flow ``mdot_f`` of an engine with ``fired`` of its cylinders fired: the idle floor
+    for the fired part, max(mdot_f, fired mdot_idle) (1: :func:`fuel_with_idle_floor`; 0: none)."""
+    floor = fired * c.idle_fuel_flow
+    return mdot_f if mdot_f > floor else floor
 
 
 @inline
@@ -127,23 +169,23 @@ def operating_point(v, a, ratio, gear, t_closed, extended, c):
 
     Paper mode: the stiff driveline (1),(14)-(18). Realistic (extended) mode: brakes below the closed-throttle
     torque ``t_closed`` (the FQM at A_min at the wheel-side speed), the clutch below idle speed, the
-    accessories' torque on the crank, and fuel cut-off in overrun: above ``c.fuel_cutoff_speed`` (if set) a
-    demand at or below the motoring torque (the unfired engine at closed throttle) cuts the fuel; the engine
-    then brakes with its motoring torque and the brakes take the rest. With a torque converter whose lock-up
+    accessories' torque on the crank, and fuel cut-off in overrun (:func:`engine_braking`): above
+    ``c.fuel_cutoff_speed`` (if set) a demand below the closed-throttle torque cuts cylinders, all of them at
+    or below the motoring torque, where the brakes take the rest. With a torque converter whose lock-up
     clutch is open, :func:`converter_point` (traction) or the idling engine (none).
-    Returns (w_e, dw_e/dt, w_wheel, T_cr demanded, brake force, clutch state, fired, wheel force); the clutch
-    state is CLUTCH_ENGAGED, CLUTCH_SLIPPING, CLUTCH_CONVERTER or CLUTCH_OPEN.
+    Returns (w_e, dw_e/dt, w_wheel, T_cr demanded, brake force, clutch state, fired fraction, wheel force);
+    the clutch state is CLUTCH_ENGAGED, CLUTCH_SLIPPING, CLUTCH_CONVERTER or CLUTCH_OPEN.
     """
     f_wheel = vh.wheel_force(v, a, c)  # (18)
     w_wheel = vh.engine_speed(v, ratio, c)  # (14),(17)
     dw = vh.engine_speed(a, ratio, c)
     t_cr = vh.crank_torque_demand(f_wheel, ratio, dw, c)  # (1),(15),(16)
     if not extended:
-        return w_wheel, dw, w_wheel, t_cr, 0.0, CLUTCH_ENGAGED, True, f_wheel
+        return w_wheel, dw, w_wheel, t_cr, 0.0, CLUTCH_ENGAGED, 1.0, f_wheel
     if not vh.converter_locked(gear, v, c):
         if f_wheel > 0.0:
             w_p, dw_p, t_p, brake = converter_point(f_wheel, w_wheel, dw, ratio, c)
-            return w_p, dw_p, w_wheel, t_p, brake, CLUTCH_CONVERTER, True, f_wheel
+            return w_p, dw_p, w_wheel, t_p, brake, CLUTCH_CONVERTER, 1.0, f_wheel
         return (
             c.idle_speed,
             0.0,
@@ -151,7 +193,7 @@ def operating_point(v, a, ratio, gear, t_closed, extended, c):
             0.0,
             (-f_wheel if f_wheel < 0.0 else 0.0),
             CLUTCH_OPEN,
-            True,
+            1.0,
             f_wheel,
         )
     if clutch_engaged(w_wheel, c):
@@ -161,10 +203,10 @@ def operating_point(v, a, ratio, gear, t_closed, extended, c):
         return w_wheel, dw, w_wheel, t_cr, brake, CLUTCH_ENGAGED, fired, f_wheel
     if f_wheel > 0.0:  # slipping: the engine at idle passes the wheel torque, its inertia decoupled
         t_clutch = vh.wheel_to_engine_torque(f_wheel, ratio, c) + en.accessory_torque(c.idle_speed, c)
-        return c.idle_speed, 0.0, w_wheel, t_clutch, 0.0, CLUTCH_SLIPPING, True, f_wheel
+        return c.idle_speed, 0.0, w_wheel, t_clutch, 0.0, CLUTCH_SLIPPING, 1.0, f_wheel
     # open: the engine idles (accessories included in the idle flow), the brakes hold what the road load
     # does not
-    return c.idle_speed, 0.0, w_wheel, 0.0, (-f_wheel if f_wheel < 0.0 else 0.0), CLUTCH_OPEN, True, f_wheel
+    return c.idle_speed, 0.0, w_wheel, 0.0, (-f_wheel if f_wheel < 0.0 else 0.0), CLUTCH_OPEN, 1.0, f_wheel
 
 
 # indices of the energy terms returned by powers(), in EnergyBalance's order
@@ -197,7 +239,7 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
     speed, and the slip dissipates T_clutch (w_e - w_wheel); an idealised idle governor supplies what a
     negative crank torque of the declutched engine would take (``idle_control``). With the clutch open
     (quasi-static methods at rest, or an unlocked converter without traction) the idling engine is outside
-    the balance. ``fired`` False: fuel cut, no indicated work.
+    the balance. ``fired``: the fraction of the cylinders fired (0: fuel cut, no indicated work).
     ``t_acc``: the accessories' torque (:func:`accessories_torque`).
     """
     vv = v if v > 0.0 else 0.0
@@ -205,7 +247,7 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
     if clutch == CLUTCH_OPEN:
         return (0.0, 0.0, 0.0, 0.0, 0.0, road[0], road[1], road[2], road[3], 0.0, 0.0, 0.0)
     cyc = en.cycles_per_second(w_e, c) * c.displacement  # MEP x this = power
-    indicated = en.fuel_flow(p_i, w_e, c) * c.fuel_heating_value * c.thermal_efficiency if fired else 0.0
+    indicated = fired * en.fuel_flow(p_i, w_e, c) * c.fuel_heating_value * c.thermal_efficiency
     friction = (
         en.fmep_at_bmep(t_cr / c.mep_to_torque, w_e, c) * cyc
     )  # (5) at the engine's BMEP (fired or not)
