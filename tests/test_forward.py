@@ -361,6 +361,55 @@ def test_steady_state_matches_fqm_at_default_settings(params):
     assert max(steps) < 200  # the step grows once the manifold has settled (stiffly stable)
 
 
+def test_boosted_steady_state_matches_fqm(params):
+    """A boosted engine held at commands beyond A_max (wide-open throttle, boost upstream): the integrator's
+    steady state is the FQM's (the same (9)-(10) with the boost upstream) to < 0.1 % of torque, and below the
+    boost; SciPy's LSODA on the manifold equation agrees."""
+    from scipy.integrate import solve_ivp
+
+    from vpsim.model.record import record_array
+
+    q = params.with_changes(engine={"boost_pressure": 1.9e5})
+    arr = record_array(q).copy()
+    arr["mass"] = 1.0e15
+    arr["rolling_force"] = 0.0
+    c = arr[0]
+    ratio = q.transmission.ratios[0]
+    a_max = q.engine.max_throttle_area
+    for u in (0.8 * a_max, 1.3 * a_max, 2.0 * a_max):
+        for w in (150.0, 300.0, 550.0):
+            y0 = np.zeros(forward.NY)
+            y0[forward._V] = w * q.vehicle.wheel_radius / ratio
+            y0[forward._P] = 0.5 * q.engine.ambient_pressure
+            _, _, out_aux, _ = forward.integrate(
+                np.array([0.0, 10.0]),
+                np.array([ratio]),
+                y0,
+                c,
+                forward.settings(q),
+                np.array([0.0, 10.0]),
+                np.array([u, u]),
+                open_loop=True,
+                max_step=0.2,
+            )
+            t_cr = out_aux[-1, forward._X_TCR]
+            p_ss, _ = en.steady_pressure(u, w, c)
+            t_fqm = en.crank_torque(p_ss, w, c)
+            ref = solve_ivp(
+                lambda t, p, u=u, w=w: [en.manifold_pressure_rate(p[0], u, w, c)],
+                (0.0, 10.0),
+                [y0[forward._P]],
+                method="LSODA",
+                rtol=1e-10,
+                atol=1e-6,
+            )
+            assert t_cr == pytest.approx(t_fqm, rel=1e-3)
+            assert t_cr == pytest.approx(float(en.crank_torque(ref.y[0, -1], w, c)), rel=1e-3)
+            assert p_ss <= en.boost_available(w, c) and out_aux[-1, forward._X_THR] <= a_max
+            if u > a_max and w >= en.BOOST_SPOOL_SPEED:
+                assert p_ss > q.engine.ambient_pressure
+
+
 @pytest.mark.parametrize("name", ["nedc", "ftp75", "us06"])
 @pytest.mark.parametrize("mode", ["paper", "extended"])
 def test_cycle_fuel_matches_a_tight_reference(name, mode):
