@@ -54,7 +54,7 @@ def test_a_vehicles_own_measurement_never_enters_its_fit(tmp_path):
     assert np.allclose(b.loc[target, "measured_mpg"], 0.6 * a.loc[target, "measured_mpg"], rtol=1e-3)
     np.testing.assert_array_equal(a.loc[target, "predicted_mpg"], b.loc[target, "predicted_mpg"])
     own_fold = int(a.loc[target, "fold"].iloc[0])
-    same_class = a["boosted"] == bool(a.loc[target, "boosted"].iloc[0])
+    same_class = a["technology_class"] == a.loc[target, "technology_class"].iloc[0]
     others = a.index[(a["fold"] != own_fold) & same_class]
     assert len(others) > 0
     changed = np.abs(b.loc[others, "predicted_mpg"].to_numpy() - a.loc[others, "predicted_mpg"].to_numpy())

@@ -32,10 +32,11 @@ def vehicle():
     "technology",
     default=None,
     type=click.Path(dir_okay=False),
-    help="technology.json of a `vpsim fleet` run: use its all-vehicle fit for this car's NA/boosted class.",
+    help="technology.json of a `vpsim fleet` run: use its all-vehicle fit for this car's technology class.",
 )
 def from_epa(file, vehicle_id, config, out, technology):
     """Write the parameters of test vehicle --id of the EPA test car list FILE as an editable TOML."""
+    from ..fleet.calibrate import vehicle_class
     from ..fleet.epa import read_test_car_list
     from ..fleet.vehicle import record_parameters, vehicle_toml
 
@@ -45,7 +46,7 @@ def from_epa(file, vehicle_id, config, out, technology):
     if technology:
         try:
             data = json.loads(Path(technology).read_text())
-            cls = "boosted" if rec.boosted else "na"
+            cls = vehicle_class(rec)
             fit = data["all_vehicles"][cls]
             tech = {k: float(fit[k]) for k in ("engine.thermal_efficiency", "engine.friction_coefficient")}
         except (OSError, ValueError, KeyError, TypeError) as exc:

@@ -1,8 +1,8 @@
 """Technology calibration across the fleet by k-fold cross-validation (folds by vehicle).
 
 A few *global* technology parameters (:data:`TECH_PARAMS`: ``engine.thermal_efficiency`` and
-``engine.friction_coefficient``) are fitted per engine class (:data:`CLASSES`: naturally aspirated or
-boosted, the record's class); nothing is tuned per vehicle.
+``engine.friction_coefficient``) are fitted per engine class (:data:`CLASSES`: naturally aspirated,
+boosted, or high-output, from the record: :func:`vehicle_class`); nothing is tuned per vehicle.
 
 How (fast and exact where it matters):
 
@@ -24,7 +24,20 @@ from __future__ import annotations
 import numpy as np
 
 TECH_PARAMS = ("engine.thermal_efficiency", "engine.friction_coefficient")
-CLASSES = ("na", "boosted")
+CLASSES = ("na", "boosted", "high_output")
+# a boosted engine above this specific power (rated power per litre) is its own technology class: the
+# record's high-output engines (sports and performance cars) run the cycles at very low load with more
+# friction, valve overlap and enrichment than the boosted class's typical 1.5-2.0 L turbocharged engine
+HIGH_OUTPUT_KW_PER_L = 100.0
+
+
+def vehicle_class(rec) -> str:
+    """The technology class of a certification record: ``na``, ``boosted`` or ``high_output``."""
+    if not rec.boosted:
+        return "na"
+    return "high_output" if rec.specific_power_kw_per_l > HIGH_OUTPUT_KW_PER_L else "boosted"
+
+
 GRID = (
     np.array([0.30, 0.36, 0.42, 0.48, 0.54]),
     np.array([0.1, 0.8, 1.5, 2.2, 2.9]),

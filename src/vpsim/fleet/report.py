@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import calibrate as cal
+
 CSV_COLUMNS = (
     "vehicle_id",
     "configuration",
@@ -83,7 +85,7 @@ def run_info(run) -> dict:
         "mode": "extended",
         "folds": run.folds,
         "technology_parameters": ["engine.thermal_efficiency", "engine.friction_coefficient"],
-        "technology_classes": ["na", "boosted"],
+        "technology_classes": list(cal.CLASSES),
         "input": str(run.cars.path),
         "n_test_rows": run.cars.n_rows,
         "n_rows": int(len(df)),
@@ -407,8 +409,8 @@ def markdown(run, s, info, df, w, command: str) -> str:
         "# Fleet: predicted against measured fuel economy",
         "",
         f"Input: `{Path(run.cars.path).name}` ({info['n_test_rows']} test rows). Method: **{run.method}**, "
-        "extended mode; technology (`engine.thermal_efficiency`, `engine.friction_coefficient` per NA / "
-        "boosted class) "
+        "extended mode; technology (`engine.thermal_efficiency`, `engine.friction_coefficient` per class: "
+        f"aspirated, boosted, high-output above {cal.HIGH_OUTPUT_KW_PER_L:g} kW/L) "
         f"fitted by {run.folds}-fold cross-validation by vehicle: **every error below is out of fold**.",
     ]
     if command:

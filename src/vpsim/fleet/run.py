@@ -89,7 +89,9 @@ class FleetRun:
 
 
 def _vehicle_class(rec: VehicleRecord) -> str:
-    return "boosted" if rec.boosted else "na"
+    from .calibrate import vehicle_class
+
+    return vehicle_class(rec)
 
 
 # --- units of work (module level: they travel to Dask workers) ----------------------------------------------
@@ -426,6 +428,7 @@ def _row(
         "test_mass_kg": round(v.mass_kg, 1),
         "power_to_mass_w_per_kg": round(1e3 * v.rated_power_kw / v.mass_kg, 2),
         "specific_power_kw_per_l": round(v.specific_power_kw_per_l, 2),
+        "technology_class": _vehicle_class(v),
         "thermal_efficiency": t[cal.TECH_PARAMS[0]],
         "friction_coefficient": t[cal.TECH_PARAMS[1]],
         "trace_miss_s": math.nan,

@@ -27,7 +27,8 @@ Mapping (record units -> SI; every default below is a module constant, documente
   :data:`FUEL_LHV_J_PER_KG`.
 * **technology** (global, not per vehicle): ``engine.thermal_efficiency`` and
   ``engine.friction_coefficient`` come from the fleet calibration (:mod:`vpsim.fleet.calibrate`) per
-  NA / boosted class, or the preset's values.
+  technology class (aspirated, boosted, high-output: :func:`vpsim.fleet.calibrate.vehicle_class`), or the
+  preset's values.
 """
 
 from __future__ import annotations
