@@ -324,6 +324,12 @@ def _union_s(w, f, exact) -> float:
 
 def limits_of(params) -> dict:
     """The physical limits a run is assessed against (:func:`flags`)."""
+    from .model.record import memo
+
+    return dict(memo(params, "limits", _limits))  # (once per parameter set: every run's result carries it)
+
+
+def _limits(params) -> dict:
     from .model import engine as en
     from .model.record import record
 
