@@ -82,12 +82,11 @@ class PIDriver:
         cls, params, driver, mode: str = "paper", tracking_time_s: float | None = None
     ) -> PIDriver:
         """The driver ``driver`` ("1", "2") of a parameter set, for ``mode`` ``paper`` or ``extended``."""
-        from ..model import engine as en
-        from ..model.record import record
+        from ..result import limits_of
 
         d = params.driver(driver)
         eng, veh = params.engine, params.vehicle
-        u_max = float(en.max_command(record(params)))  # A_max; 2 A_max for a boosted engine (full boost)
+        u_max = limits_of(params)["max_throttle_command_m2"]  # A_max; 2 A_max boosted (full boost)
         tt = 0.5 * d.forward_kp / d.forward_ki if tracking_time_s is None else float(tracking_time_s)
         from ..model.rules import canonical_mode
 
