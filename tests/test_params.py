@@ -93,3 +93,18 @@ def test_with_changes_validates(params):
 def test_complete_file_without_base(tmp_path):
     with pytest.raises(ParameterError, match=r"\[vehicle\] is missing"):
         load_parameters(_write(tmp_path, "base = ''\n[vehicle]\nmass = 1000.0\n"))
+
+
+def test_fuel_cutoff_below_idle_is_refused_in_one_line():
+    """A cut-off below idle would cut an engaged engine at the clutch's own threshold (where the forward
+    method's PI then chatters between cut and slipping): refused, naming the field and the idle speed."""
+    from vpsim.model.record import IDLE_SPEED
+    from vpsim.params import IDLE_CHECK_SPEED
+
+    assert IDLE_CHECK_SPEED == IDLE_SPEED
+    p = load_parameters("hofman2011")
+    with pytest.raises(ParameterError, match=r"fuel_cutoff_speed = 50 rad/s is below the idle speed 80") as e:
+        p.with_changes(simulation={"fuel_cutoff_speed": 50.0})
+    assert "\n" not in str(e.value)
+    assert p.with_changes(simulation={"fuel_cutoff_speed": 0.0}).simulation.fuel_cutoff_speed == 0.0
+    assert p.with_changes(simulation={"fuel_cutoff_speed": 80.0}).simulation.fuel_cutoff_speed == 80.0

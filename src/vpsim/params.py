@@ -389,6 +389,13 @@ def validate(p: Parameters, where: str = "parameters") -> None:
             raise ParameterError(
                 f"{where}: {key} = {v:g} is outside the plausible range {_fmt_range(key)}{hint}"
             )
+    cut = p.simulation.fuel_cutoff_speed
+    if 0.0 < cut < IDLE_CHECK_SPEED:
+        raise ParameterError(
+            f"{where}: simulation.fuel_cutoff_speed = {cut:g} rad/s is below the idle speed "
+            f"{IDLE_CHECK_SPEED:g} rad/s ({IDLE_CHECK_SPEED * 30 / math.pi:.0f} rpm): a cut-off must lie "
+            "above idle (0 disables it)"
+        )
     if len(p.transmission.gearbox_ratios) > _MAX_LIST:
         raise ParameterError(
             f"{where}: transmission.gearbox_ratios has {len(p.transmission.gearbox_ratios)} gears, "
