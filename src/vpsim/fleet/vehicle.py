@@ -229,7 +229,20 @@ def record_parameters(
         boost = float(en.boost_for_power(rated, RATED_SPEED_RADPS, c))
         boost = min(max(boost, 1.05 * c.ambient_pressure), MAX_BOOST_PA)
         p = p.with_changes(engine={"boost_pressure": boost})
-    return replace(p, name=f"{rec.make} {rec.model} ({rec.key})")
+    return replace(p, name=f"{rec.make} {rec.model} ({rec.key})", drivers=scaled_drivers(p, base))
+
+
+def scaled_drivers(params: Parameters, base: Parameters) -> dict:
+    """The preset's PI drivers for this engine: K_p and K_i (m² of throttle per m/s and per m) scaled with the
+    throttle's size A_max / A_max of the preset, so that a speed error moves the pedal, not the throttle area,
+    as far as in the preset's car (the same driver in another car); the smoothing drivers' a is kept."""
+    from dataclasses import replace
+
+    k = params.engine.max_throttle_area / base.engine.max_throttle_area
+    return {
+        key: replace(d, forward_kp=d.forward_kp * k, forward_ki=d.forward_ki * k)
+        for key, d in base.drivers.items()
+    }
 
 
 # --- the TOML form ---------------------------------------------------------------------------------------
@@ -367,6 +380,14 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
     ]
     block += ["", "[record.measured_mpg]"]
     block += [f"{k} = {_toml_value(v)}" for k, v in rec.measured_mpg.items()]
+    for key, d in params.drivers.items():
+        lines.append(
+            f"[drivers.{key}]  # the preset's driver {key}, K_p and K_i scaled with A_max (scaled_drivers)"
+        )
+        lines.append(f"forward_kp = {_toml_value(d.forward_kp)}")
+        lines.append(f"forward_ki = {_toml_value(d.forward_ki)}")
+        lines.append(f"inverse_a = {_toml_value(d.inverse_a)}")
+        lines.append("")
     lines.append(RECORD_BEGIN)
     lines += [("# " + x) if x else "#" for x in block]
     lines.append(RECORD_END)
