@@ -271,6 +271,25 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     aux[_X_SW + _SW_SLIP_TORQUE] = 1.0 if coupled else t_cr
 
 
+@register_jitable
+def _initial_step(y, f, thr, n, rtol, pw, hmax):
+    """ode45's initial step for an error estimate of order 1/pw: the largest |f_i| / max(|y_i|, thr_i) over
+    the first n states sets h = (0.8 rtol^pw) / that, at most hmax."""
+    rh = 0.0
+    for i in range(n):
+        sc = abs(y[i])
+        if thr[i] > sc:
+            sc = thr[i]
+        q = abs(f[i]) / sc
+        if q > rh:
+            rh = q
+    rh = rh / (0.8 * rtol**pw)
+    h = hmax
+    if h * rh > 1.0:
+        h = 1.0 / rh
+    return h
+
+
 # the same right side, inlined (at Numba-IR level) into its one call site, the integrator's stage loop: a call
 # would pass its seven arrays as some fifty scalars, 53,000 times per UDDS run
 _rhs_stage = register_jitable(inline="always")(
@@ -368,19 +387,7 @@ def _integrate(
         if span <= 0.0:
             continue
         hmax = h_max if h_max < span else span
-        # initial step (ode45)
-        rh = 0.0
-        for i in range(N_ERR):
-            sc = abs(y[i])
-            if thr[i] > sc:
-                sc = thr[i]
-            q = abs(k1[i]) / sc
-            if q > rh:
-                rh = q
-        rh = rh / (0.8 * rtol**pw)
-        absh = hmax
-        if absh * rh > 1.0:
-            absh = 1.0 / rh
+        absh = _initial_step(y, k1, thr, N_ERR, rtol, pw, hmax)  # (ode45's)
         while True:
             hmin = 16.0 * _EPS * abs(t)
             if absh > hmax:
@@ -718,19 +725,7 @@ def _integrate_ros(
         if span <= 0.0:
             continue
         hmax = h_max if h_max < span else span
-        # initial step (as ode45's, with the order of this method)
-        rh = 0.0
-        for i in range(N_DYN):
-            sc = abs(y[i])
-            if thr[i] > sc:
-                sc = thr[i]
-            q = abs(f0[i]) / sc
-            if q > rh:
-                rh = q
-        rh = rh / (0.8 * rtol**pw)
-        h = hmax
-        if h * rh > 1.0:
-            h = 1.0 / rh
+        h = _initial_step(y, f0, thr, N_DYN, rtol, pw, hmax)  # (ode45's, with the order of this method)
         if h_carry > h:  # a gear change: the step the previous gear ended with, if larger
             h = h_carry if h_carry < hmax else hmax
         have_jac = False
