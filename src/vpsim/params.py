@@ -112,6 +112,9 @@ class Engine:
     accessory_power: float = 0.0  # W, mechanical load of the accessories (alternator, pumps) while running
     boost_pressure: float = 0.0  # Pa absolute, full-load intake pressure of a boosted engine (0: aspirated)
     rated_power: float = 0.0  # W, the full-load line is capped at rated_power / w_e (0: no cap)
+    # a boosted engine's full-load enrichment: fuel supplied over fuel burned, less 1, at full boost; rises
+    # linearly with the pressure above ambient (0: none; 0.15 is lambda 0.87). vpsim.model.engine.enrichment
+    boost_enrichment: float = 0.0
 
     @property
     def displacement(self) -> float:
@@ -240,6 +243,7 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "engine.accessory_power": (0.0, 1.0e5, True),
     "engine.boost_pressure": (0.0, 4.0e5, True),
     "engine.rated_power": (0.0, 2.0e6, True),
+    "engine.boost_enrichment": (0.0, 0.5, True),  # lambda down to 0.67 at full boost
 }
 # Whole numbers: (low, high). Production piston engines have 1 to 16 cylinders and are two-stroke (1
 # revolution per cycle) or four-stroke (2); Newton converges in a handful of iterations or not at all.

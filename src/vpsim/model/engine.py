@@ -112,10 +112,42 @@ def cylinder_air_flow(p_i, w_e, c):
 
 
 @equation
-def fuel_flow(p_i, w_e, c):
-    """Fuel mass flow mdot_f = m_f w_e / (2 pi n_r), m_f = m_ac / ((A/F)_s lambda)   (7). Negative where
-    p_i < y_i / s_i (no air charge): the caller decides what that means."""
+def burned_fuel_flow(p_i, w_e, c):
+    """Fuel mass flow that burns, mdot_f = m_f w_e / (2 pi n_r), m_f = m_ac / ((A/F)_s lambda)   (7): what
+    IMEP (4) is made of. Negative where p_i < y_i / s_i (no air charge): the caller decides what that
+    means."""
     return cylinder_air_flow(p_i, w_e, c) / c.afr
+
+
+def enrichment_slope(c):
+    """d(enrichment)/dp_i above ambient: ``boost_enrichment`` over the boost range, 0 for an aspirated
+    engine (scalars or arrays of variants; evaluated once per parameter set by vpsim.model.record)."""
+    span = np.asarray(c.boost_pressure - c.ambient_pressure, dtype=float)
+    slope = np.where(span > 0.0, c.boost_enrichment / np.where(span > 0.0, span, 1.0), 0.0)
+    return slope if slope.ndim else float(slope)
+
+
+@equation
+def enrichment(p_i, c):
+    """Full-load enrichment of a boosted engine: the fuel supplied beyond (7), as a fraction of it.
+
+    Turbocharged SI engines run rich at high boost to cool the exhaust valves, turbine and catalyst
+    (component protection; Heywood 1988, sec. 7.1 and 13.7; Guzzella & Onder 2010, sec. 2.3): lambda falls
+    from 1 at ambient intake pressure to 1 / (1 + ``boost_enrichment``) at full boost, linearly in p_i. The
+    extra fuel leaves unburned (rich combustion is limited by the air), so IMEP (4) and the torque are those
+    of the air charge. 0 for an aspirated engine and at or below ambient pressure. Written without branches
+    (min and max from abs), so it serves scalars in kernels and arrays alike.
+    """
+    d = p_i - c.ambient_pressure
+    rich = c.enrichment_slope * 0.5 * (d + abs(d))
+    return 0.5 * (rich + c.boost_enrichment - abs(rich - c.boost_enrichment))
+
+
+@equation
+def fuel_flow(p_i, w_e, c):
+    """Fuel mass flow supplied: (7) with the full-load enrichment of a boosted engine (:func:`enrichment`),
+    the flow every method books. Negative where p_i < y_i / s_i (no air charge)."""
+    return burned_fuel_flow(p_i, w_e, c) * (1.0 + enrichment(p_i, c))
 
 
 # --- mean effective pressures and torque (2)-(6) -----------------------------------------------------------

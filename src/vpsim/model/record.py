@@ -69,6 +69,7 @@ _PARAMETER_FIELDS = {
         "accessory_power",
         "boost_pressure",
         "rated_power",
+        "boost_enrichment",
     ),
     "simulation": ("idle_fuel_flow", "fuel_density", "fuel_cutoff_speed"),
 }
@@ -89,6 +90,7 @@ DERIVED_FIELDS = (
     "rolling_force",  # m g c_r of (18), or the coast-down A
     "aero_coefficient",  # 1/2 c_d rho A of (18), or the coast-down C
     "torque_slope",  # dT_cr/dp_i (engine.torque_slope)
+    "enrichment_slope",  # d(enrichment)/dp_i above ambient (engine.enrichment_slope)
 )
 FIELDS = tuple(f for fs in _PARAMETER_FIELDS.values() for f in fs) + (
     "map_speed_low",
@@ -139,6 +141,7 @@ def _fill(rec, vehicle, transmission, engine, simulation, n: int) -> None:
     r.aero_coefficient = eq_vehicle.aero_coefficient(r)
     r.torque_slope = 1.0  # a placeholder crank_torque does not read; the slope follows from it
     r.torque_slope = eq_engine.torque_slope(r)
+    r.enrichment_slope = eq_engine.enrichment_slope(r)
     if n == 1:
         rec[0] = tuple(_scalar(getattr(r, name)) for name in FIELDS)
     else:

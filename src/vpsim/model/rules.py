@@ -247,7 +247,7 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
     if clutch == CLUTCH_OPEN:
         return (0.0, 0.0, 0.0, 0.0, 0.0, road[0], road[1], road[2], road[3], 0.0, 0.0, 0.0)
     cyc = en.cycles_per_second(w_e, c) * c.displacement  # MEP x this = power
-    indicated = fired * en.fuel_flow(p_i, w_e, c) * c.fuel_heating_value * c.thermal_efficiency
+    indicated = fired * en.burned_fuel_flow(p_i, w_e, c) * c.fuel_heating_value * c.thermal_efficiency
     friction = (
         en.fmep_at_bmep(t_cr / c.mep_to_torque, w_e, c) * cyc
     )  # (5) at the engine's BMEP (fired or not)
