@@ -159,6 +159,23 @@ def test_record_parameters_validate(tmp_path):
         assert p.engine.thermal_efficiency == 0.41
 
 
+def test_boosted_record_gets_enrichment_and_a_pedal_scaled_driver(tmp_path):
+    """A boosted record: the full-load enrichment of lambda 0.87 and the PI gains scaled with the pedal's
+    range (2 A_max with boost, A_max aspirated) over the preset's A_max; an aspirated one neither."""
+    from vpsim.params import load_parameters
+
+    base = load_parameters("hofman2011")
+    cars = read_test_car_list(write_list(tmp_path / "list.csv", bad_rows=False))
+    for rec, pedal in ((cars.find("T004"), 2.0), (cars.find("T001"), 1.0)):
+        p = record_parameters(rec)
+        assert (p.engine.boost_pressure > p.engine.ambient_pressure) == rec.boosted
+        assert p.engine.boost_enrichment == (pytest.approx(1 / 0.87 - 1) if rec.boosted else 0.0)
+        k = pedal * p.engine.max_throttle_area / base.engine.max_throttle_area
+        for key, d in base.drivers.items():
+            assert p.drivers[key].forward_kp == pytest.approx(k * d.forward_kp, rel=1e-12)
+            assert p.drivers[key].forward_ki == pytest.approx(k * d.forward_ki, rel=1e-12)
+
+
 def test_bag_cycles_are_udds_windows():
     bag2, bag3 = fleet_cycle("ftp_bag2"), fleet_cycle("ftp_bag3")
     assert bag2.time_s[0] == 0 and bag2.duration_s == 864 and bag3.duration_s == 505

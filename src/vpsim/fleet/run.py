@@ -447,7 +447,13 @@ def _row(
         row["max_speed_error_mps"] = round(pred["max_speed_error_mps"], 4)
     if pred["trace_miss_s"] > 0:
         row["status"] = "trace_miss"
-        row["detail"] = f"the engine's full-load torque misses the trace for {pred['trace_miss_s']:g} s"
+        if "max_speed_error_mps" in pred:  # the forward method: the PI driver's tracking
+            row["detail"] = (
+                f"the speed is outside the trace's band for {pred['trace_miss_s']:.3g} s "
+                f"(max error {pred['max_speed_error_mps']:.2f} m/s)"
+            )
+        else:
+            row["detail"] = f"the engine's full-load torque misses the trace for {pred['trace_miss_s']:g} s"
     return row
 
 
