@@ -126,7 +126,9 @@ SWITCHES = (
     "moving",
     "slip_torque",
 )
-N_AUX = _X_SW + N_SW
+# the engine's inputs at the point (the Rosenbrock step's analytic Jacobian column in p_i reads them)
+_X_AENG, _X_FIRED, _X_TACC = _X_SW + N_SW, _X_SW + N_SW + 1, _X_SW + N_SW + 2
+N_AUX = _X_SW + N_SW + 3
 
 # --- Dormand-Prince 5(4) tableau -------------------------------------------------------------------------
 _C2, _C3, _C4, _C5 = 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0
@@ -269,6 +271,65 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     aux[_X_SW + _SW_CLUTCH] = w_wheel - c.idle_speed if D[_EXT] != 0.0 else 1.0
     aux[_X_SW + _SW_MOVING] = v
     aux[_X_SW + _SW_SLIP_TORQUE] = 1.0 if coupled else t_cr
+    aux[_X_AENG] = a_eng
+    aux[_X_FIRED] = fired
+    aux[_X_TACC] = t_acc
+
+
+@register_jitable
+def _p_column(y, aux, G, c, D, col):
+    """The right side's derivative in p_i at (t, y), whose ``aux`` (from :func:`_rhs`) it reads: the
+    column of J in p_i (rows v, p_i, z) and of the quadratures. At fixed v, z and t the engine speed, the
+    driver's command and the engine's inputs do not move: dp_i/dt's own derivative of (9)
+    (:func:`.engine.manifold_rate_dp`); T_cr and mdot_f are affine in p_i, (2)-(8) (partly fired in
+    overrun); dv/dt is linear in the clutch's torque (1),(14)-(18), zero where the slipping clutch passes
+    nothing or static friction holds the car; the powers follow (:func:`.rules.powers_tangent`)."""
+    v = y[_V]
+    vv = v if v > 0.0 else 0.0
+    ratio = G[_G_I]
+    w = aux[_X_W]
+    t_cr = aux[_X_TCR]
+    fired = aux[_X_FIRED]
+    t_acc = aux[_X_TACC]
+    brake = aux[_X_BRK]
+    coupled = aux[_X_COUPLED] != 0.0
+    d_tcr = en.partly_fired_torque_dp(fired, c)
+    d_mf = fired * en.fuel_flow_dp(w, c)
+    if coupled:
+        t_clutch = t_cr - t_acc
+        d_clutch = d_tcr
+        mass = 1.0 / G[_G_INV_MEQ]
+        clutch = rules.CLUTCH_ENGAGED
+    else:
+        t_clutch = rules.slipping_clutch_torque(t_cr - t_acc)
+        d_clutch = d_tcr if t_cr - t_acc > 0.0 else 0.0
+        mass = c.mass
+        clutch = rules.CLUTCH_SLIPPING
+    f_drive = vh.engine_to_wheel_force(t_clutch, ratio, c)
+    d_acc = vh.engine_to_wheel_force(d_clutch, ratio, c) * vh.acceleration_dforce(f_drive, v, brake, mass, c)
+    d_dw = G[_G_KIN] * d_acc if coupled else 0.0
+    col[_V] = d_acc
+    col[_P] = en.manifold_rate_dp(y[_P], aux[_X_AENG], w, c)
+    col[_Z] = 0.0
+    col[_FUEL] = rules.fuel_used_tangent(aux[_X_MF], fired, d_mf, 0.0, c)
+    col[_DIST] = 0.0
+    w_wheel = vh.engine_speed(vv, ratio, c)
+    pw = rules.powers_tangent(
+        y[_P], w, t_cr, w_wheel, vv, clutch, fired, t_acc, 1.0, d_dw, d_tcr, d_acc, 0.0, 0.0, c
+    )
+    col[_E_IND] = pw[0]
+    col[_E_FRIC] = pw[1]
+    col[_E_PUMP] = pw[2]
+    col[_E_ENG] = pw[3]
+    col[_E_DRV] = pw[4]
+    col[_E_VEH] = pw[5]
+    col[_E_AERO] = pw[6]
+    col[_E_ROLL] = pw[7]
+    col[_E_BRAKE] = pw[8]
+    col[_E_IDLE] = pw[10]
+    col[_E_ACC] = pw[11]
+    col[_ERR2] = 0.0
+    col[_OUTSIDE] = 0.0
 
 
 @register_jitable
@@ -783,6 +844,13 @@ def _integrate_ros(
                     ft[_ERR2] += slope * 2.0 * (aux1[_X_VREF] - vv0)
                     n_jac += 1
                     have_jac = True
+                    task += 1
+                    continue
+                if task == _P:
+                    # the column in p_i in closed form (at fixed v, z, t the engine's inputs stay put)
+                    _p_column(y, aux1, G, c, D, gq1)
+                    for i in range(N_DYN):
+                        jac[N_DYN * i + _P] = gq1[i]
                     task += 1
                     continue
                 tgt_f = r

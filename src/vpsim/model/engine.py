@@ -147,9 +147,15 @@ def bmep_from_pressure(p_i, w_e, c):
 
 
 @equation
+def fmep_per_bmep(c):
+    """dFMEP/dBMEP of (5): 0.0215 k_f."""
+    return c.friction_factor * 0.0215
+
+
+@equation
 def fmep_at_bmep(bmep, w_e, c):
     """Friction mean effective pressure FMEP (5) at a given BMEP: Soltic's law with the factor xi_aux."""
-    return speed_friction(w_e, c) + c.friction_factor * 0.0215 * bmep
+    return speed_friction(w_e, c) + fmep_per_bmep(c) * bmep
 
 
 @equation
@@ -177,6 +183,31 @@ def partly_fired_torque(p_i, w_e, fired, c):
     motoring torque plus that fraction of what the fuel adds, (2)-(6) with IMEP (4) scaled."""
     t_motor = motoring_torque(p_i, w_e, c)
     return t_motor + fired * (crank_torque(p_i, w_e, c) - t_motor)
+
+
+@equation
+def imep_per_pressure(c):
+    """dIMEP/dp_i of (4),(8): Q s_i."""
+    return c.heat_factor * c.air_charge_slope
+
+
+@equation
+def fuel_flow_dp(w_e, c):
+    """dmdot_f/dp_i of (7),(8) at fixed w_e (the flow is affine in p_i)."""
+    return cycles_per_second(w_e, c) * c.air_per_charge * c.air_charge_slope / c.afr
+
+
+@equation
+def partly_fired_torque_dp(fired, c):
+    """d/dp_i of :func:`partly_fired_torque` at fixed w_e and ``fired``: the fired engine's slope less the
+    unfired share of IMEP's (4), through the BMEP divisor of (5)."""
+    return c.torque_slope - (1.0 - fired) * imep_per_pressure(c) / c.one_plus_kf * c.mep_to_torque
+
+
+@equation
+def partly_fired_torque_dfired(p_i, c):
+    """d/d(fired) of :func:`partly_fired_torque`: what the fuel adds, IMEP (4) through the divisor of (5)."""
+    return imep(p_i, c) / c.one_plus_kf * c.mep_to_torque
 
 
 @equation

@@ -138,6 +138,15 @@ def fuel_used(mdot_f, fired, c):
     return mdot_f if mdot_f > floor else floor
 
 
+@equation
+def fuel_used_tangent(mdot_f, fired, d_mdot_f, d_fired, c):
+    """Directional derivative of :func:`fuel_used` along (d_mdot_f, d_fired): the flow's, or the floor's
+    where it holds (one-sided at the kink, as :func:`fuel_used` takes the floor there)."""
+    if mdot_f > fired * c.idle_fuel_flow:
+        return d_mdot_f
+    return d_fired * c.idle_fuel_flow
+
+
 @inline
 def converter_point(f_wheel, w_wheel, dw_wheel, ratio, c):
     """The unlocked torque converter's operating point with traction (``f_wheel`` > 0, turbine speed
@@ -282,4 +291,56 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
         t_missing * w_e,
         idle,
         t_acc * w_e,
+    )
+
+
+@inline
+def powers_tangent(
+    p_i, w_e, t_cr, w_wheel, v, clutch, fired, t_acc, d_p, d_dw, d_tcr, d_a, d_brake, d_fired, c
+):
+    """Directional derivative of :func:`powers` (``t_missing`` = 0) along a change (d_p, d_dw, d_tcr, d_a,
+    d_brake, d_fired) of p_i, dw_e/dt, T_cr, the acceleration, the brake force and the fired fraction, at
+    fixed speeds w_e, w_wheel, v and accessories' torque: the forward method's Jacobian columns in p_i and in
+    the PI's state, none of which moves the speeds. Same terms and branches as :func:`powers`."""
+    vv = v if v > 0.0 else 0.0
+    road = (c.mass * vv * d_a, 0.0, 0.0, d_brake * vv)
+    if clutch == CLUTCH_OPEN:
+        return (0.0, 0.0, 0.0, 0.0, 0.0, road[0], road[1], road[2], road[3], 0.0, 0.0, 0.0)
+    cyc = en.cycles_per_second(w_e, c) * c.displacement
+    indicated = (
+        (d_fired * en.fuel_flow(p_i, w_e, c) + fired * en.fuel_flow_dp(w_e, c) * d_p)
+        * c.fuel_heating_value
+        * c.thermal_efficiency
+    )
+    friction = en.fmep_per_bmep(c) * (d_tcr / c.mep_to_torque) * cyc  # (5)
+    pumping = -d_p * cyc  # (6)
+    if clutch == CLUTCH_ENGAGED:
+        engine_kinetic = c.inertia * w_e * d_dw
+        driveline = (1.0 - c.efficiency) * (d_tcr - c.inertia * d_dw) * w_e  # (1),(15)
+        idle = 0.0
+    elif clutch == CLUTCH_CONVERTER:
+        engine_kinetic = c.inertia * w_e * d_dw
+        nu = w_wheel / w_e
+        driveline = (
+            (1.0 - c.efficiency * vh.converter_torque_ratio(nu, c) * nu) * (d_tcr - c.inertia * d_dw) * w_e
+        )
+        idle = 0.0
+    else:
+        engine_kinetic = 0.0
+        d_clutch = d_tcr if t_cr - t_acc > 0.0 else 0.0  # slipping_clutch_torque's branch
+        driveline = (1.0 - c.efficiency) * d_clutch * w_wheel + d_clutch * (w_e - w_wheel)
+        idle = (d_tcr - d_clutch) * w_e
+    return (
+        indicated,
+        friction,
+        pumping,
+        engine_kinetic,
+        driveline,
+        road[0],
+        road[1],
+        road[2],
+        road[3],
+        0.0,
+        idle,
+        0.0,
     )

@@ -130,6 +130,15 @@ def acceleration(f_drive, v, brake, mass, c):
 
 
 @equation
+def acceleration_dforce(f_drive, v, brake, mass, c):
+    """d/dF_drive of :func:`acceleration` (and minus its derivative in the brake force): 1 / mass while
+    moving or pushed off, 0 while static friction (rolling resistance and brakes) holds the car at rest."""
+    if v > 0.0 or f_drive > c.rolling_force + brake:
+        return 1.0 / mass
+    return 0.0
+
+
+@equation
 def wheel_force_rate(v, a, jerk, c):
     """d/dt of the wheel force (18) along a trajectory (v, dv/dt, d2v/dt2): m jerk + d(drag)/dv a."""
     return c.mass * jerk + 2.0 * c.aero_coefficient * abs(v) * a
