@@ -584,6 +584,8 @@ def _column_check(c, D, cyc, pts, column, dy_rel, label):
             seen.add("boosted")
         if aux0[forward._X_MF] < aux0[forward._X_FIRED] * c.idle_fuel_flow:
             seen.add("idle floor")
+        if min(aux0[forward._X_SW + forward._SW_SAT_LO], aux0[forward._X_SW + forward._SW_SAT_HI]) < 0.0:
+            seen.add("saturated")
     return seen, worst
 
 
@@ -592,6 +594,13 @@ def _p_col(y, aux, G, c, D, col):
 
 
 _p_col.index = forward._P
+
+
+def _z_col(y, aux, G, c, D, col):
+    forward._z_column(y, aux, G, c, D, col)
+
+
+_z_col.index = forward._Z
 
 
 @pytest.mark.parametrize(
@@ -616,3 +625,38 @@ def test_jacobian_column_in_p_i_is_the_right_sides_derivative(params, cycle, mod
     c, D, cyc, pts = _visited_states(q, cycle, mode, "1")
     seen, worst = _column_check(c, D, cyc, pts, _p_col, lambda y: 1e-7 * y[forward._P], cycle)
     assert branches <= seen, seen
+
+
+@pytest.mark.parametrize(
+    "cycle, mode, driver, changes, branches",
+    [
+        ("nedc", "paper", "1", {}, {"coupled", "saturated"}),
+        ("ftp75", "extended", "2", {}, {"slipping", "braking", "idle floor", "held at rest"}),
+        (
+            "ftp75",
+            "extended",
+            "1",
+            {"simulation": {"fuel_cutoff_speed": 125.0}, "engine": {"accessory_power": 800.0}},
+            {"partly fired", "slipping", "braking"},
+        ),
+        ("us06", "extended", "1", {"engine": {"boost_pressure": 1.6e5}}, {"boosted"}),
+        ("us06", "paper", "2", {"engine": {"boost_pressure": 1.6e5}}, {"boosted"}),
+    ],
+)
+def test_jacobian_column_in_z_is_the_right_sides_derivative(params, cycle, mode, driver, changes, branches):
+    """The column of J in the PI state z in closed form (the raw command, the pedal, the cut-off's fired
+    fraction, the boost, the anti-windup): central differences of the right side at the states a run
+    passes. It gives df/dt as well (test_time_derivative_from_the_pi_structure)."""
+    q = params.with_changes(**changes) if changes else params
+    c, D, cyc, pts = _visited_states(q, cycle, mode, driver)
+    seen, worst = _column_check(c, D, cyc, pts, _z_col, lambda y: 1e-9, cycle)
+    assert branches <= seen, seen
+
+
+def test_jacobian_column_in_z_open_loop_is_zero(params):
+    c = record(params)
+    D = forward.settings(params, None, "paper")
+    D[forward._OPEN] = 1.0
+    col = np.ones(forward.NY)
+    forward._z_column(np.zeros(forward.NY), np.zeros(forward.N_AUX), np.ones(3), c, D, col)
+    assert np.all(col == 0.0)

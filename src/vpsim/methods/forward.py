@@ -277,15 +277,18 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
 
 
 @register_jitable
-def _p_column(y, aux, G, c, D, col):
-    """The right side's derivative in p_i at (t, y), whose ``aux`` (from :func:`_rhs`) it reads: the
-    column of J in p_i (rows v, p_i, z) and of the quadratures. At fixed v, z and t the engine speed, the
-    driver's command and the engine's inputs do not move: dp_i/dt's own derivative of (9)
-    (:func:`.engine.manifold_rate_dp`); T_cr and mdot_f are affine in p_i, (2)-(8) (partly fired in
-    overrun); dv/dt is linear in the clutch's torque (1),(14)-(18), zero where the slipping clutch passes
-    nothing or static friction holds the car; the powers follow (:func:`.rules.powers_tangent`)."""
+def _tangent(y, aux, G, c, d_p, d_a, d_fired, d_brake, col):
+    """The right side's directional derivative at (t, y), whose ``aux`` (from :func:`_rhs`) it reads, along a
+    change d_p of p_i, d_a of the engine's throttle command, d_fired of the fired fraction and d_brake of the
+    brake force, at fixed v and t (the engine speed and the accessories' torque stay put): the Jacobian's
+    columns in p_i and in the PI state z. dp_i/dt (9),(10): :func:`.engine.manifold_rate_dp` and
+    :func:`.engine.manifold_rate_da`; T_cr and mdot_f are affine in p_i and in the fired fraction (2)-(8);
+    dv/dt is linear in the clutch's torque and the brake force (1),(14)-(18), the torque's part zero where
+    the slipping clutch passes nothing, all zero where static friction holds the car; the powers follow
+    (:func:`.rules.powers_tangent`). Sets every row but z's."""
     v = y[_V]
     vv = v if v > 0.0 else 0.0
+    p = y[_P]
     ratio = G[_G_I]
     w = aux[_X_W]
     t_cr = aux[_X_TCR]
@@ -293,8 +296,18 @@ def _p_column(y, aux, G, c, D, col):
     t_acc = aux[_X_TACC]
     brake = aux[_X_BRK]
     coupled = aux[_X_COUPLED] != 0.0
-    d_tcr = en.partly_fired_torque_dp(fired, c)
-    d_mf = fired * en.fuel_flow_dp(w, c)
+    d_tcr = 0.0
+    d_mf = 0.0
+    d_dp = 0.0
+    if d_p != 0.0:
+        d_tcr = en.partly_fired_torque_dp(fired, c) * d_p
+        d_mf = fired * en.fuel_flow_dp(w, c) * d_p
+        d_dp = en.manifold_rate_dp(p, aux[_X_AENG], w, c) * d_p
+    if d_a != 0.0:
+        d_dp += en.manifold_rate_da(p, aux[_X_AENG], w, c) * d_a
+    if d_fired != 0.0:
+        d_tcr += en.partly_fired_torque_dfired(p, c) * d_fired
+        d_mf += en.fuel_flow(p, w, c) * d_fired
     if coupled:
         t_clutch = t_cr - t_acc
         d_clutch = d_tcr
@@ -306,16 +319,17 @@ def _p_column(y, aux, G, c, D, col):
         mass = c.mass
         clutch = rules.CLUTCH_SLIPPING
     f_drive = vh.engine_to_wheel_force(t_clutch, ratio, c)
-    d_acc = vh.engine_to_wheel_force(d_clutch, ratio, c) * vh.acceleration_dforce(f_drive, v, brake, mass, c)
+    d_acc = (vh.engine_to_wheel_force(d_clutch, ratio, c) - d_brake) * vh.acceleration_dforce(
+        f_drive, v, brake, mass, c
+    )
     d_dw = G[_G_KIN] * d_acc if coupled else 0.0
     col[_V] = d_acc
-    col[_P] = en.manifold_rate_dp(y[_P], aux[_X_AENG], w, c)
-    col[_Z] = 0.0
-    col[_FUEL] = rules.fuel_used_tangent(aux[_X_MF], fired, d_mf, 0.0, c)
+    col[_P] = d_dp
+    col[_FUEL] = rules.fuel_used_tangent(aux[_X_MF], fired, d_mf, d_fired, c)
     col[_DIST] = 0.0
     w_wheel = vh.engine_speed(vv, ratio, c)
     pw = rules.powers_tangent(
-        y[_P], w, t_cr, w_wheel, vv, clutch, fired, t_acc, 1.0, d_dw, d_tcr, d_acc, 0.0, 0.0, c
+        p, w, t_cr, w_wheel, vv, clutch, fired, t_acc, d_p, d_dw, d_tcr, d_acc, d_brake, d_fired, c
     )
     col[_E_IND] = pw[0]
     col[_E_FRIC] = pw[1]
@@ -330,6 +344,41 @@ def _p_column(y, aux, G, c, D, col):
     col[_E_ACC] = pw[11]
     col[_ERR2] = 0.0
     col[_OUTSIDE] = 0.0
+
+
+@register_jitable
+def _p_column(y, aux, G, c, D, col):
+    """The right side's derivative in p_i at (t, y): at fixed v, z and t the engine's inputs do not move."""
+    _tangent(y, aux, G, c, 1.0, 0.0, 0.0, 0.0, col)
+    col[_Z] = 0.0
+
+
+@register_jitable
+def _z_column(y, aux, G, c, D, col):
+    """The right side's derivative in the PI state z at (t, y): z moves the raw command u_raw = K_p e + z
+    one for one, the command where it is not saturated (pi_law), and with it the pedal's throttle, brake
+    (pedal_split) and, in overrun, fired fraction (rules.fired_fraction_of_command); dz/dt's own derivative
+    is the anti-windup's (du/du_raw - 1)/T_t. Nothing depends on z with the throttle fed open loop."""
+    if D[_OPEN] != 0.0:
+        for i in range(col.size):
+            col[i] = 0.0
+        return
+    # u_lo <= u_raw <= u_hi (the switching functions' values): the command follows u_raw
+    du = 1.0 if aux[_X_SW + _SW_SAT_LO] >= 0.0 and aux[_X_SW + _SW_SAT_HI] >= 0.0 else 0.0
+    cmd = aux[_X_CMD]
+    a_min = D[_AMIN]
+    d_thr = du if cmd > a_min else 0.0
+    d_brake = -D[_KB] * du if cmd < 0.0 else 0.0
+    coupled = aux[_X_COUPLED] != 0.0
+    d_a = d_thr
+    d_fired = 0.0
+    if coupled:
+        if D[_EXT] != 0.0:
+            d_fired = rules.fired_fraction_dcommand(cmd, a_min, aux[_X_W], c) * du
+    elif not (cmd if cmd > a_min else a_min) > D[_AIDLE]:
+        d_a = 0.0  # held at the idle throttle
+    _tangent(y, aux, G, c, 0.0, d_a, d_fired, d_brake, col)
+    col[_Z] = (du - 1.0) * D[_AWG]
 
 
 @register_jitable
@@ -846,11 +895,15 @@ def _integrate_ros(
                     have_jac = True
                     task += 1
                     continue
-                if task == _P:
-                    # the column in p_i in closed form (at fixed v, z, t the engine's inputs stay put)
-                    _p_column(y, aux1, G, c, D, gq1)
+                if task == _P or task == _Z:
+                    # the columns in p_i and z in closed form (at fixed v and t the engine speed stays put)
+                    qcol = work[14 + task]
+                    if task == _P:
+                        _p_column(y, aux1, G, c, D, qcol)
+                    else:
+                        _z_column(y, aux1, G, c, D, qcol)
                     for i in range(N_DYN):
-                        jac[N_DYN * i + _P] = gq1[i]
+                        jac[N_DYN * i + task] = qcol[i]
                     task += 1
                     continue
                 tgt_f = r
@@ -859,10 +912,6 @@ def _integrate_ros(
                     sc = abs(y[task])
                     if thr[task] > sc:
                         sc = thr[task]
-                    if task == _Z and D[_UHI] > sc:
-                        # the PI state's increment on the command's range: df/dz also gives df/dt (above),
-                        # where a smaller one would carry its rounding into the energy balance
-                        sc = D[_UHI]
                     for i in range(N_DYN):
                         ytmp[i] = y[i]
                     ytmp[task] = y[task] + _FD_STEP * sc

@@ -591,6 +591,24 @@ def manifold_rate_dp(p_i, a_eff, w_e, c):
     return k * (throttle / p_up - cycles_per_second(w_e, c) * c.air_per_charge * c.air_charge_slope)
 
 
+@equation
+def manifold_rate_da(p_i, a_eff, w_e, c):
+    """d(dp_i/dt)/dA_eff of (9),(10) at fixed p_i and w_e, ``a_eff`` the throttle command: the throttle's flow
+    per unit area up to A_max (or an aspirated engine); beyond, a boosted engine's flow rise with the
+    pressure upstream, d(p_up Psi(p_i/p_up))/dp_up = Psi - p_r dPsi/dp_r, times dp_up/du of
+    :func:`throttle_upstream`; 0 at full boost."""
+    k = c.rt_intake / c.intake_manifold_volume
+    a_max = c.max_throttle_area
+    if a_eff <= a_max or not is_boosted(c):
+        return k * throttle_flow_per_area(p_i, c)
+    if (a_eff - a_max) / a_max >= 1.0:
+        return 0.0
+    a, p_up = throttle_upstream(a_eff, w_e, c)
+    p_r = p_i / p_up
+    per_pressure = a * (psi(p_r, c) - p_r * dpsi_dpr(p_r, c)) / c.sqrt_rt_ambient
+    return k * per_pressure * (boost_available(w_e, c) - c.ambient_pressure) / a_max
+
+
 @kernel
 def _rate_loop(p_i, a_eff, w_e, recs, out, jac):
     one = recs.size == 1

@@ -131,6 +131,16 @@ def fired_fraction_of_command(u, a_min, w_e, c):
 
 
 @equation
+def fired_fraction_dcommand(u, a_min, w_e, c):
+    """d/du of :func:`fired_fraction_of_command`: the allowed cut's share over A_min inside the floor band
+    (0, A_min), 0 elsewhere."""
+    share = cutoff_share(w_e, c)
+    if u >= a_min or share <= 0.0 or u <= 0.0:
+        return 0.0
+    return share / a_min
+
+
+@equation
 def fuel_used(mdot_f, fired, c):
     """Fuel booked for the flow ``mdot_f`` of an engine with ``fired`` of its cylinders fired: the idle floor
     for the fired part, max(mdot_f, fired mdot_idle) (1: :func:`fuel_with_idle_floor`; 0: none)."""
