@@ -277,15 +277,27 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
 
 
 @register_jitable
-def _tangent(y, aux, G, c, d_p, d_a, d_fired, d_brake, col):
-    """The right side's directional derivative at (t, y), whose ``aux`` (from :func:`_rhs`) it reads, along a
-    change d_p of p_i, d_a of the engine's throttle command, d_fired of the fired fraction and d_brake of the
-    brake force, at fixed v and t (the engine speed and the accessories' torque stay put): the Jacobian's
-    columns in p_i and in the PI state z. dp_i/dt (9),(10): :func:`.engine.manifold_rate_dp` and
-    :func:`.engine.manifold_rate_da`; T_cr and mdot_f are affine in p_i and in the fired fraction (2)-(8);
-    dv/dt is linear in the clutch's torque and the brake force (1),(14)-(18), the torque's part zero where
-    the slipping clutch passes nothing, all zero where static friction holds the car; the powers follow
-    (:func:`.rules.powers_tangent`). Sets every row but z's."""
+def _jacobian(y, aux, G, c, D, jac, col_v, col_p, col_z):
+    """The right side's derivatives in v, p_i and z at (t, y) (``aux`` from :func:`_rhs` there): the 3 x 3
+    Jacobian ``jac`` (row-major) and the full columns col_v, col_p, col_z (the quadratures' rows): the
+    model's equations differentiated branch by branch.
+
+    Three directions, at fixed t: the speed v at a fixed driver's command (at rest, v = 0, the derivative
+    from below: zero, as max(v, 0) does not move; from above the road load steps), p_i, and
+    the command. The command moves the pedal's throttle and brake (pedal_split), the slipping engine's
+    throttle above the idle one, and in overrun the fired fraction (rules.fired_fraction_of_command), as
+    does the engine speed; dp_i/dt (9),(10): :func:`.engine.manifold_rate_dp`, ``_da``, ``_dw``; T_cr and
+    mdot_f (2)-(8) are affine in p_i and in the fired fraction; dv/dt (1),(14)-(18) is linear in the
+    clutch's torque (the slipping clutch's part zero where it passes nothing) and the brake force, all zero
+    where static friction holds the car; the powers follow (:func:`.rules.powers_tangent`). z moves the raw
+    command u_raw = K_p e + z one for one, the command where it is not saturated (pi_law), and dz/dt's own
+    derivative is the anti-windup's (du/du_raw - 1)/T_t; v moves the PI error e = v_cycle - v as well,
+    hence the command as -K_p times z does (the right side's change is linear in the three). Open loop
+    nothing depends on z."""
+    closed = D[_OPEN] == 0.0
+    # u_lo <= u_raw <= u_hi (the switching functions' values): the command follows u_raw
+    du = 1.0 if closed and aux[_X_SW + _SW_SAT_LO] >= 0.0 and aux[_X_SW + _SW_SAT_HI] >= 0.0 else 0.0
+    # the point
     v = y[_V]
     vv = v if v > 0.0 else 0.0
     p = y[_P]
@@ -295,90 +307,143 @@ def _tangent(y, aux, G, c, d_p, d_a, d_fired, d_brake, col):
     fired = aux[_X_FIRED]
     t_acc = aux[_X_TACC]
     brake = aux[_X_BRK]
-    coupled = aux[_X_COUPLED] != 0.0
-    d_tcr = 0.0
-    d_mf = 0.0
-    d_dp = 0.0
-    if d_p != 0.0:
-        d_tcr = en.partly_fired_torque_dp(fired, c) * d_p
-        d_mf = fired * en.fuel_flow_dp(w, c) * d_p
-        d_dp = en.manifold_rate_dp(p, aux[_X_AENG], w, c) * d_p
-    if d_a != 0.0:
-        d_dp += en.manifold_rate_da(p, aux[_X_AENG], w, c) * d_a
-    if d_fired != 0.0:
-        d_tcr += en.partly_fired_torque_dfired(p, c) * d_fired
-        d_mf += en.fuel_flow(p, w, c) * d_fired
-    if coupled:
-        t_clutch = t_cr - t_acc
-        d_clutch = d_tcr
-        mass = 1.0 / G[_G_INV_MEQ]
-        clutch = rules.CLUTCH_ENGAGED
-    else:
-        t_clutch = rules.slipping_clutch_torque(t_cr - t_acc)
-        d_clutch = d_tcr if t_cr - t_acc > 0.0 else 0.0
-        mass = c.mass
-        clutch = rules.CLUTCH_SLIPPING
-    f_drive = vh.engine_to_wheel_force(t_clutch, ratio, c)
-    d_acc = (vh.engine_to_wheel_force(d_clutch, ratio, c) - d_brake) * vh.acceleration_dforce(
-        f_drive, v, brake, mass, c
-    )
-    d_dw = G[_G_KIN] * d_acc if coupled else 0.0
-    col[_V] = d_acc
-    col[_P] = d_dp
-    col[_FUEL] = rules.fuel_used_tangent(aux[_X_MF], fired, d_mf, d_fired, c)
-    col[_DIST] = 0.0
-    w_wheel = vh.engine_speed(vv, ratio, c)
-    pw = rules.powers_tangent(
-        p, w, t_cr, w_wheel, vv, clutch, fired, t_acc, d_p, d_dw, d_tcr, d_acc, d_brake, d_fired, c
-    )
-    col[_E_IND] = pw[0]
-    col[_E_FRIC] = pw[1]
-    col[_E_PUMP] = pw[2]
-    col[_E_ENG] = pw[3]
-    col[_E_DRV] = pw[4]
-    col[_E_VEH] = pw[5]
-    col[_E_AERO] = pw[6]
-    col[_E_ROLL] = pw[7]
-    col[_E_BRAKE] = pw[8]
-    col[_E_IDLE] = pw[10]
-    col[_E_ACC] = pw[11]
-    col[_ERR2] = 0.0
-    col[_OUTSIDE] = 0.0
-
-
-@register_jitable
-def _p_column(y, aux, G, c, D, col):
-    """The right side's derivative in p_i at (t, y): at fixed v, z and t the engine's inputs do not move."""
-    _tangent(y, aux, G, c, 1.0, 0.0, 0.0, 0.0, col)
-    col[_Z] = 0.0
-
-
-@register_jitable
-def _z_column(y, aux, G, c, D, col):
-    """The right side's derivative in the PI state z at (t, y): z moves the raw command u_raw = K_p e + z
-    one for one, the command where it is not saturated (pi_law), and with it the pedal's throttle, brake
-    (pedal_split) and, in overrun, fired fraction (rules.fired_fraction_of_command); dz/dt's own derivative
-    is the anti-windup's (du/du_raw - 1)/T_t. Nothing depends on z with the throttle fed open loop."""
-    if D[_OPEN] != 0.0:
-        for i in range(col.size):
-            col[i] = 0.0
-        return
-    # u_lo <= u_raw <= u_hi (the switching functions' values): the command follows u_raw
-    du = 1.0 if aux[_X_SW + _SW_SAT_LO] >= 0.0 and aux[_X_SW + _SW_SAT_HI] >= 0.0 else 0.0
+    acc = aux[_X_ACC]
+    a_eng = aux[_X_AENG]
+    mdot_f = aux[_X_MF]
     cmd = aux[_X_CMD]
     a_min = D[_AMIN]
-    d_thr = du if cmd > a_min else 0.0
-    d_brake = -D[_KB] * du if cmd < 0.0 else 0.0
     coupled = aux[_X_COUPLED] != 0.0
-    d_a = d_thr
-    d_fired = 0.0
+    realistic = D[_EXT] != 0.0
+    cut = coupled and realistic and closed  # fuel cut-off in overrun
     if coupled:
-        if D[_EXT] != 0.0:
-            d_fired = rules.fired_fraction_dcommand(cmd, a_min, aux[_X_W], c) * du
-    elif not (cmd if cmd > a_min else a_min) > D[_AIDLE]:
-        d_a = 0.0  # held at the idle throttle
-    _tangent(y, aux, G, c, 0.0, d_a, d_fired, d_brake, col)
-    col[_Z] = (du - 1.0) * D[_AWG]
+        t_clutch = t_cr - t_acc
+        mass = 1.0 / G[_G_INV_MEQ]
+        clutch = rules.CLUTCH_ENGAGED
+        dw = G[_G_KIN] * acc
+    else:
+        t_clutch = rules.slipping_clutch_torque(t_cr - t_acc)
+        mass = c.mass
+        clutch = rules.CLUTCH_SLIPPING
+        dw = 0.0
+    passes = coupled or t_cr - t_acc > 0.0  # the slipping clutch passes the torque's change
+    per_force = vh.acceleration_dforce(vh.engine_to_wheel_force(t_clutch, ratio, c), v, brake, mass, c)
+    w_wheel = vh.engine_speed(vv, ratio, c)
+    moving = v > 0.0  # at rest nothing moves with v (max(v, 0) = 0 below; above, the road load's step)
+    for k in range(3):
+        if k == 0:
+            col = col_v
+            d_v, d_p, d_cmd = 1.0, 0.0, 0.0
+            if not moving:
+                for i in range(col.size):
+                    col[i] = 0.0
+                continue
+        elif k == 1:
+            col = col_p
+            d_v, d_p, d_cmd = 0.0, 1.0, 0.0
+        else:
+            col = col_z
+            d_v, d_p, d_cmd = 0.0, 0.0, 1.0
+            if du == 0.0:
+                for i in range(col.size):
+                    col[i] = 0.0
+                break
+        d_wheel = G[_G_KIN] * d_v
+        d_w = d_wheel if coupled else 0.0  # the slipping clutch holds the engine at idle
+        d_tacc = en.accessory_torque_rate(w, d_w, c) if realistic else 0.0
+        # the driver's command through the pedal (pedal_split) and the slipping engine's idle throttle
+        d_a = 0.0
+        d_brake = 0.0
+        if d_cmd != 0.0:
+            d_brake = -D[_KB] * d_cmd if cmd < 0.0 else 0.0
+            if cmd > a_min and (coupled or cmd > D[_AIDLE]):
+                d_a = d_cmd
+        d_fired = 0.0
+        if cut:
+            d_fired = rules.fired_fraction_dcommand(cmd, a_min, w, c) * d_cmd
+            d_fired += rules.fired_fraction_dspeed(cmd, a_min, w, c) * d_w
+        # engine: manifold (9),(10), torque (2)-(8), fuel (7)
+        d_dp = 0.0
+        d_tcr = 0.0
+        d_mf = 0.0
+        if d_fired != 0.0:
+            d_tcr += en.partly_fired_torque_dfired(p, c) * d_fired
+            d_mf += en.fuel_flow(p, w, c) * d_fired
+        if d_p != 0.0:
+            d_dp += en.manifold_rate_dp(p, a_eng, w, c) * d_p
+            d_tcr += en.partly_fired_torque_dp(fired, c) * d_p
+            d_mf += fired * en.fuel_flow_dp(w, c) * d_p
+        if d_a != 0.0:
+            d_dp += en.manifold_rate_da(p, a_eng, w, c) * d_a
+        if d_w != 0.0:
+            d_dp += en.manifold_rate_dw(p, a_eng, w, c) * d_w
+            d_tcr += en.crank_torque_dw(w, c) * d_w
+            d_mf += fired * en.fuel_flow_dw(p, c) * d_w
+        # vehicle (18) with the engine inertia (1),(14)-(17)
+        d_clutch = d_tcr - d_tacc if passes else 0.0
+        d_acc = (vh.engine_to_wheel_force(d_clutch, ratio, c) - d_brake) * per_force
+        if d_v != 0.0:
+            d_acc -= vh.road_load_dv(v, c) / mass * d_v
+        d_dw = G[_G_KIN] * d_acc if coupled else 0.0
+        col[_V] = d_acc
+        col[_P] = d_dp
+        col[_FUEL] = rules.fuel_used_tangent(mdot_f, fired, d_mf, d_fired, c)
+        col[_DIST] = d_v
+        pw = rules.powers_tangent(
+            p,
+            w,
+            dw,
+            t_cr,
+            w_wheel,
+            vv,
+            acc,
+            brake,
+            clutch,
+            fired,
+            t_acc,
+            d_p,
+            d_w,
+            d_dw,
+            d_tcr,
+            d_wheel,
+            d_v,
+            d_acc,
+            d_brake,
+            d_fired,
+            d_tacc,
+            c,
+        )
+        col[_E_IND] = pw[0]
+        col[_E_FRIC] = pw[1]
+        col[_E_PUMP] = pw[2]
+        col[_E_ENG] = pw[3]
+        col[_E_DRV] = pw[4]
+        col[_E_VEH] = pw[5]
+        col[_E_AERO] = pw[6]
+        col[_E_ROLL] = pw[7]
+        col[_E_BRAKE] = pw[8]
+        col[_E_IDLE] = pw[10]
+        col[_E_ACC] = pw[11]
+        col[_OUTSIDE] = 0.0
+    # the command's part of the speed's column; the z and e^2 rows
+    if du != 0.0 and moving:
+        kp = D[_KP]
+        for i in range(col_v.size):
+            col_v[i] -= kp * col_z[i]
+    col_p[_Z] = 0.0
+    col_p[_ERR2] = 0.0
+    col_z[_ERR2] = 0.0
+    if closed:
+        col_z[_Z] = (du - 1.0) * D[_AWG]
+        col_v[_Z] = -D[_KI] - D[_KP] * col_z[_Z] if moving else 0.0
+        col_v[_ERR2] = -2.0 * (aux[_X_VREF] - vv) if moving else 0.0
+    else:  # e = 0
+        col_z[_Z] = 0.0
+        col_v[_Z] = 0.0
+        col_v[_ERR2] = 0.0
+    for i in range(N_DYN):
+        jac[N_DYN * i + _V] = col_v[i]
+        jac[N_DYN * i + _P] = col_p[i]
+        jac[N_DYN * i + _Z] = col_z[i]
 
 
 @register_jitable
@@ -867,10 +932,10 @@ def _integrate_ros(
                 to_stop = t + 1.1 * h >= t_stop
                 tnew = t_stop if to_stop else t + h
             h = tnew - t
-            # evaluations of the right side, through one (inlined) call site: the Jacobian's forward
-            # differences in v, p_i, z (tasks 0-2, once per step) and, open loop only, in t (task 3, inside
-            # the table's current interval, where f is smooth); then stages 3 and 4 (both at t + h; stage 2
-            # reuses stage 1's f) and the right side at the step's end (the next step's first stage)
+            # the Jacobian in v, p_i, z in closed form (task 0, once per step) and df/dt (task 3: from the PI
+            # structure, or open loop a forward difference in t inside the table's current interval, where f
+            # is smooth); then the evaluations of the right side, through one (inlined) call site: stages 3
+            # and 4 (both at t + h; stage 2 reuses stage 1's f) and the step's end (the next step's stage 1)
             hg = h * _ROS_GAMMA
             task = 0 if not have_jac else N_DYN + 1
             d = 0.0
@@ -895,29 +960,14 @@ def _integrate_ros(
                     have_jac = True
                     task += 1
                     continue
-                if task == _P or task == _Z:
-                    # the columns in p_i and z in closed form (at fixed v and t the engine speed stays put)
-                    qcol = work[14 + task]
-                    if task == _P:
-                        _p_column(y, aux1, G, c, D, qcol)
-                    else:
-                        _z_column(y, aux1, G, c, D, qcol)
-                    for i in range(N_DYN):
-                        jac[N_DYN * i + task] = qcol[i]
-                    task += 1
+                if task < N_DYN:
+                    # the Jacobian in v, p_i and z in closed form (the model's equations differentiated)
+                    _jacobian(y, aux1, G, c, D, jac, gq0, gq1, gq2)
+                    task = N_DYN
                     continue
                 tgt_f = r
                 tgt_a = aux
-                if task < N_DYN:
-                    sc = abs(y[task])
-                    if thr[task] > sc:
-                        sc = thr[task]
-                    for i in range(N_DYN):
-                        ytmp[i] = y[i]
-                    ytmp[task] = y[task] + _FD_STEP * sc
-                    d = ytmp[task] - y[task]
-                    ts = t
-                elif task == N_DYN:
+                if task == N_DYN:
                     d = _FD_STEP * (abs(t) if abs(t) > 1.0 else 1.0)
                     if d > 0.5 * (t_stop - t):
                         d = 0.5 * (t_stop - t)
@@ -950,13 +1000,7 @@ def _integrate_ros(
                     ts = tnew
                 _rhs_stage(ts, ytmp, G, c, D, tab_t, tab_v, tgt_f, tgt_a)
                 nfev += 1
-                if task < N_DYN:
-                    for i in range(N_DYN):
-                        jac[N_DYN * i + task] = (r[i] - f0[i]) / d
-                    qcol = work[14 + task]
-                    for i in range(N_DYN, ny):
-                        qcol[i] = (r[i] - f0[i]) / d
-                elif task == N_DYN:
+                if task == N_DYN:
                     for i in range(ny):
                         ft[i] = (r[i] - f0[i]) / d
                     n_jac += 1

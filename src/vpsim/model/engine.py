@@ -141,6 +141,14 @@ def speed_friction(w_e, c):
 
 
 @equation
+def speed_friction_dw(w_e, c):
+    """d/dw_e of :func:`speed_friction`: k_f 0.0072 x 1.8 c_m^0.8 (S / pi) pi_bl 1e5 (sign of w_e)."""
+    c_m = abs(c.stroke * w_e / math.pi)
+    d = c.friction_factor * 0.0072 * 1.8 * c_m**0.8 * (c.stroke / math.pi) * c.boost_layout * 1e5
+    return d if w_e >= 0.0 else -d
+
+
+@equation
 def bmep_from_pressure(p_i, w_e, c):
     """BMEP from (2)-(6): IMEP - FMEP - PMEP with FMEP = speed part + 0.0215 k_f BMEP."""
     return (imep(p_i, c) - speed_friction(w_e, c) - pmep(p_i, c)) / c.one_plus_kf
@@ -195,6 +203,19 @@ def imep_per_pressure(c):
 def fuel_flow_dp(w_e, c):
     """dmdot_f/dp_i of (7),(8) at fixed w_e (the flow is affine in p_i)."""
     return cycles_per_second(w_e, c) * c.air_per_charge * c.air_charge_slope / c.afr
+
+
+@equation
+def fuel_flow_dw(p_i, c):
+    """dmdot_f/dw_e of (7),(8) at fixed p_i (the flow is linear in w_e)."""
+    return cylinder_air_flow(p_i, 1.0, c) / c.afr
+
+
+@equation
+def crank_torque_dw(w_e, c):
+    """dT_cr/dw_e at fixed p_i, fired or not (:func:`partly_fired_torque`): FMEP's speed part (5) through
+    the BMEP divisor."""
+    return -speed_friction_dw(w_e, c) / c.one_plus_kf * c.mep_to_torque
 
 
 @equation
@@ -324,6 +345,14 @@ def boost_available(w_e, c):
     if spool < 0.0:
         spool = 0.0
     return c.ambient_pressure + (c.boost_pressure - c.ambient_pressure) * spool
+
+
+@equation
+def boost_available_dw(w_e, c):
+    """d/dw_e of :func:`boost_available`: the spool's slope below :data:`BOOST_SPOOL_SPEED`, 0 elsewhere."""
+    if not is_boosted(c) or not 0.0 < w_e < BOOST_SPOOL_SPEED:
+        return 0.0
+    return (c.boost_pressure - c.ambient_pressure) / BOOST_SPOOL_SPEED
 
 
 @equation
@@ -607,6 +636,24 @@ def manifold_rate_da(p_i, a_eff, w_e, c):
     p_r = p_i / p_up
     per_pressure = a * (psi(p_r, c) - p_r * dpsi_dpr(p_r, c)) / c.sqrt_rt_ambient
     return k * per_pressure * (boost_available(w_e, c) - c.ambient_pressure) / a_max
+
+
+@equation
+def manifold_rate_dw(p_i, a_eff, w_e, c):
+    """d(dp_i/dt)/dw_e of (9),(10) at fixed p_i and throttle command: the cylinders' outflow (linear in w_e)
+    and, for a boosted engine beyond A_max below full spool, the boost's rise with speed."""
+    k = c.rt_intake / c.intake_manifold_volume
+    d = -cylinder_air_flow(p_i, 1.0, c)
+    a_max = c.max_throttle_area
+    if a_eff > a_max and is_boosted(c):
+        frac = (a_eff - a_max) / a_max
+        if frac > 1.0:
+            frac = 1.0
+        a, p_up = throttle_upstream(a_eff, w_e, c)
+        p_r = p_i / p_up
+        per_pressure = a * (psi(p_r, c) - p_r * dpsi_dpr(p_r, c)) / c.sqrt_rt_ambient
+        d += per_pressure * frac * boost_available_dw(w_e, c)
+    return k * d
 
 
 @kernel
