@@ -286,7 +286,7 @@ def _jacobian(y, aux, G, c, D, jac, col_v, col_p, col_z):
     from below: zero, as max(v, 0) does not move; from above the road load steps), p_i, and
     the command. The command moves the pedal's throttle and brake (pedal_split), the slipping engine's
     throttle above the idle one, and in overrun the fired fraction (rules.fired_fraction_of_command), as
-    does the engine speed; dp_i/dt (9),(10): :func:`.engine.manifold_rate_dp`, ``_da``, ``_dw``; T_cr and
+    does the engine speed; dp_i/dt (9),(10): :func:`.engine.manifold_rate_partials`; T_cr and
     mdot_f (2)-(8) are affine in p_i and in the fired fraction; dv/dt (1),(14)-(18) is linear in the
     clutch's torque (the slipping clutch's part zero where it passes nothing) and the brake force, all zero
     where static friction holds the car; the powers follow (:func:`.rules.powers_tangent`). z moves the raw
@@ -328,6 +328,7 @@ def _jacobian(y, aux, G, c, D, jac, col_v, col_p, col_z):
     passes = coupled or t_cr - t_acc > 0.0  # the slipping clutch passes the torque's change
     per_force = vh.acceleration_dforce(vh.engine_to_wheel_force(t_clutch, ratio, c), v, brake, mass, c)
     w_wheel = vh.engine_speed(vv, ratio, c)
+    rate_dp, rate_da, rate_dw = en.manifold_rate_partials(p, a_eng, w, c)
     moving = v > 0.0  # at rest nothing moves with v (max(v, 0) = 0 below; above, the road load's step)
     for k in range(3):
         if k == 0:
@@ -362,20 +363,16 @@ def _jacobian(y, aux, G, c, D, jac, col_v, col_p, col_z):
             d_fired = rules.fired_fraction_dcommand(cmd, a_min, w, c) * d_cmd
             d_fired += rules.fired_fraction_dspeed(cmd, a_min, w, c) * d_w
         # engine: manifold (9),(10), torque (2)-(8), fuel (7)
-        d_dp = 0.0
         d_tcr = 0.0
         d_mf = 0.0
         if d_fired != 0.0:
             d_tcr += en.partly_fired_torque_dfired(p, c) * d_fired
             d_mf += en.fuel_flow(p, w, c) * d_fired
+        d_dp = rate_dp * d_p + rate_da * d_a + rate_dw * d_w
         if d_p != 0.0:
-            d_dp += en.manifold_rate_dp(p, a_eng, w, c) * d_p
             d_tcr += en.partly_fired_torque_dp(fired, c) * d_p
             d_mf += fired * en.fuel_flow_dp(w, c) * d_p
-        if d_a != 0.0:
-            d_dp += en.manifold_rate_da(p, a_eng, w, c) * d_a
         if d_w != 0.0:
-            d_dp += en.manifold_rate_dw(p, a_eng, w, c) * d_w
             d_tcr += en.crank_torque_dw(w, c) * d_w
             d_mf += fired * en.fuel_flow_dw(p, c) * d_w
         # vehicle (18) with the engine inertia (1),(14)-(17)

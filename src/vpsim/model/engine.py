@@ -142,10 +142,12 @@ def speed_friction(w_e, c):
 
 @equation
 def speed_friction_dw(w_e, c):
-    """d/dw_e of :func:`speed_friction`: k_f 0.0072 x 1.8 c_m^0.8 (S / pi) pi_bl 1e5 (sign of w_e)."""
+    """d/dw_e of :func:`speed_friction`: k_f 0.0072 x 1.8 c_m^1.8 / w_e pi_bl 1e5 (c_m^0.8 S / pi = c_m^1.8 /
+    |w_e|: the same power as the friction's own, which a compiled caller of both computes once)."""
+    if w_e == 0.0:
+        return 0.0
     c_m = abs(c.stroke * w_e / math.pi)
-    d = c.friction_factor * 0.0072 * 1.8 * c_m**0.8 * (c.stroke / math.pi) * c.boost_layout * 1e5
-    return d if w_e >= 0.0 else -d
+    return c.friction_factor * 0.0072 * 1.8 * c_m**1.8 / w_e * c.boost_layout * 1e5
 
 
 @equation
@@ -621,39 +623,44 @@ def manifold_rate_dp(p_i, a_eff, w_e, c):
 
 
 @equation
-def manifold_rate_da(p_i, a_eff, w_e, c):
-    """d(dp_i/dt)/dA_eff of (9),(10) at fixed p_i and w_e, ``a_eff`` the throttle command: the throttle's flow
-    per unit area up to A_max (or an aspirated engine); beyond, a boosted engine's flow rise with the
-    pressure upstream, d(p_up Psi(p_i/p_up))/dp_up = Psi - p_r dPsi/dp_r, times dp_up/du of
-    :func:`throttle_upstream`; 0 at full boost."""
-    k = c.rt_intake / c.intake_manifold_volume
-    a_max = c.max_throttle_area
-    if a_eff <= a_max or not is_boosted(c):
-        return k * throttle_flow_per_area(p_i, c)
-    if (a_eff - a_max) / a_max >= 1.0:
-        return 0.0
-    a, p_up = throttle_upstream(a_eff, w_e, c)
-    p_r = p_i / p_up
-    per_pressure = a * (psi(p_r, c) - p_r * dpsi_dpr(p_r, c)) / c.sqrt_rt_ambient
-    return k * per_pressure * (boost_available(w_e, c) - c.ambient_pressure) / a_max
+def psi_and_dpsi(p_r, c):
+    """(:func:`psi`, :func:`dpsi_dpr`) at p_r with one power (the forward method's Jacobian needs both)."""
+    if p_r <= c.critical_ratio:
+        return c.psi_choked, 0.0
+    if p_r >= 1.0:
+        return 0.0, 0.0
+    g = c.specific_heat_ratio
+    x = p_r ** (1.0 / g)
+    f = 2.0 * g / (g - 1.0) * (x * x - p_r * x)
+    df = 2.0 * g / (g - 1.0) * ((2.0 / g) * x * x / p_r - ((g + 1.0) / g) * x)
+    return (math.sqrt(f) if f > 0.0 else 0.0), df / (2.0 * math.sqrt(f if f > 1e-300 else 1e-300))
 
 
 @equation
-def manifold_rate_dw(p_i, a_eff, w_e, c):
-    """d(dp_i/dt)/dw_e of (9),(10) at fixed p_i and throttle command: the cylinders' outflow (linear in w_e)
-    and, for a boosted engine beyond A_max below full spool, the boost's rise with speed."""
+def manifold_rate_partials(p_i, a_eff, w_e, c):
+    """The partial derivatives of (9),(10), :func:`manifold_pressure_rate`, in p_i, in the throttle command
+    ``a_eff`` and in w_e: (:func:`manifold_rate_dp`; the throttle's flow per unit area up to A_max (or an
+    aspirated engine), beyond it a boosted engine's flow rise with the pressure upstream,
+    d(p_up Psi(p_i/p_up))/dp_up = Psi - p_r dPsi/dp_r, times dp_up/du of :func:`throttle_upstream`, 0 at
+    full boost; the cylinders' outflow (linear in w_e) and, boosted beyond A_max below full spool, the
+    boost's rise with speed). One evaluation of Psi and its derivative."""
     k = c.rt_intake / c.intake_manifold_volume
-    d = -cylinder_air_flow(p_i, 1.0, c)
+    a, p_up = throttle_upstream(a_eff, w_e, c)
+    p_r = p_i / p_up
+    ps, dps = psi_and_dpsi(p_r, c)
+    d_p = k * (
+        a * dps / c.sqrt_rt_ambient - cycles_per_second(w_e, c) * c.air_per_charge * c.air_charge_slope
+    )
+    d_w = -k * cylinder_air_flow(p_i, 1.0, c)
     a_max = c.max_throttle_area
-    if a_eff > a_max and is_boosted(c):
-        frac = (a_eff - a_max) / a_max
-        if frac > 1.0:
-            frac = 1.0
-        a, p_up = throttle_upstream(a_eff, w_e, c)
-        p_r = p_i / p_up
-        per_pressure = a * (psi(p_r, c) - p_r * dpsi_dpr(p_r, c)) / c.sqrt_rt_ambient
-        d += per_pressure * frac * boost_available_dw(w_e, c)
-    return k * d
+    if a_eff <= a_max or not is_boosted(c):
+        return d_p, k * p_up * ps / c.sqrt_rt_ambient, d_w
+    frac = (a_eff - a_max) / a_max
+    per_pressure = a * (ps - p_r * dps) / c.sqrt_rt_ambient
+    d_w += k * per_pressure * (frac if frac < 1.0 else 1.0) * boost_available_dw(w_e, c)
+    if frac >= 1.0:
+        return d_p, 0.0, d_w
+    return d_p, k * per_pressure * (boost_available(w_e, c) - c.ambient_pressure) / a_max, d_w
 
 
 @kernel
