@@ -716,6 +716,25 @@ def test_jacobian_keeps_the_energy_balance(params, mode):
     assert at_rest > 10 or mode == "paper"  # (paper mode: the car creeps at standstill)
 
 
+@pytest.mark.parametrize("mode", ["paper", "extended"])
+def test_switching_functions_alone_are_the_right_sides(params, mode):
+    """The events are located on _switch, each switching function without the rest of the right side: the
+    same values as _rhs sets, at every state a run passes (clutch slipping, saturated, braking, at rest)."""
+    q = params.with_changes(simulation={"fuel_cutoff_speed": 125.0})
+    for driver in ("1", "2"):
+        c, D, cyc, pts = _visited_states(q, "ftp75", mode, driver, stride=1)
+        for t, y_, ratio in pts:
+            G = np.zeros(3)
+            forward._gear(ratio, c, G)
+            y = np.array(y_, dtype=float)
+            dy, aux = np.zeros(forward.NY), np.zeros(forward.N_AUX)
+            forward._rhs(t, y, G, c, D, cyc.time_s, cyc.speed_mps, dy, aux)
+            for k in range(forward.N_SW):
+                assert forward._switch(k, t, y, G, c, D, cyc.time_s, cyc.speed_mps) == aux[forward._X_SW + k]
+    D[forward._OPEN] = 1.0
+    assert [forward._switch(k, 3.0, y, G, c, D, cyc.time_s, cyc.speed_mps) for k in range(1, 5)] == [1.0] * 4
+
+
 def test_jacobian_open_loop_has_no_z_column(params):
     c = record(params)
     D = forward.settings(params, None, "paper")

@@ -779,11 +779,40 @@ def _hermite(s, h, y, ynew, f0, f1, n, out):
 
 
 @register_jitable
-def _locate(k, t, h, ga, gb, y, ynew, f0, f1, ytmp, scratch, aux, G, c, D, tab_t, tab_v):
+def _switch(k, t, y, G, c, D, tab_t, tab_v):
+    """Switching function k at (t, y), as :func:`_rhs` sets aux[_X_SW + k], without the rest of the right
+    side: the events' location (:func:`_locate`) needs this one value, some eight times per event."""
+    v = y[_V]
+    if k == _SW_MOVING:
+        return v
+    vv = v if v > 0.0 else 0.0
+    ext = D[_EXT] != 0.0
+    w_wheel = vh.engine_speed(vv, G[_G_I], c)  # (14),(17)
+    if k == _SW_CLUTCH:
+        return w_wheel - c.idle_speed if ext else 1.0
+    if k == _SW_SLIP_TORQUE:
+        if not ext or rules.clutch_engaged(w_wheel, c):
+            return 1.0
+        return en.crank_torque(y[_P], c.idle_speed, c)  # the slipping engine at idle, all cylinders fired
+    if D[_OPEN] != 0.0:  # no driver
+        return 1.0
+    v_ref = tb.interp_at(t, tab_t, tab_v, D[_TAB_INV])
+    if k == _SW_SAT_LO or k == _SW_SAT_HI:
+        raw, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], -math.inf, math.inf, D[_AWG])
+        return raw - D[_ULO] if k == _SW_SAT_LO else D[_UHI] - raw
+    cmd, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], D[_ULO], D[_UHI], D[_AWG])
+    if k == _SW_THROTTLE:
+        return cmd - D[_AMIN] if ext else 1.0
+    return cmd if D[_KB] != 0.0 else 1.0  # _SW_BRAKE
+
+
+@register_jitable
+def _locate(k, t, h, ga, gb, y, ynew, f0, f1, ytmp, G, c, D, tab_t, tab_v):
     """First instant in (t, t + h] where switching function k has changed sign, on the step's dense output.
 
     Illinois (regula falsi with halving of the stale end), bisection where the secant gives nothing; returns
-    (the right end of the final bracket, where the function has the new sign; right-side evaluations)."""
+    (the right end of the final bracket, where the function has the new sign; evaluations of the function,
+    :func:`_switch`)."""
     a, b = 0.0, 1.0
     fa, fb = ga, gb
     pa = fa > 0.0
@@ -797,9 +826,8 @@ def _locate(k, t, h, ga, gb, y, ynew, f0, f1, ytmp, scratch, aux, G, c, D, tab_t
             if a < sec < b:
                 s = sec
         _hermite(s, h, y, ynew, f0, f1, N_DYN, ytmp)
-        _rhs(t + s * h, ytmp, G, c, D, tab_t, tab_v, scratch, aux)
+        fs = _switch(k, t + s * h, ytmp, G, c, D, tab_t, tab_v)
         n += 1
-        fs = aux[_X_SW + k]
         if (fs > 0.0) == pa:
             a, fa = s, fs
             if side == -1:
@@ -1083,10 +1111,7 @@ def _integrate_ros(
                 for k in range(N_SW):
                     g_a, g_b = sw0[k], aux1[_X_SW + k]
                     if (g_a > 0.0) != (g_b > 0.0) and abs(g_b) > SWITCH_SIGNIFICANCE[k]:
-                        tb, n_it = _locate(
-                            k, t, h, g_a, g_b, y, ynew, f0, f1, ytmp, scratch, aux, G, c, D, tab_t, tab_v
-                        )
-                        nfev += n_it
+                        tb, _ = _locate(k, t, h, g_a, g_b, y, ynew, f0, f1, ytmp, G, c, D, tab_t, tab_v)
                         if tb < tb_min:
                             tb_min = tb
                 if tb_min < tnew and tb_min - t > EVENT_TOLERANCE_S + 1e-3 * h:
