@@ -517,3 +517,234 @@ def test_dopri5_is_still_the_paper_solver(prepared):
     assert "RODAS3" in d.notes[0]
     with pytest.raises(VpsimError, match="solver"):
         forward.run(c, p, schedule=s, solver="euler")
+
+
+def _visited_states(params, cycle_name, mode, driver, stride=3):
+    """States (t, y, ratio) the Rosenbrock integrator passes on a cycle, with the settings to evaluate the
+    right side there: every branch the cycle reaches (clutch slipping, brakes, cut-off, boost, rest)."""
+    c_, p, s = resolve_inputs(cycle_name, params)
+    c = record(p)
+    pi = PIDriver.from_params(p, driver, mode, None)
+    D = forward.settings(p, pi, mode)
+    ratios = np.asarray(p.transmission.ratios)
+    seg_t, seg_r = forward.segments(c_, s, ratios)
+    y0 = forward.initial_state(c_, p, seg_r[0], pi, mode)
+    _, out_y, _, _ = forward.integrate(
+        seg_t, seg_r, y0, c, D, c_.time_s, c_.speed_mps, out_t=c_.time_s, max_step=c_.time_s[-1] / 50
+    )
+    D[forward._TAB_INV] = (c_.time_s.size - 1) / (c_.time_s[-1] - c_.time_s[0])
+    gears = s.gear_at(c_.time_s)
+    # a little off the cycle's nodes (where v_cycle has kinks), inside the step's time interval
+    pts = [
+        (t + 0.37, out_y[k], ratios[gears[k] - 1]) for k, t in enumerate(c_.time_s[:-1]) if k % stride == 0
+    ]
+    return c, D, c_, pts
+
+
+def _column_check(c, D, cyc, pts, column, dy_rel, label):
+    """Compare an analytic Jacobian column with central differences of the right side; the branches seen."""
+    seen = set()
+    worst = 0.0
+    for t, y_, ratio in pts:
+        G = np.zeros(3)
+        forward._gear(ratio, c, G)
+        y = np.array(y_, dtype=float)
+
+        def f(yy, t=t, G=G):
+            dy, aux = np.zeros(forward.NY), np.zeros(forward.N_AUX)
+            forward._rhs(t, yy, G, c, D, cyc.time_s, cyc.speed_mps, dy, aux)
+            return dy, aux
+
+        f0, aux0 = f(y)
+        col = np.zeros(forward.NY)
+        column(y, aux0, G, c, D, col)
+        h = dy_rel(y)
+        yp, ym = y.copy(), y.copy()
+        yp[column.index] += h
+        ym[column.index] -= h
+        fp, fm = f(yp)[0], f(ym)[0]
+        central = (fp - fm) / (2 * h)
+        fwd, bwd = (fp - f0) / h, (f0 - fm) / h
+        # what rounding leaves of a difference over the increment h
+        noise = 10 * np.finfo(float).eps * (np.abs(f0) + np.abs(fp) + np.abs(fm)) / h + 1e-300
+        if np.any(
+            np.abs(fwd - bwd) > 1e-4 * np.abs(central) + noise
+        ):  # a kink within +-h: nothing to compare
+            continue
+        p_r = y[forward._P] / en.throttle_upstream(aux0[forward._X_AENG], aux0[forward._X_W], c)[1]
+        if p_r > 0.999:  # dPsi/dp_r -> -inf: central differences lose their accuracy
+            continue
+        rel = np.abs(col - central) / (np.abs(central) + noise / 1e-6)
+        worst = max(worst, float(rel.max()))
+        assert np.all(rel <= 1e-6), (label, t, y[:3], np.flatnonzero(rel > 1e-6), col, central)
+        seen.add("coupled" if aux0[forward._X_COUPLED] else "slipping")
+        seen.add("fired" if aux0[forward._X_FIRED] == 1.0 else "partly fired")
+        if aux0[forward._X_BRK] > 0:
+            seen.add("braking")
+        if y[forward._V] <= 0 and aux0[forward._X_ACC] == 0.0:
+            seen.add("held at rest")
+        if aux0[forward._X_AENG] > c.max_throttle_area:
+            seen.add("boosted")
+            if aux0[forward._X_W] < en.BOOST_SPOOL_SPEED:
+                seen.add("spooling")
+        if aux0[forward._X_MF] < aux0[forward._X_FIRED] * c.idle_fuel_flow:
+            seen.add("idle floor")
+        if min(aux0[forward._X_SW + forward._SW_SAT_LO], aux0[forward._X_SW + forward._SW_SAT_HI]) < 0.0:
+            seen.add("saturated")
+    return seen, worst
+
+
+def _column(k):
+    def col_k(y, aux, G, c, D, col):
+        cols = np.zeros((3, forward.NY))
+        forward._jacobian(y, aux, G, c, D, np.zeros(9), cols[0], cols[1], cols[2])
+        col[:] = cols[k]
+
+    col_k.index = k
+    return col_k
+
+
+_v_col, _p_col, _z_col = _column(forward._V), _column(forward._P), _column(forward._Z)
+
+
+@pytest.mark.parametrize(
+    "cycle, mode, changes, branches",
+    [
+        ("nedc", "paper", {}, {"coupled", "held at rest"}),
+        ("ftp75", "extended", {}, {"slipping", "braking", "idle floor"}),
+        (
+            "ftp75",
+            "extended",
+            {"simulation": {"fuel_cutoff_speed": 125.0}, "engine": {"accessory_power": 800.0}},
+            {"partly fired", "slipping", "braking"},
+        ),
+        ("us06", "extended", {"engine": {"boost_pressure": 1.6e5}}, {"boosted"}),
+        ("us06", "paper", {"engine": {"boost_pressure": 1.6e5}}, {"boosted"}),
+    ],
+)
+def test_jacobian_column_in_p_i_is_the_right_sides_derivative(params, cycle, mode, changes, branches):
+    """The Rosenbrock step's column of J in p_i (v, p_i, z and the quadratures) in closed form: central
+    differences of the right side itself at the states a run passes, every branch of it."""
+    q = params.with_changes(**changes) if changes else params
+    c, D, cyc, pts = _visited_states(q, cycle, mode, "1")
+    seen, worst = _column_check(c, D, cyc, pts, _p_col, lambda y: 1e-7 * y[forward._P], cycle)
+    assert branches <= seen, seen
+
+
+@pytest.mark.parametrize(
+    "cycle, mode, driver, changes, branches",
+    [
+        ("nedc", "paper", "1", {}, {"coupled", "saturated"}),
+        ("ftp75", "extended", "2", {}, {"slipping", "braking", "idle floor", "held at rest"}),
+        (
+            "ftp75",
+            "extended",
+            "1",
+            {"simulation": {"fuel_cutoff_speed": 125.0}, "engine": {"accessory_power": 800.0}},
+            {"partly fired", "slipping", "braking"},
+        ),
+        ("us06", "extended", "1", {"engine": {"boost_pressure": 1.6e5}}, {"boosted"}),
+        ("us06", "paper", "2", {"engine": {"boost_pressure": 1.6e5}}, {"boosted"}),
+    ],
+)
+def test_jacobian_column_in_z_is_the_right_sides_derivative(params, cycle, mode, driver, changes, branches):
+    """The column of J in the PI state z in closed form (the raw command, the pedal, the cut-off's fired
+    fraction, the boost, the anti-windup): central differences of the right side at the states a run
+    passes. It gives df/dt as well (test_time_derivative_from_the_pi_structure)."""
+    q = params.with_changes(**changes) if changes else params
+    c, D, cyc, pts = _visited_states(q, cycle, mode, driver)
+    seen, worst = _column_check(c, D, cyc, pts, _z_col, lambda y: 1e-9, cycle)
+    assert branches <= seen, seen
+
+
+@pytest.mark.parametrize(
+    "cycle, mode, driver, changes, branches",
+    [
+        ("nedc", "paper", "1", {}, {"coupled", "saturated"}),
+        ("ftp75", "extended", "2", {}, {"slipping", "braking", "idle floor"}),
+        (
+            "ftp75",
+            "extended",
+            "1",
+            {"simulation": {"fuel_cutoff_speed": 125.0}, "engine": {"accessory_power": 800.0}},
+            {"partly fired", "slipping", "braking"},
+        ),
+        (
+            "ftp75",
+            "extended",
+            "1",
+            {"vehicle": {"road_load_a": 150.0, "road_load_b": 2.0, "road_load_c": 0.45}},
+            {"slipping", "braking"},
+        ),
+        ("us06", "extended", "1", {"engine": {"boost_pressure": 1.6e5}}, {"boosted", "spooling"}),
+        ("us06", "paper", "2", {"engine": {"boost_pressure": 1.6e5}}, {"boosted"}),
+    ],
+)
+def test_jacobian_column_in_v_is_the_right_sides_derivative(params, cycle, mode, driver, changes, branches):
+    """The column of J in v in closed form (the PI error, the engine speed through friction, the cylinders'
+    flow, the boost's spool, the cut-off's ramp and the accessories, the road load, the energy terms):
+    central differences of the right side at the states a run passes."""
+    q = params.with_changes(**changes) if changes else params
+    c, D, cyc, pts = _visited_states(q, cycle, mode, driver)
+    seen, worst = _column_check(c, D, cyc, pts, _v_col, lambda y: 1e-6, cycle)
+    assert branches <= seen, seen
+
+
+@pytest.mark.parametrize("mode", ["paper", "extended"])
+def test_jacobian_keeps_the_energy_balance(params, mode):
+    """The powers' rows of the Jacobian columns satisfy the balance's identity as the powers do (indicated =
+    the sum of the others), at every state a run passes, at rest too: the Rosenbrock step is linear in them,
+    so the balance closes to rounding."""
+    q = params.with_changes(simulation={"fuel_cutoff_speed": 125.0}, engine={"accessory_power": 800.0})
+    c, D, cyc, pts = _visited_states(q, "ftp75", mode, "1", stride=2)
+    f = forward
+    rows = [f._E_FRIC, f._E_PUMP, f._E_ENG, f._E_DRV, f._E_VEH, f._E_AERO, f._E_ROLL, f._E_BRAKE]
+    rows += [f._E_IDLE, f._E_ACC]
+    at_rest = 0
+    for t, y_, ratio in pts:
+        G = np.zeros(3)
+        f._gear(ratio, c, G)
+        y = np.array(y_, dtype=float)
+        dy, aux = np.zeros(f.NY), np.zeros(f.N_AUX)
+        f._rhs(t, y, G, c, D, cyc.time_s, cyc.speed_mps, dy, aux)
+        cols = np.zeros((3, f.NY))
+        f._jacobian(y, aux, G, c, D, np.zeros(9), cols[0], cols[1], cols[2])
+        scale = np.abs(cols[:, [f._E_IND, *rows]]).max(axis=1) + 1e-300
+        residual = cols[:, f._E_IND] - cols[:, rows].sum(axis=1)
+        assert np.all(np.abs(residual) <= 1e-12 * scale), (t, y[:3], residual / scale)
+        at_rest += y[f._V] <= 0.0
+    assert at_rest > 10 or mode == "paper"  # (paper mode: the car creeps at standstill)
+
+
+@pytest.mark.parametrize("mode", ["paper", "extended"])
+def test_switching_functions_alone_are_the_right_sides(params, mode):
+    """The events are located on _switch, each switching function without the rest of the right side: the
+    same values as _rhs sets, at every state a run passes (clutch slipping, saturated, braking, at rest)."""
+    q = params.with_changes(simulation={"fuel_cutoff_speed": 125.0})
+    for driver in ("1", "2"):
+        c, D, cyc, pts = _visited_states(q, "ftp75", mode, driver, stride=1)
+        for t, y_, ratio in pts:
+            G = np.zeros(3)
+            forward._gear(ratio, c, G)
+            y = np.array(y_, dtype=float)
+            dy, aux = np.zeros(forward.NY), np.zeros(forward.N_AUX)
+            forward._rhs(t, y, G, c, D, cyc.time_s, cyc.speed_mps, dy, aux)
+            for k in range(forward.N_SW):
+                assert forward._switch(k, t, y, G, c, D, cyc.time_s, cyc.speed_mps) == aux[forward._X_SW + k]
+    D[forward._OPEN] = 1.0
+    assert [forward._switch(k, 3.0, y, G, c, D, cyc.time_s, cyc.speed_mps) for k in range(1, 5)] == [1.0] * 4
+
+
+def test_jacobian_open_loop_has_no_z_column(params):
+    c = record(params)
+    D = forward.settings(params, None, "paper")
+    D[forward._OPEN] = 1.0
+    y = np.zeros(forward.NY)
+    y[[forward._V, forward._P]] = 10.0, 5e4
+    dy, aux = np.zeros(forward.NY), np.zeros(forward.N_AUX)
+    G = np.zeros(3)
+    forward._gear(10.0, c, G)
+    forward._rhs(3.0, y, G, c, D, np.array([0.0, 10.0]), np.array([1e-4, 1e-4]), dy, aux)
+    cols = np.ones((3, forward.NY))
+    forward._jacobian(y, aux, G, c, D, np.zeros(9), cols[0], cols[1], cols[2])
+    assert np.all(cols[2] == 0.0) and cols[0][forward._Z] == 0.0 and cols[0][forward._ERR2] == 0.0

@@ -534,3 +534,20 @@ def test_the_forward_method_refuses_a_converter_in_one_line(params):
     with pytest.raises(vpsim.VpsimError, match="forward method has no torque converter"):
         forward.run(load_cycle("udds"), q, mode="realistic")  # the method itself, not only its callers
     assert vpsim.simulate("udds", method="forward", params=q, mode="paper").fuel_kg > 0  # none in paper mode
+
+
+def test_jacobian_helpers_agree_with_the_equations_they_differentiate(params):
+    """psi_and_dpsi is (psi, dpsi_dpr) from one power; manifold_rate_partials' p_i entry is manifold_rate_dp;
+    speed_friction_dw is speed_friction's slope (central differences)."""
+    c = record(params)
+    for p_r in (0.2, c.critical_ratio, 0.6, 0.9, 0.999, 1.0, 1.2):
+        assert en.psi_and_dpsi(p_r, c) == pytest.approx((en.psi(p_r, c), en.dpsi_dpr(p_r, c)), rel=1e-13)
+    for p_i, a, w in ((3e4, 1e-4, 100.0), (9e4, 1.5e-3, 400.0), (2e4, 0.0, 0.0)):
+        assert en.manifold_rate_partials(p_i, a, w, c)[0] == pytest.approx(
+            en.manifold_rate_dp(p_i, a, w, c), rel=1e-13
+        )
+    for w in (-50.0, 30.0, 200.0, 600.0):
+        h = 1e-4 * abs(w)
+        fd = (en.speed_friction(w + h, c) - en.speed_friction(w - h, c)) / (2 * h)
+        assert en.speed_friction_dw(w, c) == pytest.approx(fd, rel=1e-7)
+    assert en.speed_friction_dw(0.0, c) == 0.0

@@ -19,8 +19,10 @@ Integrators (``solver=``; docs/methods.md explains both):
 * ``rosenbrock`` (default): RODAS3 (Sandu et al. 1997; Hairer & Wanner 1996, IV.7), a linearly implicit,
   L-stable, stiffly accurate Rosenbrock method of order 3 with an embedded order-2 method, so that the step
   follows the accuracy asked and not the stability of the fast manifold. Its Jacobian (v, p_i, z, and the
-  rows of the quadratures in these three) and df/dt are forward differences of the model's right side, once
-  per step. The error (filtered by (I - h gamma J)^-1) is measured in the RMS norm over v, p_i, z (ode45's
+  rows of the quadratures in these three) is the model's equations differentiated in closed form (the
+  derivative helpers beside them in :mod:`vpsim.model`), df/dt follows from it by the PI law's structure
+  (open loop: a forward difference in t), once per step; three evaluations of the right side per step.
+  The error (filtered by (I - h gamma J)^-1) is measured in the RMS norm over v, p_i, z (ode45's
   scales) and the fuel and distance (relative to their increment over the step plus a rate scale times h).
   Steps end at every node of the cycle's table (where the cycle speed has a kink), at every output time, at
   the gear changes (restarts) and at every event: a switching function of the right side (clutch
@@ -126,7 +128,9 @@ SWITCHES = (
     "moving",
     "slip_torque",
 )
-N_AUX = _X_SW + N_SW
+# the engine's inputs at the point (the Rosenbrock step's analytic Jacobian column in p_i reads them)
+_X_AENG, _X_FIRED, _X_TACC = _X_SW + N_SW, _X_SW + N_SW + 1, _X_SW + N_SW + 2
+N_AUX = _X_SW + N_SW + 3
 
 # --- Dormand-Prince 5(4) tableau -------------------------------------------------------------------------
 _C2, _C3, _C4, _C5 = 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0
@@ -269,6 +273,176 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     aux[_X_SW + _SW_CLUTCH] = w_wheel - c.idle_speed if D[_EXT] != 0.0 else 1.0
     aux[_X_SW + _SW_MOVING] = v
     aux[_X_SW + _SW_SLIP_TORQUE] = 1.0 if coupled else t_cr
+    aux[_X_AENG] = a_eng
+    aux[_X_FIRED] = fired
+    aux[_X_TACC] = t_acc
+
+
+@register_jitable
+def _jacobian(y, aux, G, c, D, jac, col_v, col_p, col_z):
+    """The right side's derivatives in v, p_i and z at (t, y) (``aux`` from :func:`_rhs` there): the 3 x 3
+    Jacobian ``jac`` (row-major) and the full columns col_v, col_p, col_z (the quadratures' rows): the
+    model's equations differentiated branch by branch.
+
+    Three directions, at fixed t: the speed v at a fixed driver's command (at rest, v = 0, the derivative
+    from below: zero, as max(v, 0) does not move; from above the road load steps), p_i, and
+    the command. The command moves the pedal's throttle and brake (pedal_split), the slipping engine's
+    throttle above the idle one, and in overrun the fired fraction (rules.fired_fraction_of_command), as
+    does the engine speed; dp_i/dt (9),(10): :func:`.engine.manifold_rate_partials`; T_cr and
+    mdot_f (2)-(8) are affine in p_i and in the fired fraction; dv/dt (1),(14)-(18) is linear in the
+    clutch's torque (the slipping clutch's part zero where it passes nothing) and the brake force, all zero
+    where static friction holds the car; the powers follow (:func:`.rules.powers_tangent`). z moves the raw
+    command u_raw = K_p e + z one for one, the command where it is not saturated (pi_law), and dz/dt's own
+    derivative is the anti-windup's (du/du_raw - 1)/T_t; v moves the PI error e = v_cycle - v as well,
+    hence the command as -K_p times z does (the right side's change is linear in the three). Open loop
+    nothing depends on z."""
+    closed = D[_OPEN] == 0.0
+    # u_lo <= u_raw <= u_hi (the switching functions' values): the command follows u_raw
+    du = 1.0 if closed and aux[_X_SW + _SW_SAT_LO] >= 0.0 and aux[_X_SW + _SW_SAT_HI] >= 0.0 else 0.0
+    # the point
+    v = y[_V]
+    vv = v if v > 0.0 else 0.0
+    p = y[_P]
+    ratio = G[_G_I]
+    w = aux[_X_W]
+    t_cr = aux[_X_TCR]
+    fired = aux[_X_FIRED]
+    t_acc = aux[_X_TACC]
+    brake = aux[_X_BRK]
+    acc = aux[_X_ACC]
+    a_eng = aux[_X_AENG]
+    mdot_f = aux[_X_MF]
+    cmd = aux[_X_CMD]
+    a_min = D[_AMIN]
+    coupled = aux[_X_COUPLED] != 0.0
+    realistic = D[_EXT] != 0.0
+    cut = coupled and realistic and closed  # fuel cut-off in overrun
+    if coupled:
+        t_clutch = t_cr - t_acc
+        mass = 1.0 / G[_G_INV_MEQ]
+        clutch = rules.CLUTCH_ENGAGED
+        dw = G[_G_KIN] * acc
+    else:
+        t_clutch = rules.slipping_clutch_torque(t_cr - t_acc)
+        mass = c.mass
+        clutch = rules.CLUTCH_SLIPPING
+        dw = 0.0
+    passes = coupled or t_cr - t_acc > 0.0  # the slipping clutch passes the torque's change
+    per_force = vh.acceleration_dforce(vh.engine_to_wheel_force(t_clutch, ratio, c), v, brake, mass, c)
+    w_wheel = vh.engine_speed(vv, ratio, c)
+    rate_dp, rate_da, rate_dw = en.manifold_rate_partials(p, a_eng, w, c)
+    moving = v > 0.0  # at rest nothing moves with v (max(v, 0) = 0 below; above, the road load's step)
+    for k in range(3):
+        if k == 0:
+            col = col_v
+            d_v, d_p, d_cmd = 1.0, 0.0, 0.0
+            if not moving:
+                for i in range(col.size):
+                    col[i] = 0.0
+                continue
+        elif k == 1:
+            col = col_p
+            d_v, d_p, d_cmd = 0.0, 1.0, 0.0
+        else:
+            col = col_z
+            d_v, d_p, d_cmd = 0.0, 0.0, 1.0
+            if du == 0.0:
+                for i in range(col.size):
+                    col[i] = 0.0
+                break
+        d_wheel = G[_G_KIN] * d_v
+        d_w = d_wheel if coupled else 0.0  # the slipping clutch holds the engine at idle
+        d_tacc = en.accessory_torque_rate(w, d_w, c) if realistic else 0.0
+        # the driver's command through the pedal (pedal_split) and the slipping engine's idle throttle
+        d_a = 0.0
+        d_brake = 0.0
+        if d_cmd != 0.0:
+            d_brake = -D[_KB] * d_cmd if cmd < 0.0 else 0.0
+            if cmd > a_min and (coupled or cmd > D[_AIDLE]):
+                d_a = d_cmd
+        d_fired = 0.0
+        if cut:
+            d_fired = rules.fired_fraction_dcommand(cmd, a_min, w, c) * d_cmd
+            d_fired += rules.fired_fraction_dspeed(cmd, a_min, w, c) * d_w
+        # engine: manifold (9),(10), torque (2)-(8), fuel (7)
+        d_tcr = 0.0
+        d_mf = 0.0
+        if d_fired != 0.0:
+            d_tcr += en.partly_fired_torque_dfired(p, c) * d_fired
+            d_mf += en.fuel_flow(p, w, c) * d_fired
+        d_dp = rate_dp * d_p + rate_da * d_a + rate_dw * d_w
+        if d_p != 0.0:
+            d_tcr += en.partly_fired_torque_dp(fired, c) * d_p
+            d_mf += fired * en.fuel_flow_dp(w, c) * d_p
+        if d_w != 0.0:
+            d_tcr += en.crank_torque_dw(w, c) * d_w
+            d_mf += fired * en.fuel_flow_dw(p, c) * d_w
+        # vehicle (18) with the engine inertia (1),(14)-(17)
+        d_clutch = d_tcr - d_tacc if passes else 0.0
+        d_acc = (vh.engine_to_wheel_force(d_clutch, ratio, c) - d_brake) * per_force
+        if d_v != 0.0:
+            d_acc -= vh.road_load_dv(v, c) / mass * d_v
+        d_dw = G[_G_KIN] * d_acc if coupled else 0.0
+        col[_V] = d_acc
+        col[_P] = d_dp
+        col[_FUEL] = rules.fuel_used_tangent(mdot_f, fired, d_mf, d_fired, c)
+        col[_DIST] = d_v
+        pw = rules.powers_tangent(
+            p,
+            w,
+            dw,
+            t_cr,
+            w_wheel,
+            vv,
+            acc,
+            brake,
+            clutch,
+            fired,
+            t_acc,
+            d_p,
+            d_w,
+            d_dw,
+            d_tcr,
+            d_wheel,
+            d_v,
+            d_acc,
+            d_brake,
+            d_fired,
+            d_tacc,
+            c,
+        )
+        col[_E_IND] = pw[0]
+        col[_E_FRIC] = pw[1]
+        col[_E_PUMP] = pw[2]
+        col[_E_ENG] = pw[3]
+        col[_E_DRV] = pw[4]
+        col[_E_VEH] = pw[5]
+        col[_E_AERO] = pw[6]
+        col[_E_ROLL] = pw[7]
+        col[_E_BRAKE] = pw[8]
+        col[_E_IDLE] = pw[10]
+        col[_E_ACC] = pw[11]
+        col[_OUTSIDE] = 0.0
+    # the command's part of the speed's column; the z and e^2 rows
+    if du != 0.0 and moving:
+        kp = D[_KP]
+        for i in range(col_v.size):
+            col_v[i] -= kp * col_z[i]
+    col_p[_Z] = 0.0
+    col_p[_ERR2] = 0.0
+    col_z[_ERR2] = 0.0
+    if closed:
+        col_z[_Z] = (du - 1.0) * D[_AWG]
+        col_v[_Z] = -D[_KI] - D[_KP] * col_z[_Z] if moving else 0.0
+        col_v[_ERR2] = -2.0 * (aux[_X_VREF] - vv) if moving else 0.0
+    else:  # e = 0
+        col_z[_Z] = 0.0
+        col_v[_Z] = 0.0
+        col_v[_ERR2] = 0.0
+    for i in range(N_DYN):
+        jac[N_DYN * i + _V] = col_v[i]
+        jac[N_DYN * i + _P] = col_p[i]
+        jac[N_DYN * i + _Z] = col_z[i]
 
 
 @register_jitable
@@ -539,7 +713,7 @@ _WA31, _WA41, _WA43 = 2.0, 2.0, 1.0  # a_ij (the others are zero)
 _WC21, _WC31, _WC32, _WC41, _WC42, _WC43 = 4.0, 1.0, -1.0, 1.0, -1.0, -8.0 / 3.0
 _WM1, _WM3, _WM4 = 2.0, 1.0, 1.0  # m_2 = 0; y_new = stage 4 state + u_4 (stiffly accurate)
 _WG1, _WG2 = 0.5, 1.5  # gamma_i = sum_j gamma_ij (0 for stages 3, 4); alpha = (0, 0, 1, 1)
-ROS_ORDER = 3  # the step-size controller uses the embedded order 2: h ~ err^(-1/3); the error is u_4
+ROS_ORDER = 3  # the step-size controller uses the embedded order 2: h ~ err^(-1/3) (cbrt); the error: u_4
 _FD_STEP = 1.4901161193847656e-08  # sqrt(eps): forward-difference increment relative to the state's scale
 EVENT_TOLERANCE_S = 1e-6  # events are located to this width (plus rounding of t)
 
@@ -575,15 +749,16 @@ def _solve3(r, winv, u):
 
 
 @register_jitable(inline="always")
-def _quadrature_stages(i, h, hg, y, ynew, f0, k3, k4, ft, u1, u2, u3, u4, e, g0, g1, g2, err):
+def _quadrature_stages(i, h, ih, hg, y, ynew, f0, k3, k4, ft, u1, u2, u3, u4, e, g0, g1, g2, err):
     """The four stages of quadrature state i (its column of J is zero, its row G_i = (g0, g1, g2)[i] in v,
     p_i, z): u_j = hg (f_j + sum_k c_jk u_k / h + gamma_j h df/dt + G_i u_j[v, p_i, z]); sets ynew[i] and
-    err[i], the filtered error estimate u_4 + hg G_i e (e: the filtered estimate of v, p_i, z over hg)."""
+    err[i], the filtered error estimate u_4 + hg G_i e (e: the filtered estimate of v, p_i, z over hg).
+    ``ih`` = 1/h: products, where the quotients cost 45 divisions per step."""
     a, b, cc = g0[i], g1[i], g2[i]
     q1 = hg * (f0[i] + (_WG1 * h) * ft[i] + a * u1[0] + b * u1[1] + cc * u1[2])
-    q2 = hg * (f0[i] + (_WC21 / h) * q1 + (_WG2 * h) * ft[i] + a * u2[0] + b * u2[1] + cc * u2[2])
-    q3 = hg * (k3[i] + (_WC31 * q1 + _WC32 * q2) / h + a * u3[0] + b * u3[1] + cc * u3[2])
-    q4 = hg * (k4[i] + (_WC41 * q1 + _WC42 * q2 + _WC43 * q3) / h + a * u4[0] + b * u4[1] + cc * u4[2])
+    q2 = hg * (f0[i] + (_WC21 * ih) * q1 + (_WG2 * h) * ft[i] + a * u2[0] + b * u2[1] + cc * u2[2])
+    q3 = hg * (k3[i] + (_WC31 * q1 + _WC32 * q2) * ih + a * u3[0] + b * u3[1] + cc * u3[2])
+    q4 = hg * (k4[i] + (_WC41 * q1 + _WC42 * q2 + _WC43 * q3) * ih + a * u4[0] + b * u4[1] + cc * u4[2])
     ynew[i] = y[i] + _WM1 * q1 + _WM3 * q3 + _WM4 * q4
     err[i] = q4 + hg * (a * e[0] + b * e[1] + cc * e[2])
 
@@ -604,11 +779,40 @@ def _hermite(s, h, y, ynew, f0, f1, n, out):
 
 
 @register_jitable
-def _locate(k, t, h, ga, gb, y, ynew, f0, f1, ytmp, scratch, aux, G, c, D, tab_t, tab_v):
+def _switch(k, t, y, G, c, D, tab_t, tab_v):
+    """Switching function k at (t, y), as :func:`_rhs` sets aux[_X_SW + k], without the rest of the right
+    side: the events' location (:func:`_locate`) needs this one value, some eight times per event."""
+    v = y[_V]
+    if k == _SW_MOVING:
+        return v
+    vv = v if v > 0.0 else 0.0
+    ext = D[_EXT] != 0.0
+    w_wheel = vh.engine_speed(vv, G[_G_I], c)  # (14),(17)
+    if k == _SW_CLUTCH:
+        return w_wheel - c.idle_speed if ext else 1.0
+    if k == _SW_SLIP_TORQUE:
+        if not ext or rules.clutch_engaged(w_wheel, c):
+            return 1.0
+        return en.crank_torque(y[_P], c.idle_speed, c)  # the slipping engine at idle, all cylinders fired
+    if D[_OPEN] != 0.0:  # no driver
+        return 1.0
+    v_ref = tb.interp_at(t, tab_t, tab_v, D[_TAB_INV])
+    if k == _SW_SAT_LO or k == _SW_SAT_HI:
+        raw, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], -math.inf, math.inf, D[_AWG])
+        return raw - D[_ULO] if k == _SW_SAT_LO else D[_UHI] - raw
+    cmd, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], D[_ULO], D[_UHI], D[_AWG])
+    if k == _SW_THROTTLE:
+        return cmd - D[_AMIN] if ext else 1.0
+    return cmd if D[_KB] != 0.0 else 1.0  # _SW_BRAKE
+
+
+@register_jitable
+def _locate(k, t, h, ga, gb, y, ynew, f0, f1, ytmp, G, c, D, tab_t, tab_v):
     """First instant in (t, t + h] where switching function k has changed sign, on the step's dense output.
 
     Illinois (regula falsi with halving of the stale end), bisection where the secant gives nothing; returns
-    (the right end of the final bracket, where the function has the new sign; right-side evaluations)."""
+    (the right end of the final bracket, where the function has the new sign; evaluations of the function,
+    :func:`_switch`)."""
     a, b = 0.0, 1.0
     fa, fb = ga, gb
     pa = fa > 0.0
@@ -622,9 +826,8 @@ def _locate(k, t, h, ga, gb, y, ynew, f0, f1, ytmp, scratch, aux, G, c, D, tab_t
             if a < sec < b:
                 s = sec
         _hermite(s, h, y, ynew, f0, f1, N_DYN, ytmp)
-        _rhs(t + s * h, ytmp, G, c, D, tab_t, tab_v, scratch, aux)
+        fs = _switch(k, t + s * h, ytmp, G, c, D, tab_t, tab_v)
         n += 1
-        fs = aux[_X_SW + k]
         if (fs > 0.0) == pa:
             a, fa = s, fs
             if side == -1:
@@ -757,11 +960,12 @@ def _integrate_ros(
                 to_stop = t + 1.1 * h >= t_stop
                 tnew = t_stop if to_stop else t + h
             h = tnew - t
-            # evaluations of the right side, through one (inlined) call site: the Jacobian's forward
-            # differences in v, p_i, z (tasks 0-2, once per step) and, open loop only, in t (task 3, inside
-            # the table's current interval, where f is smooth); then stages 3 and 4 (both at t + h; stage 2
-            # reuses stage 1's f) and the right side at the step's end (the next step's first stage)
+            # the Jacobian in v, p_i, z in closed form (task 0, once per step) and df/dt (task 3: from the PI
+            # structure, or open loop a forward difference in t inside the table's current interval, where f
+            # is smooth); then the evaluations of the right side, through one (inlined) call site: stages 3
+            # and 4 (both at t + h; stage 2 reuses stage 1's f) and the step's end (the next step's stage 1)
             hg = h * _ROS_GAMMA
+            ih = 1.0 / h
             task = 0 if not have_jac else N_DYN + 1
             d = 0.0
             errn = 0.0
@@ -785,22 +989,14 @@ def _integrate_ros(
                     have_jac = True
                     task += 1
                     continue
+                if task < N_DYN:
+                    # the Jacobian in v, p_i and z in closed form (the model's equations differentiated)
+                    _jacobian(y, aux1, G, c, D, jac, gq0, gq1, gq2)
+                    task = N_DYN
+                    continue
                 tgt_f = r
                 tgt_a = aux
-                if task < N_DYN:
-                    sc = abs(y[task])
-                    if thr[task] > sc:
-                        sc = thr[task]
-                    if task == _Z and D[_UHI] > sc:
-                        # the PI state's increment on the command's range: df/dz also gives df/dt (above),
-                        # where a smaller one would carry its rounding into the energy balance
-                        sc = D[_UHI]
-                    for i in range(N_DYN):
-                        ytmp[i] = y[i]
-                    ytmp[task] = y[task] + _FD_STEP * sc
-                    d = ytmp[task] - y[task]
-                    ts = t
-                elif task == N_DYN:
+                if task == N_DYN:
                     d = _FD_STEP * (abs(t) if abs(t) > 1.0 else 1.0)
                     if d > 0.5 * (t_stop - t):
                         d = 0.5 * (t_stop - t)
@@ -816,7 +1012,7 @@ def _integrate_ros(
                             r[i] = f0[i] + (_WG1 * h) * ft[i]
                         _solve3(r, winv, u1)
                         for i in range(N_DYN):  # stage 2 at (t, y): f is stage 1's
-                            r[i] = f0[i] + (_WC21 / h) * u1[i] + (_WG2 * h) * ft[i]
+                            r[i] = f0[i] + (_WC21 * ih) * u1[i] + (_WG2 * h) * ft[i]
                         _solve3(r, winv, u2)
                         for i in range(N_DYN):
                             ytmp[i] = y[i] + _WA31 * u1[i]
@@ -833,24 +1029,18 @@ def _integrate_ros(
                     ts = tnew
                 _rhs_stage(ts, ytmp, G, c, D, tab_t, tab_v, tgt_f, tgt_a)
                 nfev += 1
-                if task < N_DYN:
-                    for i in range(N_DYN):
-                        jac[N_DYN * i + task] = (r[i] - f0[i]) / d
-                    qcol = work[14 + task]
-                    for i in range(N_DYN, ny):
-                        qcol[i] = (r[i] - f0[i]) / d
-                elif task == N_DYN:
+                if task == N_DYN:
                     for i in range(ny):
                         ft[i] = (r[i] - f0[i]) / d
                     n_jac += 1
                     have_jac = True
                 elif task == N_DYN + 1:
                     for i in range(N_DYN):
-                        r[i] = k3[i] + (_WC31 * u1[i] + _WC32 * u2[i]) / h
+                        r[i] = k3[i] + (_WC31 * u1[i] + _WC32 * u2[i]) * ih
                     _solve3(r, winv, u3)
                 elif task == N_DYN + 2:
                     for i in range(N_DYN):
-                        r[i] = k4[i] + (_WC41 * u1[i] + _WC42 * u2[i] + _WC43 * u3[i]) / h
+                        r[i] = k4[i] + (_WC41 * u1[i] + _WC42 * u2[i] + _WC43 * u3[i]) * ih
                     _solve3(r, winv, u4)
                     for i in range(N_DYN):
                         ynew[i] = y[i] + _WM1 * u1[i] + _WM3 * u3[i] + _WM4 * u4[i]
@@ -864,7 +1054,7 @@ def _integrate_ros(
                     # distance now (their errors are in the norm), for the others once the step is accepted
                     for i in (_FUEL, _DIST):
                         _quadrature_stages(
-                            i, h, hg, y, ynew, f0, k3, k4, ft, u1, u2, u3, u4, ytmp, gq0, gq1, gq2, r
+                            i, h, ih, hg, y, ynew, f0, k3, k4, ft, u1, u2, u3, u4, ytmp, gq0, gq1, gq2, r
                         )
                     # the RMS norm over v, p_i, z (ode45's scales) and the fuel and distance (relative to
                     # their increment over the step plus a rate scale times h)
@@ -889,7 +1079,7 @@ def _integrate_ros(
                     for i in range(N_DYN, ny):
                         if i != _FUEL and i != _DIST:
                             _quadrature_stages(
-                                i, h, hg, y, ynew, f0, k3, k4, ft, u1, u2, u3, u4, ytmp, gq0, gq1, gq2, r
+                                i, h, ih, hg, y, ynew, f0, k3, k4, ft, u1, u2, u3, u4, ytmp, gq0, gq1, gq2, r
                             )
                     if ynew[_V] < 0.0:  # keep v >= 0 (the car does not roll backwards)
                         ynew[_V] = 0.0
@@ -906,7 +1096,7 @@ def _integrate_ros(
                     return
                 fac = 0.2
                 if errn == errn and nofailed:
-                    fac = 0.9 * errn ** (-pw)
+                    fac = 0.9 / np.cbrt(errn)  # errn^(-1/ROS_ORDER): a cube root costs less than a power
                     if fac < 0.2:
                         fac = 0.2
                 elif errn == errn:
@@ -921,10 +1111,7 @@ def _integrate_ros(
                 for k in range(N_SW):
                     g_a, g_b = sw0[k], aux1[_X_SW + k]
                     if (g_a > 0.0) != (g_b > 0.0) and abs(g_b) > SWITCH_SIGNIFICANCE[k]:
-                        tb, n_it = _locate(
-                            k, t, h, g_a, g_b, y, ynew, f0, f1, ytmp, scratch, aux, G, c, D, tab_t, tab_v
-                        )
-                        nfev += n_it
+                        tb, _ = _locate(k, t, h, g_a, g_b, y, ynew, f0, f1, ytmp, G, c, D, tab_t, tab_v)
                         if tb < tb_min:
                             tb_min = tb
                 if tb_min < tnew and tb_min - t > EVENT_TOLERANCE_S + 1e-3 * h:
@@ -958,7 +1145,7 @@ def _integrate_ros(
             # before it was cut to a stop or an event
             fac = 5.0
             if errn > 0.0:
-                fac = 0.9 * errn ** (-pw)
+                fac = 0.9 / np.cbrt(errn)  # errn^(-1/ROS_ORDER)
                 if fac > 5.0:
                     fac = 5.0
                 if fac < 0.2:

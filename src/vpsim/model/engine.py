@@ -173,15 +173,31 @@ def speed_friction(w_e, c):
 
 
 @equation
+def speed_friction_dw(w_e, c):
+    """d/dw_e of :func:`speed_friction`: k_f 0.0072 x 1.8 c_m^1.8 / w_e pi_bl 1e5 (c_m^0.8 S / pi = c_m^1.8 /
+    |w_e|: the same power as the friction's own, which a compiled caller of both computes once)."""
+    if w_e == 0.0:
+        return 0.0
+    c_m = abs(c.stroke * w_e / math.pi)
+    return c.friction_factor * 0.0072 * 1.8 * c_m**1.8 / w_e * c.boost_layout * 1e5
+
+
+@equation
 def bmep_from_pressure(p_i, w_e, c):
     """BMEP from (2)-(6): IMEP - FMEP - PMEP with FMEP = speed part + 0.0215 k_f BMEP."""
     return (imep(p_i, c) - speed_friction(w_e, c) - pmep(p_i, c)) / c.one_plus_kf
 
 
 @equation
+def fmep_per_bmep(c):
+    """dFMEP/dBMEP of (5): 0.0215 k_f."""
+    return c.friction_factor * 0.0215
+
+
+@equation
 def fmep_at_bmep(bmep, w_e, c):
     """Friction mean effective pressure FMEP (5) at a given BMEP: Soltic's law with the factor xi_aux."""
-    return speed_friction(w_e, c) + c.friction_factor * 0.0215 * bmep
+    return speed_friction(w_e, c) + fmep_per_bmep(c) * bmep
 
 
 @equation
@@ -209,6 +225,44 @@ def partly_fired_torque(p_i, w_e, fired, c):
     motoring torque plus that fraction of what the fuel adds, (2)-(6) with IMEP (4) scaled."""
     t_motor = motoring_torque(p_i, w_e, c)
     return t_motor + fired * (crank_torque(p_i, w_e, c) - t_motor)
+
+
+@equation
+def imep_per_pressure(c):
+    """dIMEP/dp_i of (4),(8): Q s_i."""
+    return c.heat_factor * c.air_charge_slope
+
+
+@equation
+def fuel_flow_dp(w_e, c):
+    """dmdot_f/dp_i of (7),(8) at fixed w_e (the flow is affine in p_i)."""
+    return cycles_per_second(w_e, c) * c.air_per_charge * c.air_charge_slope / c.afr
+
+
+@equation
+def fuel_flow_dw(p_i, c):
+    """dmdot_f/dw_e of (7),(8) at fixed p_i (the flow is linear in w_e)."""
+    return cylinder_air_flow(p_i, 1.0, c) / c.afr
+
+
+@equation
+def crank_torque_dw(w_e, c):
+    """dT_cr/dw_e at fixed p_i, fired or not (:func:`partly_fired_torque`): FMEP's speed part (5) through
+    the BMEP divisor."""
+    return -speed_friction_dw(w_e, c) / c.one_plus_kf * c.mep_to_torque
+
+
+@equation
+def partly_fired_torque_dp(fired, c):
+    """d/dp_i of :func:`partly_fired_torque` at fixed w_e and ``fired``: the fired engine's slope less the
+    unfired share of IMEP's (4), through the BMEP divisor of (5)."""
+    return c.torque_slope - (1.0 - fired) * imep_per_pressure(c) / c.one_plus_kf * c.mep_to_torque
+
+
+@equation
+def partly_fired_torque_dfired(p_i, c):
+    """d/d(fired) of :func:`partly_fired_torque`: what the fuel adds, IMEP (4) through the divisor of (5)."""
+    return imep(p_i, c) / c.one_plus_kf * c.mep_to_torque
 
 
 @equation
@@ -325,6 +379,14 @@ def boost_available(w_e, c):
     if spool < 0.0:
         spool = 0.0
     return c.ambient_pressure + (c.boost_pressure - c.ambient_pressure) * spool
+
+
+@equation
+def boost_available_dw(w_e, c):
+    """d/dw_e of :func:`boost_available`: the spool's slope below :data:`BOOST_SPOOL_SPEED`, 0 elsewhere."""
+    if not is_boosted(c) or not 0.0 < w_e < BOOST_SPOOL_SPEED:
+        return 0.0
+    return (c.boost_pressure - c.ambient_pressure) / BOOST_SPOOL_SPEED
 
 
 @equation
@@ -590,6 +652,47 @@ def manifold_rate_dp(p_i, a_eff, w_e, c):
     a, p_up = throttle_upstream(a_eff, w_e, c)
     throttle = a * p_up * dpsi_dpr(p_i / p_up, c) / c.sqrt_rt_ambient
     return k * (throttle / p_up - cycles_per_second(w_e, c) * c.air_per_charge * c.air_charge_slope)
+
+
+@equation
+def psi_and_dpsi(p_r, c):
+    """(:func:`psi`, :func:`dpsi_dpr`) at p_r with one power (the forward method's Jacobian needs both)."""
+    if p_r <= c.critical_ratio:
+        return c.psi_choked, 0.0
+    if p_r >= 1.0:
+        return 0.0, 0.0
+    g = c.specific_heat_ratio
+    x = p_r ** (1.0 / g)
+    f = 2.0 * g / (g - 1.0) * (x * x - p_r * x)
+    df = 2.0 * g / (g - 1.0) * ((2.0 / g) * x * x / p_r - ((g + 1.0) / g) * x)
+    return (math.sqrt(f) if f > 0.0 else 0.0), df / (2.0 * math.sqrt(f if f > 1e-300 else 1e-300))
+
+
+@equation
+def manifold_rate_partials(p_i, a_eff, w_e, c):
+    """The partial derivatives of (9),(10), :func:`manifold_pressure_rate`, in p_i, in the throttle command
+    ``a_eff`` and in w_e: (:func:`manifold_rate_dp`; the throttle's flow per unit area up to A_max (or an
+    aspirated engine), beyond it a boosted engine's flow rise with the pressure upstream,
+    d(p_up Psi(p_i/p_up))/dp_up = Psi - p_r dPsi/dp_r, times dp_up/du of :func:`throttle_upstream`, 0 at
+    full boost; the cylinders' outflow (linear in w_e) and, boosted beyond A_max below full spool, the
+    boost's rise with speed). One evaluation of Psi and its derivative."""
+    k = c.rt_intake / c.intake_manifold_volume
+    a, p_up = throttle_upstream(a_eff, w_e, c)
+    p_r = p_i / p_up
+    ps, dps = psi_and_dpsi(p_r, c)
+    d_p = k * (
+        a * dps / c.sqrt_rt_ambient - cycles_per_second(w_e, c) * c.air_per_charge * c.air_charge_slope
+    )
+    d_w = -k * cylinder_air_flow(p_i, 1.0, c)
+    a_max = c.max_throttle_area
+    if a_eff <= a_max or not is_boosted(c):
+        return d_p, k * p_up * ps / c.sqrt_rt_ambient, d_w
+    frac = (a_eff - a_max) / a_max
+    per_pressure = a * (ps - p_r * dps) / c.sqrt_rt_ambient
+    d_w += k * per_pressure * (frac if frac < 1.0 else 1.0) * boost_available_dw(w_e, c)
+    if frac >= 1.0:
+        return d_p, 0.0, d_w
+    return d_p, k * per_pressure * (boost_available(w_e, c) - c.ambient_pressure) / a_max, d_w
 
 
 @kernel

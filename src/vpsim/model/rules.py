@@ -98,6 +98,15 @@ def cutoff_share(w_e, c):
 
 
 @equation
+def cutoff_share_dw(w_e, c):
+    """d/dw_e of :func:`cutoff_share`: the ramp's slope inside it, 0 elsewhere."""
+    w_cut = c.fuel_cutoff_speed
+    if not w_cut > 0.0 or w_e <= w_cut or (w_e - w_cut) / (CUTOFF_RESUME_BAND * w_cut) >= 1.0:
+        return 0.0
+    return 1.0 / (CUTOFF_RESUME_BAND * w_cut)
+
+
+@equation
 def engine_braking(t_demand, t_closed, p_closed, w_e, ratio, c):
     """The engaged engine asked for less than its closed-throttle torque ``t_closed`` (manifold at
     ``p_closed``). Without fuel cut-off it runs on that line and the brakes take the rest. With it the control
@@ -131,11 +140,39 @@ def fired_fraction_of_command(u, a_min, w_e, c):
 
 
 @equation
+def fired_fraction_dcommand(u, a_min, w_e, c):
+    """d/du of :func:`fired_fraction_of_command`: the allowed cut's share over A_min inside the floor band
+    (0, A_min), 0 elsewhere."""
+    share = cutoff_share(w_e, c)
+    if u >= a_min or share <= 0.0 or u <= 0.0:
+        return 0.0
+    return share / a_min
+
+
+@equation
+def fired_fraction_dspeed(u, a_min, w_e, c):
+    """d/dw_e of :func:`fired_fraction_of_command` at fixed u: the allowed cut's ramp (cutoff_share_dw)."""
+    if u >= a_min or cutoff_share(w_e, c) <= 0.0:
+        return 0.0
+    need = u / a_min if u > 0.0 else 0.0
+    return -(1.0 - need) * cutoff_share_dw(w_e, c)
+
+
+@equation
 def fuel_used(mdot_f, fired, c):
     """Fuel booked for the flow ``mdot_f`` of an engine with ``fired`` of its cylinders fired: the idle floor
     for the fired part, max(mdot_f, fired mdot_idle) (1: :func:`fuel_with_idle_floor`; 0: none)."""
     floor = fired * c.idle_fuel_flow
     return mdot_f if mdot_f > floor else floor
+
+
+@equation
+def fuel_used_tangent(mdot_f, fired, d_mdot_f, d_fired, c):
+    """Directional derivative of :func:`fuel_used` along (d_mdot_f, d_fired): the flow's, or the floor's
+    where it holds (one-sided at the kink, as :func:`fuel_used` takes the floor there)."""
+    if mdot_f > fired * c.idle_fuel_flow:
+        return d_mdot_f
+    return d_fired * c.idle_fuel_flow
 
 
 @inline
@@ -282,4 +319,99 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
         t_missing * w_e,
         idle,
         t_acc * w_e,
+    )
+
+
+@inline
+def powers_tangent(
+    p_i,
+    w_e,
+    dw_e,
+    t_cr,
+    w_wheel,
+    v,
+    a,
+    brake,
+    clutch,
+    fired,
+    t_acc,
+    d_p,
+    d_w,
+    d_dw,
+    d_tcr,
+    d_wheel,
+    d_v,
+    d_a,
+    d_brake,
+    d_fired,
+    d_tacc,
+    c,
+):
+    """Directional derivative of :func:`powers` (``t_missing`` = 0) along a change d_x of each of its
+    arguments x (p_i, w_e, dw_e/dt, T_cr, w_wheel, v, a, brake force, fired fraction, accessories' torque):
+    the forward method's Jacobian. Same terms and branches as :func:`powers` (at v <= 0, the branch of rest:
+    no rolling resistance)."""
+    vv = v if v > 0.0 else 0.0
+    road = (
+        c.mass * (d_v * a + vv * d_a),
+        (vh.aero_force(vv, c) + 2.0 * c.aero_coefficient * vv * vv) * d_v,
+        (vh.rolling_force(vv, c) + c.road_load_b * vv * (vv > 0.0)) * d_v,
+        d_brake * vv + brake * d_v,
+    )
+    if clutch == CLUTCH_OPEN:
+        return (0.0, 0.0, 0.0, 0.0, 0.0, road[0], road[1], road[2], road[3], 0.0, 0.0, 0.0)
+    cyc = en.cycles_per_second(w_e, c) * c.displacement
+    d_flow = en.fuel_flow_dp(w_e, c) * d_p
+    d_fmep = en.fmep_per_bmep(c) * (d_tcr / c.mep_to_torque)
+    friction = 0.0
+    pumping = -d_p * cyc  # (6)
+    if d_w != 0.0:  # (the speed's terms, with their powers, only where the speed moves)
+        d_cyc = en.cycles_per_second(d_w, c) * c.displacement
+        d_flow += en.fuel_flow_dw(p_i, c) * d_w
+        d_fmep += en.speed_friction_dw(w_e, c) * d_w
+        friction = en.fmep_at_bmep(t_cr / c.mep_to_torque, w_e, c) * d_cyc
+        pumping += en.pmep(p_i, c) * d_cyc
+    friction += d_fmep * cyc  # (5)
+    indicated = fired * d_flow
+    if d_fired != 0.0:
+        indicated += d_fired * en.fuel_flow(p_i, w_e, c)
+    indicated *= c.fuel_heating_value * c.thermal_efficiency
+    t_asked = t_cr - t_acc
+    d_asked = d_tcr - d_tacc
+    if clutch == CLUTCH_ENGAGED or clutch == CLUTCH_CONVERTER:
+        engine_kinetic = c.inertia * (d_w * dw_e + w_e * d_dw)
+        flywheel = (t_asked - c.inertia * dw_e) * w_e
+        d_flywheel = (d_asked - c.inertia * d_dw) * w_e + (t_asked - c.inertia * dw_e) * d_w
+        if clutch == CLUTCH_ENGAGED:
+            driveline = (1.0 - c.efficiency) * d_flywheel  # (1),(15)
+        else:
+            nu = w_wheel / w_e
+            d_nu = (d_wheel - nu * d_w) / w_e
+            mu = vh.converter_torque_ratio(nu, c)
+            d_pass = c.efficiency * (vh.converter_torque_ratio_dnu(nu, c) * nu + mu) * d_nu
+            driveline = (1.0 - c.efficiency * mu * nu) * d_flywheel - d_pass * flywheel
+        idle = 0.0
+    else:
+        engine_kinetic = 0.0
+        t_clutch = slipping_clutch_torque(t_asked)
+        d_clutch = d_asked if t_asked > 0.0 else 0.0  # slipping_clutch_torque's branch
+        driveline = (
+            (1.0 - c.efficiency) * (d_clutch * w_wheel + t_clutch * d_wheel)
+            + d_clutch * (w_e - w_wheel)
+            + t_clutch * (d_w - d_wheel)
+        )
+        idle = (d_asked - d_clutch) * w_e + (t_asked - t_clutch) * d_w
+    return (
+        indicated,
+        friction,
+        pumping,
+        engine_kinetic,
+        driveline,
+        road[0],
+        road[1],
+        road[2],
+        road[3],
+        0.0,
+        idle,
+        d_tacc * w_e + t_acc * d_w,
     )

@@ -130,6 +130,31 @@ def acceleration(f_drive, v, brake, mass, c):
 
 
 @equation
+def road_load_dv(v, c):
+    """d/dv of :func:`road_load` while moving: 2 (1/2 c_d rho A_f) |v| (+ B of a coast-down road load); the
+    rolling force's step at rest is left out (static friction)."""
+    return 2.0 * c.aero_coefficient * abs(v) + (c.road_load_b if v > 0.0 else 0.0)
+
+
+@equation
+def converter_torque_ratio_dnu(nu, c):
+    """d/dnu of :func:`converter_torque_ratio`."""
+    nc = c.converter_coupling_speed_ratio
+    if nu >= nc:
+        return 0.0
+    return (1.0 - c.converter_stall_torque_ratio) / nc
+
+
+@equation
+def acceleration_dforce(f_drive, v, brake, mass, c):
+    """d/dF_drive of :func:`acceleration` (and minus its derivative in the brake force): 1 / mass while
+    moving or pushed off, 0 while static friction (rolling resistance and brakes) holds the car at rest."""
+    if v > 0.0 or f_drive > c.rolling_force + brake:
+        return 1.0 / mass
+    return 0.0
+
+
+@equation
 def wheel_force_rate(v, a, jerk, c):
     """d/dt of the wheel force (18) along a trajectory (v, dv/dt, d2v/dt2): m jerk + d(drag)/dv a."""
     return c.mass * jerk + 2.0 * c.aero_coefficient * abs(v) * a
