@@ -373,7 +373,7 @@ def _jacobian(y, aux, G, c, D, jac, col_v, col_p, col_z):
         d_dp = rate_dp * d_p + rate_da * d_a + rate_dw * d_w
         if d_p != 0.0:
             d_tcr += en.partly_fired_torque_dp(fired, c) * d_p
-            d_mf += fired * en.fuel_flow_dp(w, c) * d_p
+            d_mf += fired * en.fuel_flow_dp(p, w, c) * d_p
         if d_w != 0.0:
             d_tcr += en.crank_torque_dw(w, c) * d_w
             d_mf += fired * en.fuel_flow_dw(p, c) * d_w

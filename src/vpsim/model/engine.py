@@ -234,15 +234,38 @@ def imep_per_pressure(c):
 
 
 @equation
-def fuel_flow_dp(w_e, c):
-    """dmdot_f/dp_i of (7),(8) at fixed w_e (the flow is affine in p_i)."""
+def burned_fuel_flow_dp(w_e, c):
+    """d/dp_i of :func:`burned_fuel_flow`, (7),(8) at fixed w_e (the flow is affine in p_i)."""
     return cycles_per_second(w_e, c) * c.air_per_charge * c.air_charge_slope / c.afr
 
 
 @equation
-def fuel_flow_dw(p_i, c):
-    """dmdot_f/dw_e of (7),(8) at fixed p_i (the flow is linear in w_e)."""
+def burned_fuel_flow_dw(p_i, c):
+    """d/dw_e of :func:`burned_fuel_flow`, (7),(8) at fixed p_i (the flow is linear in w_e)."""
     return cylinder_air_flow(p_i, 1.0, c) / c.afr
+
+
+@equation
+def enrichment_dp(p_i, c):
+    """d/dp_i of :func:`enrichment`: its slope between ambient pressure and full boost, 0 elsewhere."""
+    d = p_i - c.ambient_pressure
+    if d <= 0.0 or c.enrichment_slope * d >= c.boost_enrichment:
+        return 0.0
+    return c.enrichment_slope
+
+
+@equation
+def fuel_flow_dp(p_i, w_e, c):
+    """d/dp_i of :func:`fuel_flow` at fixed w_e: the burned flow's slope and the enrichment's."""
+    return burned_fuel_flow_dp(w_e, c) * (1.0 + enrichment(p_i, c)) + burned_fuel_flow(
+        p_i, w_e, c
+    ) * enrichment_dp(p_i, c)
+
+
+@equation
+def fuel_flow_dw(p_i, c):
+    """d/dw_e of :func:`fuel_flow` at fixed p_i (linear in w_e; the enrichment depends on p_i only)."""
+    return burned_fuel_flow_dw(p_i, c) * (1.0 + enrichment(p_i, c))
 
 
 @equation

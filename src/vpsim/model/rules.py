@@ -361,20 +361,20 @@ def powers_tangent(
     if clutch == CLUTCH_OPEN:
         return (0.0, 0.0, 0.0, 0.0, 0.0, road[0], road[1], road[2], road[3], 0.0, 0.0, 0.0)
     cyc = en.cycles_per_second(w_e, c) * c.displacement
-    d_flow = en.fuel_flow_dp(w_e, c) * d_p
+    d_flow = en.burned_fuel_flow_dp(w_e, c) * d_p  # the indicated work is the burned fuel's
     d_fmep = en.fmep_per_bmep(c) * (d_tcr / c.mep_to_torque)
     friction = 0.0
     pumping = -d_p * cyc  # (6)
     if d_w != 0.0:  # (the speed's terms, with their powers, only where the speed moves)
         d_cyc = en.cycles_per_second(d_w, c) * c.displacement
-        d_flow += en.fuel_flow_dw(p_i, c) * d_w
+        d_flow += en.burned_fuel_flow_dw(p_i, c) * d_w
         d_fmep += en.speed_friction_dw(w_e, c) * d_w
         friction = en.fmep_at_bmep(t_cr / c.mep_to_torque, w_e, c) * d_cyc
         pumping += en.pmep(p_i, c) * d_cyc
     friction += d_fmep * cyc  # (5)
     indicated = fired * d_flow
     if d_fired != 0.0:
-        indicated += d_fired * en.fuel_flow(p_i, w_e, c)
+        indicated += d_fired * en.burned_fuel_flow(p_i, w_e, c)
     indicated *= c.fuel_heating_value * c.thermal_efficiency
     t_asked = t_cr - t_acc
     d_asked = d_tcr - d_tacc
