@@ -176,6 +176,29 @@ def _gear(ratio, c, G):
     G[_G_KIN] = vh.engine_speed(1.0, ratio, c)  # w_e per unit v
 
 
+@register_jitable(inline="always")
+def _switch_value(k, v, w_wheel, t_slip, raw, cmd, c, D):
+    """Switching function k (where the right side changes form) from the right side's own values: the speed
+    v, the wheel-side engine speed, the slipping engine's crank torque, the PI's unclipped and clipped
+    command. Written once for :func:`_rhs` (every evaluation) and :func:`_switch` (the events' location)."""
+    ext = D[_EXT] != 0.0
+    if k == _SW_MOVING:
+        return v
+    if k == _SW_CLUTCH:
+        return w_wheel - c.idle_speed if ext else 1.0
+    if k == _SW_SLIP_TORQUE:  # the clutch passes max(T_cr, 0) while it slips
+        return 1.0 if not ext or rules.clutch_engaged(w_wheel, c) else t_slip
+    if D[_OPEN] != 0.0:  # no driver
+        return 1.0
+    if k == _SW_SAT_LO:
+        return raw - D[_ULO]
+    if k == _SW_SAT_HI:
+        return D[_UHI] - raw
+    if k == _SW_THROTTLE:
+        return cmd - D[_AMIN] if ext else 1.0
+    return cmd if D[_KB] != 0.0 else 1.0  # _SW_BRAKE
+
+
 @register_jitable
 def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     """Right side of model + driver + quadratures at (t, y) with gear constants G; fills ``dy`` and ``aux``.
@@ -190,20 +213,15 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     if D[_OPEN] != 0.0:
         cmd = tb.interp_at(t, tab_t, tab_v, D[_TAB_INV])
         v_ref = vv
+        raw = cmd
         throttle = cmd
         brake = 0.0
         dz = 0.0
-        for k in range(_SW_SAT_LO, _SW_BRAKE + 1):
-            aux[_X_SW + k] = 1.0
     else:
         v_ref = tb.interp_at(t, tab_t, tab_v, D[_TAB_INV])
         cmd, dz = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], D[_ULO], D[_UHI], D[_AWG])
         throttle, brake = pedal_split(cmd, D[_AMIN], D[_KB])
         raw, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], -math.inf, math.inf, D[_AWG])  # unclipped
-        aux[_X_SW + _SW_SAT_LO] = raw - D[_ULO]
-        aux[_X_SW + _SW_SAT_HI] = D[_UHI] - raw
-        aux[_X_SW + _SW_THROTTLE] = cmd - D[_AMIN] if D[_EXT] != 0.0 else 1.0
-        aux[_X_SW + _SW_BRAKE] = cmd if D[_KB] != 0.0 else 1.0
     # driveline kinematics: stiff, or slipping clutch with the engine held at idle (extended mode)
     ratio = G[_G_I]
     w_wheel = vh.engine_speed(vv, ratio, c)  # (14),(17)
@@ -270,9 +288,8 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     aux[_X_VREF] = v_ref
     aux[_X_CMD] = cmd
     aux[_X_COUPLED] = 1.0 if coupled else 0.0
-    aux[_X_SW + _SW_CLUTCH] = w_wheel - c.idle_speed if D[_EXT] != 0.0 else 1.0
-    aux[_X_SW + _SW_MOVING] = v
-    aux[_X_SW + _SW_SLIP_TORQUE] = 1.0 if coupled else t_cr
+    for k in range(N_SW):
+        aux[_X_SW + k] = _switch_value(k, v, w_wheel, t_cr, raw, cmd, c, D)
     aux[_X_AENG] = a_eng
     aux[_X_FIRED] = fired
     aux[_X_TACC] = t_acc
@@ -783,27 +800,16 @@ def _switch(k, t, y, G, c, D, tab_t, tab_v):
     """Switching function k at (t, y), as :func:`_rhs` sets aux[_X_SW + k], without the rest of the right
     side: the events' location (:func:`_locate`) needs this one value, some eight times per event."""
     v = y[_V]
-    if k == _SW_MOVING:
-        return v
     vv = v if v > 0.0 else 0.0
-    ext = D[_EXT] != 0.0
     w_wheel = vh.engine_speed(vv, G[_G_I], c)  # (14),(17)
-    if k == _SW_CLUTCH:
-        return w_wheel - c.idle_speed if ext else 1.0
+    t_slip = raw = cmd = 0.0
     if k == _SW_SLIP_TORQUE:
-        if not ext or rules.clutch_engaged(w_wheel, c):
-            return 1.0
-        return en.crank_torque(y[_P], c.idle_speed, c)  # the slipping engine at idle, all cylinders fired
-    if D[_OPEN] != 0.0:  # no driver
-        return 1.0
-    v_ref = tb.interp_at(t, tab_t, tab_v, D[_TAB_INV])
-    if k == _SW_SAT_LO or k == _SW_SAT_HI:
+        t_slip = en.crank_torque(y[_P], c.idle_speed, c)  # the slipping engine at idle, all cylinders fired
+    elif k != _SW_MOVING and k != _SW_CLUTCH and D[_OPEN] == 0.0:
+        v_ref = tb.interp_at(t, tab_t, tab_v, D[_TAB_INV])
         raw, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], -math.inf, math.inf, D[_AWG])
-        return raw - D[_ULO] if k == _SW_SAT_LO else D[_UHI] - raw
-    cmd, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], D[_ULO], D[_UHI], D[_AWG])
-    if k == _SW_THROTTLE:
-        return cmd - D[_AMIN] if ext else 1.0
-    return cmd if D[_KB] != 0.0 else 1.0  # _SW_BRAKE
+        cmd, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], D[_ULO], D[_UHI], D[_AWG])
+    return _switch_value(k, v, w_wheel, t_slip, raw, cmd, c, D)
 
 
 @register_jitable
