@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from vpsim.batch import run_batch, variant_parameters
+from vpsim.batch import METHODS, run_batch, variant_parameters
 from vpsim.cycles import Cycle, load_cycle
 from vpsim.errors import ParameterError, VpsimError
 from vpsim.gears import default_schedule
@@ -152,15 +152,33 @@ def test_bad_calls_give_clear_errors(params):
         run_batch("nedc", {"vehicle.mass": [1500.0]}, params=params, gears=3)
 
 
+def test_variants_are_checked_as_whole_engines(params):
+    # bore 0.2 m and stroke 0.2 m are each plausible with the base engine's other field, not together
+    crossed = {"engine.bore": [0.09, 0.2], "engine.stroke": [0.09, 0.2]}
+    for method in METHODS:
+        with pytest.raises(ParameterError, match=r"^variant 1: displacement 25\.13 L .* outside the plaus"):
+            run_batch("nedc", crossed, method=method, params=params)
+    df = run_batch("nedc", {"engine.bore": [0.09, 0.2], "engine.stroke": [0.2, 0.09]}, params=params)
+    assert np.isfinite(df["fuel_kg"]).all()
+
+
 def test_forward_batch_rows_equal_individual_runs(params):
     from vpsim.methods import forward
 
     cyc = load_cycle("nedc")
-    variants = {"vehicle.mass": [1500.0, 1900.0, 1700.0], "transmission.final_drive": [4.0, 4.45, 4.9]}
+    # the variants differ in what sets each run's own start, command range, brake gain, idle throttle and
+    # error scales (the throttle's size, a boosted engine: its command goes on to 2 A_max)
+    variants = {
+        "vehicle.mass": [1500.0, 1900.0, 1700.0],
+        "transmission.final_drive": [4.0, 4.45, 4.9],
+        "engine.max_throttle_area": [params.engine.max_throttle_area, 1.2e-4, 0.9e-4],
+        "engine.boost_pressure": [0.0, 1.6e5, 0.0],
+        "engine.bore": [0.086, 0.080, 0.092],
+    }
     schedule = default_schedule(cyc, params, cached_engine_map(params.engine))
     for driver, mode in (("1", "paper"), ("2", "extended")):
         df = run_batch(cyc, variants, method="forward", params=params, driver=driver, mode=mode)
-        assert list(df.columns[:2]) == list(variants)
+        assert list(df.columns[: len(variants)]) == list(variants)
         for i in range(3):
             p = variant_parameters(params, list(variants), [variants[k][i] for k in variants])
             r = forward.run(cyc, p, driver=driver, schedule=schedule, mode=mode)

@@ -30,7 +30,9 @@ Methods:
   through the same model functions as a single run (:func:`vpsim.model.rules.operating_point`,
   :func:`vpsim.model.engine.intake_pressure_for_torque`, :func:`vpsim.model.engine.fuel_flow`).
 * ``forward``: the forward dynamic method's compiled integrator (:mod:`vpsim.methods.forward`) run for each
-  variant inside one compiled call, parallel over variants.
+  variant inside one compiled call, parallel over variants (:func:`vpsim.methods.forward.run_variants`):
+  the records and driver settings of all variants are built at once, and each row is what
+  :func:`vpsim.methods.forward.run` gives the variant.
 
 Gear schedule (``gears``): by default every variant follows the base design's schedule (derived once from
 the cycle by the documented rule, or the :class:`~vpsim.gears.GearSchedule` / CSV given). The paper
@@ -239,9 +241,10 @@ def validate_variants(params: Parameters, names: list[str], values: np.ndarray) 
     """Check every variant through :meth:`Parameters.with_changes`; errors name the variant row.
 
     The per-field checks are intervals, so each column is validated at its smallest and largest value (and
-    every value for whole-number fields); the one check that couples fields (A_min < A_max) is then applied
-    to every row.
+    every value for whole-number fields); the checks that couple fields (A_min < A_max, and the engine as a
+    whole: :func:`vpsim.params.engine_check_figures`) are then applied to every row, vectorised.
     """
+    n = values.shape[0]
     for j, name in enumerate(names):
         sec, fld, gear = _split(name, params)
         col = values[:, j]
@@ -260,6 +263,15 @@ def validate_variants(params: Parameters, names: list[str], values: np.ndarray) 
         bad = np.flatnonzero(~(lo < hi))
         if bad.size:
             _check_row(params, names, values, int(bad[0]))
+    if any(n.startswith("engine.") for n in names):
+        # the engine as a whole (displacement, full-load and motoring BMEP, idle) couples its fields: checked
+        # for every variant at once, the first implausible one then through with_changes for its message
+        from .model.record import records
+        from .params import engine_check_figures
+
+        (veh, tr, eng, sim), _ = _sections(params, names, values)
+        for i in np.flatnonzero(~np.broadcast_to(engine_check_figures(records(veh, tr, eng, sim))["ok"], n)):
+            _check_row(params, names, values, int(i))
 
 
 def _column(params, names, values, key):
@@ -381,47 +393,56 @@ def _backward(cycle, params, names, values, schedules, schedule_of_variant, mode
 
 
 def _forward(cycle, params, names, values, schedules, schedule_of_variant, mode, driver, rtol):
-    """The forward dynamic method per variant, variants in parallel threads.
+    """The forward dynamic method for every variant in one compiled call, parallel over the variants.
 
-    Each variant is exactly :func:`vpsim.methods.forward.run` (so a row is that run's summary); the compiled
-    integrator releases the GIL, so the threads run the variants' integrations concurrently on the cores.
+    Each row is what :func:`vpsim.methods.forward.run` gives that variant without series (same start, same
+    driver settings, same kernel; a test checks it row by row). The variants' records and driver settings are
+    built for all of them at once from the arrays of values, not as one parameter set each.
     """
-    import os
-    from concurrent.futures import ThreadPoolExecutor
-
-    import numba
-
+    from .drivers.pi import PIDriver
     from .methods import forward
+    from .model.record import records
 
     driver = "1" if driver is None else str(driver)
-    params.driver(driver)  # validates the name
+    pi = PIDriver.from_params(params, driver, mode)  # also validates the driver's name
+    (veh, tr, eng, sim), ratios = _sections(params, names, values)
     n = values.shape[0]
-    shared = schedule_of_variant.max(initial=0) == 0
-    gear_schedules = [GearSchedule(cycle.time_s.copy(), g, source="batch") for g in schedules]
-
-    def one(i):
-        # the variant's parameters are built in its thread: that Python work (it holds the GIL) overlaps the
-        # other threads' integrations (they release it)
-        variant = variant_parameters(params, names, values[i])
-        sched = gear_schedules[0 if shared else int(schedule_of_variant[i])]
-        return forward.run(
-            cycle, variant, driver=driver, schedule=sched, mode=mode, rtol=rtol, keep_series=False
-        )
-
-    forward.warm_up()
-    workers = max(1, min(n, numba.config.NUMBA_NUM_THREADS, os.cpu_count() or 1))
-    if workers == 1:
-        results = [one(i) for i in range(n)]
+    recs = records(veh, tr, eng, sim)
+    if recs.size != n:
+        recs = np.ascontiguousarray(np.broadcast_to(recs, (n,))).view(np.recarray)
+    if rtol is None:
+        rtol = np.broadcast_to(np.asarray(sim.ode_relative_tolerance, dtype=float), (n,))
     else:
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            results = list(pool.map(one, range(n)))
+        rtol = np.full(n, float(rtol))
+    bad = np.flatnonzero(~((rtol > 0.0) & (rtol < 1.0)))
+    if bad.size:
+        raise VpsimError(f"variant {bad[0]}: rtol = {rtol[bad[0]]!r} must be in (0, 1)")
+    D = forward.variant_settings(params, pi, mode, veh, eng, recs)
+    gear_schedules = [GearSchedule(cycle.time_s.copy(), g, source="batch") for g in schedules]
+    out = forward.run_variants(cycle, recs, ratios, gear_schedules, schedule_of_variant, D, mode, rtol)
+    status = out[:, forward.V_STATUS]
+    failed = np.flatnonzero(status != forward.STATUS_OK)
+    if failed.size:
+        i = int(failed[0])
+        why = (
+            "step size below the minimum"
+            if status[i] == forward.STATUS_STEP_TOO_SMALL
+            else f"more than {forward.MAX_STEPS} steps"
+        )
+        raise VpsimError(
+            f"variant {i}: forward integration failed ({why}); {failed.size} of {n} variants failed"
+        )
+    fuel = out[:, forward.V_FUEL]
+    distance = out[:, forward.V_DIST]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per_100km = np.where(distance > 0.0, fuel / recs.fuel_density / (distance / 1e5), np.nan)
     return {
-        "fuel_l_per_100km": np.array([r.fuel_l_per_100km for r in results]),
-        "fuel_kg": np.array([r.fuel_kg for r in results]),
-        "distance_km": np.array([r.distance_km for r in results]),
-        "trace_miss_s": np.array([r.trace_miss.seconds for r in results]),
-        "max_speed_error_mps": np.array([r.trace_miss.max_speed_error_mps for r in results]),
-        "steps": np.array([r.steps for r in results], dtype=np.int64),
+        "fuel_l_per_100km": per_100km,
+        "fuel_kg": fuel,
+        "distance_km": distance / 1e3,
+        "trace_miss_s": out[:, forward.V_OUTSIDE],
+        "max_speed_error_mps": out[:, forward.V_MAX_ERR],
+        "steps": out[:, forward.V_STEPS].astype(np.int64),
     }
 
 

@@ -433,6 +433,76 @@ def validate(p: Parameters, where: str = "parameters") -> None:
 _ENTRY_KEYS = ("value", "unit", "confidence", "note")
 
 
+def engine_check_figures(c) -> dict:
+    """The whole-engine figures :func:`_check_engine` tests, for an engine record or an array of records
+    (vpsim.batch checks every design variant at once): displacement, full-load BMEP at ambient pressure,
+    motoring BMEP at 1.25 x the map's top speed, the intake pressure of zero torque at idle and the throttle
+    area that holds it, and whether each is plausible (``ok``)."""
+    from .model import engine as en
+
+    w_top = 1.25 * c.map_speed_high
+    with np.errstate(all="ignore"):
+        peak = en.bmep_from_pressure(c.ambient_pressure, 0.0, c)
+        motoring = en.bmep_from_pressure(0.0, w_top, c)
+        p_idle = en.intake_pressure_for_torque(0.0, IDLE_CHECK_SPEED, c)
+        flow = en.cylinder_air_flow(p_idle, IDLE_CHECK_SPEED, c)
+        pressure_ok = np.isfinite(p_idle) & (0.0 < p_idle) & (p_idle < c.ambient_pressure)
+        area = en.throttle_for_flow_array(np.where(pressure_ok, p_idle, 0.5 * c.ambient_pressure), flow, c)
+    lo, hi = DISPLACEMENT_RANGE
+    f = {
+        "displacement": c.displacement,
+        "w_top": w_top,
+        "peak": peak,
+        "motoring": motoring,
+        "p_idle": p_idle,
+        "idle_area": area,
+        "displacement_ok": (lo <= c.displacement) & (c.displacement <= hi),
+        "peak_ok": np.isfinite(peak) & (peak <= MAX_FULL_LOAD_BMEP),
+        "motoring_ok": np.isfinite(motoring) & (motoring >= MIN_MOTORING_BMEP),
+        "idle_ok": pressure_ok & np.isfinite(area) & (0.0 < area) & (area <= c.max_throttle_area),
+    }
+    f["ok"] = f["displacement_ok"] & f["peak_ok"] & f["motoring_ok"] & f["idle_ok"]
+    return f
+
+
+def _check_engine(eng: Engine, where: str) -> None:
+    """The engine as a whole: displacement, peak and motoring BMEP, and that it can idle (module limits)."""
+    from .model.record import engine_record
+
+    f = engine_check_figures(engine_record(eng))
+    if not f["displacement_ok"]:
+        lo, hi = DISPLACEMENT_RANGE
+        raise ParameterError(
+            f"{where}: displacement {eng.displacement * 1e3:.4g} L (engine.cylinders {eng.cylinders} x pi/4 "
+            f"x engine.bore {eng.bore:g}^2 x engine.stroke {eng.stroke:g} m) is outside the plausible range "
+            f"[{lo * 1e3:g}, {hi * 1e3:g}] L"
+        )
+    if not f["peak_ok"]:
+        raise ParameterError(
+            f"{where}: the engine's full-load BMEP would be {float(f['peak']) / 1e5:.4g} bar at ambient "
+            f"pressure, more than the {MAX_FULL_LOAD_BMEP / 1e5:g} bar of any production engine; check "
+            "engine.fuel_heating_value, thermal_efficiency, stoich_air_fuel_ratio, lambda, air_charge_slope"
+        )
+    if not f["motoring_ok"]:
+        raise ParameterError(
+            f"{where}: the engine's motoring BMEP would be {float(f['motoring']) / 1e5:.4g} bar at "
+            f"{float(f['w_top']):g} rad/s (friction and pumping), below {MIN_MOTORING_BMEP / 1e5:g} bar; "
+            f"check engine.friction_coefficient {eng.friction_coefficient:g}, boost_layout "
+            f"{eng.boost_layout:g}, stroke {eng.stroke:g} m and map_speed_range"
+        )
+    if not f["idle_ok"]:
+        raise ParameterError(
+            f"{where}: the engine cannot idle: zero torque at {IDLE_CHECK_SPEED:g} rad/s needs an intake "
+            f"pressure of {float(f['p_idle']):.4g} Pa with ambient {eng.ambient_pressure:.4g} Pa "
+            f"(engine.air_charge_slope {eng.air_charge_slope:g}, air_charge_intercept "
+            f"{eng.air_charge_intercept:g} Pa, exhaust_pressure {eng.exhaust_pressure:.4g} Pa), which the "
+            "throttle cannot hold between 0 and the ambient pressure"
+        )
+
+
+_ENTRY_KEYS = ("value", "unit", "confidence", "note")
+
+
 def _check_engine(eng: Engine, where: str) -> None:
     """The engine as a whole: displacement, peak and motoring BMEP, and that it can idle (module limits)."""
     from .model import engine as en

@@ -57,6 +57,24 @@ def pedal_split(u, a_min, brake_gain):
     return throttle, brake
 
 
+def command_limits(vehicle, engine, u_max, mode: str):
+    """(u_lo, u_hi, A_min, brake gain) of the PI command in ``mode``; ``u_max`` is the command's upper end
+    (:func:`vpsim.model.engine.max_command`). Fields may be arrays over design variants (vpsim.batch).
+
+    ``paper``: the command spans the throttle, [A_min, u_max], and there are no brakes. ``realistic``: below
+    A_min the pedal brakes, down to -A_max, where the brake force is the car's weight (gain m g / A_max).
+    """
+    from ..model.rules import canonical_mode
+
+    mode = canonical_mode(mode)
+    if mode == "paper":
+        return engine.min_throttle_area, u_max, engine.min_throttle_area, 0.0
+    if mode == "realistic":
+        gain = vehicle.mass * vehicle.gravity / engine.max_throttle_area
+        return -engine.max_throttle_area, u_max, engine.min_throttle_area, gain
+    raise VpsimError(f"unknown mode {mode!r}; expected paper or extended")
+
+
 @dataclass(frozen=True)
 class PIDriver:
     """A PI driver's gains and command range (SI: m² per m/s, m² per m, m², s, N/m²)."""
@@ -85,20 +103,10 @@ class PIDriver:
         from ..result import limits_of
 
         d = params.driver(driver)
-        eng, veh = params.engine, params.vehicle
         u_max = limits_of(params)["max_throttle_command_m2"]  # A_max; 2 A_max boosted (full boost)
         tt = 0.5 * d.forward_kp / d.forward_ki if tracking_time_s is None else float(tracking_time_s)
-        from ..model.rules import canonical_mode
-
-        mode = canonical_mode(mode)
-        if mode == "paper":
-            return cls(d.forward_kp, d.forward_ki, eng.min_throttle_area, u_max, eng.min_throttle_area, tt)
-        if mode == "realistic":
-            gain = veh.mass * veh.gravity / eng.max_throttle_area
-            return cls(
-                d.forward_kp, d.forward_ki, -eng.max_throttle_area, u_max, eng.min_throttle_area, tt, gain
-            )
-        raise VpsimError(f"unknown mode {mode!r}; expected paper or extended")
+        u_lo, u_hi, a_min, gain = command_limits(params.vehicle, params.engine, u_max, mode)
+        return cls(d.forward_kp, d.forward_ki, u_lo, u_hi, a_min, tt, gain)
 
     @property
     def integral_time_s(self) -> float:

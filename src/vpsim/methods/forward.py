@@ -63,6 +63,7 @@ import time
 import types
 
 import numpy as np
+from numba import prange
 from numba.extending import register_jitable
 
 from ..drivers.pi import PIDriver, pedal_split, pi_law
@@ -1201,26 +1202,39 @@ def initial_state(cycle, params, ratio: float, pi: PIDriver, mode: str) -> np.nd
     At standstill: ``paper`` starts with the manifold at the pressure of zero crank torque at w_e = 0 and the
     throttle closed; ``extended`` at the idle steady state with a zero pedal command.
     """
-    c = record(params)
     y = np.zeros(NY)
-    v0 = float(cycle.speed_mps[0])
+    v0, a0 = _cycle_start(cycle.time_s, cycle.speed_mps)
+    _start_state(v0, a0, ratio, rules.canonical_mode(mode) == "paper", pi.u_lo, pi.u_hi, record(params), y)
+    return y
+
+
+@register_jitable
+def _cycle_start(t, v):
+    """(speed, acceleration) at the cycle's start."""
+    return v[0], (v[1] - v[0]) / (t[1] - t[0])
+
+
+@register_jitable
+def _start_state(v0, a0, ratio, paper, u_lo, u_hi, c, y):
+    """Fill ``y`` (zeros) with :func:`initial_state`'s state (``paper``: the paper mode); plain Python for one
+    run, compiled into :func:`_variants` for the batch."""
     y[_V] = v0
     if v0 > 0.0:
-        a0 = float((cycle.speed_mps[1] - cycle.speed_mps[0]) / (cycle.time_s[1] - cycle.time_s[0]))
         f = vh.equivalent_mass(ratio, c) * a0 + vh.road_load(v0, c)
         w = vh.engine_speed(v0, ratio, c)
-        p = float(en.intake_pressure_for_torque(vh.wheel_to_engine_torque(f, ratio, c), w, c))
-        p = min(p, 0.99 * (en.full_load_pressure(w, c) if en.is_boosted(c) else c.ambient_pressure))
-        u = float(en.command_for_flow(p, en.cylinder_air_flow(p, w, c), w, c))
+        p = en.intake_pressure_for_torque(vh.wheel_to_engine_torque(f, ratio, c), w, c)
+        p_top = en.full_load_pressure(w, c) if en.is_boosted(c) else c.ambient_pressure
+        if p > 0.99 * p_top:
+            p = 0.99 * p_top
+        u = en.command_for_flow(p, en.cylinder_air_flow(p, w, c), w, c)
         y[_P] = p
-        y[_Z] = float(np.clip(u, pi.u_lo, pi.u_hi))
-    elif mode == "paper":
-        y[_P] = float(en.intake_pressure_for_torque(0.0, 0.0, c))
-        y[_Z] = pi.u_lo
+        y[_Z] = u_hi if u > u_hi else (u_lo if u < u_lo else u)
+    elif paper:
+        y[_P] = en.intake_pressure_for_torque(0.0, 0.0, c)
+        y[_Z] = u_lo
     else:
-        y[_P] = float(en.intake_pressure_for_torque(0.0, c.idle_speed, c))
+        y[_P] = en.intake_pressure_for_torque(0.0, c.idle_speed, c)
         y[_Z] = 0.0
-    return y
 
 
 ERROR_THRESHOLDS = np.array([1.0, 1.0e4, 1.0e-4])  # v (m/s), p_i (Pa), z (m²): ode45's atol/rtol per state
@@ -1232,11 +1246,13 @@ SOLVERS = ("rosenbrock", "dopri5")
 DEFAULT_SOLVER = "rosenbrock"
 
 
+@register_jitable
 def quadrature_scales(c) -> np.ndarray:
     """Rate scales of the fuel (kg/s) and distance (m/s) in the Rosenbrock error norm."""
-    return np.array([FUEL_RATE_SCALE, DISTANCE_RATE_SCALE])
+    return np.array([FUEL_RATE_SCALE, DISTANCE_RATE_SCALE], dtype=np.float64)
 
 
+@register_jitable
 def error_scales(c) -> np.ndarray:
     """The Rosenbrock error norm's scales of v, p_i and z: each state's error is measured against
     max(|y|, scale) (ode45's threshold), the scale being the state's natural size in this car: 1 m/s, the
@@ -1245,7 +1261,7 @@ def error_scales(c) -> np.ndarray:
     the dopri5 solver keeps for the paper's Table 3) measured a manifold at 30 kPa and a PI state near 0
     against their own size: on UDDS (driver 1, paper mode) 2.43 accepted steps per cycle second against
     1.99, for a cycle fuel that stays within 1.4e-4 of the rtol 1e-8 reference (5.6e-5 before)."""
-    return np.array([1.0, float(c.ambient_pressure), float(en.max_command(c))])
+    return np.array([1.0, c.ambient_pressure, en.max_command(c)])
 
 
 def integrate(
@@ -1363,6 +1379,124 @@ def warm_up() -> None:
             out_t=np.array([0.0, 1.0]),
             solver=solver,
         )
+
+
+# --- many design variants in one compiled call (vpsim.batch) ----------------------------------------------
+
+V_FUEL, V_DIST, V_OUTSIDE, V_MAX_ERR, V_STEPS, V_STATUS = range(6)
+N_VARIANT_OUT = 6
+MAX_STEPS = 2_000_000
+
+
+@kernel(parallel=True)
+def _variants(seg_t, n_seg, seg_gear, ratios, sched_of, tab_t, tab_v, recs, D_all, paper, rtol, h_max, out):
+    """:func:`run` without series for every variant m (record ``recs[m]``, settings ``D_all[m]``), in
+    parallel: the same start (:func:`_start_state`), error scales and kernel (:func:`_integrate_ros`).
+    Schedule s = sched_of[m] restarts at seg_t[s, :n_seg[s] + 1] in the gears seg_gear[s] (1-based)."""
+    for m in prange(recs.size):
+        c = recs[m]
+        s = sched_of[m]
+        ns = n_seg[s]
+        st = np.empty(ns + 1)
+        sr = np.empty(ns)
+        for k in range(ns + 1):
+            st[k] = seg_t[s, k]
+        for k in range(ns):
+            sr[k] = ratios[m, seg_gear[s, k] - 1]
+        D = D_all[m].copy()
+        if D[_EXT] != 0.0:
+            D[_AIDLE] = en.idle_throttle(c)
+        y0 = np.zeros(NY)
+        v0, a0 = _cycle_start(tab_t, tab_v)
+        _start_state(v0, a0, sr[0], paper, D[_ULO], D[_UHI], c, y0)
+        stats = np.zeros(6, dtype=np.int64)
+        fstats = np.zeros(1 + N_SW)
+        work = np.zeros((20, NY))
+        _integrate_ros(
+            st,
+            sr,
+            y0,
+            tab_t,
+            tab_v,
+            c,
+            D,
+            rtol[m],
+            h_max,
+            error_scales(c),
+            quadrature_scales(c),
+            MAX_STEPS,
+            np.zeros(0),
+            np.zeros((0, NY)),
+            np.zeros((0, N_AUX)),
+            stats,
+            fstats,
+            work,
+            np.empty(N_AUX),
+            np.empty(N_AUX),
+            np.empty(3),
+        )
+        out[m, V_FUEL] = work[0, _FUEL]
+        out[m, V_DIST] = work[0, _DIST]
+        out[m, V_OUTSIDE] = work[0, _OUTSIDE]
+        out[m, V_MAX_ERR] = fstats[0]
+        out[m, V_STEPS] = stats[0]
+        out[m, V_STATUS] = stats[3]
+
+
+def variant_settings(params, pi: PIDriver, mode: str, vehicle, engine, recs) -> np.ndarray:
+    """:func:`settings` for every variant (n_var, N_SETTINGS): the driver's and mode's settings of ``params``
+    with the command range, throttle floor and brake gain of each variant (``vehicle``, ``engine``: sections
+    whose varied fields are arrays; ``recs``: their records), from the same rule as one run
+    (:func:`vpsim.drivers.pi.command_limits`)."""
+    from ..drivers.pi import command_limits
+
+    D = np.tile(settings(params, pi, mode), (recs.size, 1))
+    u_lo, u_hi, a_min, gain = command_limits(vehicle, engine, en.max_command(recs), mode)
+    for k, x in ((_ULO, u_lo), (_UHI, u_hi), (_AMIN, a_min), (_KB, gain)):
+        D[:, k] = x
+    return D
+
+
+def run_variants(cycle, recs, ratios, schedules, schedule_of_variant, D_all, mode: str, rtol) -> np.ndarray:
+    """The forward method (Rosenbrock, no series) for many variants in one compiled call, parallel over them.
+
+    ``recs``: record array (n_var,); ``ratios``: (n_var, n_gears) total ratios; ``schedules``: GearSchedules;
+    ``schedule_of_variant``: index into ``schedules``; ``D_all``: (n_var, N_SETTINGS) driver and mode settings
+    (:func:`settings`; the idle throttle of the realistic mode is the kernel's, per variant); ``rtol``: per
+    variant. Returns (n_var, N_VARIANT_OUT): fuel (kg), distance (m), seconds outside the band, largest speed
+    error at the steps' ends (m/s), accepted steps, solver status. Each row is what :func:`run` gives the
+    variant with ``keep_series=False`` (a test checks it).
+    """
+    n_var = recs.size
+    segs = [segments(cycle, sch, np.arange(1.0, sch.gear.max(initial=1) + 1.0)) for sch in schedules]
+    n_seg = np.array([st.size - 1 for st, _ in segs], dtype=np.int64)
+    seg_t = np.zeros((len(segs), n_seg.max() + 1))
+    seg_gear = np.ones((len(segs), n_seg.max()), dtype=np.int64)
+    for k, (st, g) in enumerate(segs):
+        seg_t[k, : st.size] = st
+        seg_gear[k, : g.size] = np.rint(g)
+    D = np.array(D_all, dtype=float)
+    table_t = np.array(cycle.time_s, dtype=float)
+    D[:, _OPEN] = 0.0
+    D[:, _TAB_INV] = (table_t.size - 1) / (table_t[-1] - table_t[0])
+    out = np.empty((n_var, N_VARIANT_OUT))
+    warm_up()
+    _variants(
+        seg_t,
+        n_seg,
+        seg_gear,
+        np.ascontiguousarray(ratios, dtype=float),
+        np.asarray(schedule_of_variant, dtype=np.int64),
+        table_t,
+        np.array(cycle.speed_mps, dtype=float),
+        np.asarray(recs).view(np.ndarray),
+        np.ascontiguousarray(D),
+        rules.canonical_mode(mode) == "paper",
+        np.ascontiguousarray(np.broadcast_to(np.asarray(rtol, dtype=float), (n_var,))),
+        float(cycle.time_s[-1] - cycle.time_s[0]) / 50.0,
+        out,
+    )
+    return out
 
 
 def run(

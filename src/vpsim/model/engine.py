@@ -414,8 +414,9 @@ def boost_available_dw(w_e, c):
 
 @equation
 def max_command(c):
-    """Upper end of the throttle command: A_max aspirated, 2 A_max boosted (full boost)."""
-    return 2.0 * c.max_throttle_area if is_boosted(c) else c.max_throttle_area
+    """Upper end of the throttle command: A_max aspirated, 2 A_max boosted (full boost). Branch-free, so it
+    also takes a record array of variants."""
+    return c.max_throttle_area * (1.0 + is_boosted(c))
 
 
 @equation
@@ -608,6 +609,21 @@ def _steady_loop(a_eff, w_e, recs, p_out, it_out):
         p, it = steady_pressure(a_eff[k], w_e[k], recs[0 if one else k])
         p_out[k] = p
         it_out[k] = it
+
+
+@kernel
+def _throttle_for_flow_loop(p_i, air_flow, recs, out):
+    one = recs.size == 1
+    for k in range(p_i.size):
+        out[k] = throttle_for_flow(p_i[k], air_flow[k], recs[0 if one else k])
+
+
+def throttle_for_flow_array(p_i, air_flow, c):
+    """:func:`throttle_for_flow` over arrays (``c``: a record, or an array of records broadcast)."""
+    shape, (p, f), recs = _flat(p_i, air_flow, recs=c)
+    out = np.empty(p.size)
+    _throttle_for_flow_loop(p, f, recs, out)
+    return out.reshape(shape)
 
 
 def _flat(*arrays, recs):
