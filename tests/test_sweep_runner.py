@@ -124,7 +124,7 @@ def test_compiled_batch_and_one_by_one_paths_agree(monkeypatch):
 
 
 def test_forward_rows_through_the_batch_equal_one_by_one(monkeypatch):
-    """Forward rows of a chunk go through vpsim.batch (designs on threads): the same rows as one by one."""
+    """Forward rows of a chunk go through vpsim.batch (one compiled call): the same rows as one by one."""
     import vpsim.batch
 
     calls = []

@@ -1480,7 +1480,6 @@ def run_variants(cycle, recs, ratios, schedules, schedule_of_variant, D_all, mod
     D[:, _OPEN] = 0.0
     D[:, _TAB_INV] = (table_t.size - 1) / (table_t[-1] - table_t[0])
     out = np.empty((n_var, N_VARIANT_OUT))
-    warm_up()
     _variants(
         seg_t,
         n_seg,

@@ -298,7 +298,7 @@ def _compute_chunk(chunk: Chunk) -> pd.DataFrame:
                 setup_error[t.design] = _one_line(exc)
         return params_of.get(t.design)
 
-    # a chunk of backward-only rows for the compiled batch is validated as a whole, which is much cheaper than
+    # a chunk of backward and forward rows for the compiled batch is validated as a whole, much cheaper than
     # building every design's Parameters; anything else (or a failed check) validates design by design
     whole = _batch_only(chunk) and _valid_together(chunk)
     if not whole:
@@ -375,12 +375,13 @@ def _compute_chunk(chunk: Chunk) -> pd.DataFrame:
 
 
 def _batch_only(chunk: Chunk) -> bool:
-    """Every row of the chunk goes to the compiled backward batch and nothing needs a Parameters object."""
+    """Every row of the chunk goes to the compiled batch (backward or forward) and nothing needs a Parameters
+    object."""
     return (
         batch_available()
         and not chunk.acceleration.enabled
         and all(s is not None for s in chunk.schedules)
-        and all(r[2] == "backward" for t in chunk.tasks for r in t.rows)
+        and all(r[2] in ("backward", "forward") for t in chunk.tasks for r in t.rows)
         and not any("transmission.gearbox_ratios" in t.changes for t in chunk.tasks)
     )
 
@@ -439,8 +440,8 @@ def _accelerations(chunk: Chunk, params_of: dict) -> dict[int, tuple[float, str]
 
 
 def _batch_rows(cycle, schedule, chunk: Chunk, items, method: str, driver: str) -> dict[str, dict]:
-    """Rows of many designs in one batch call (backward: one compiled pass; forward: designs on threads);
-    {} if the batch cannot take them, and the rows then run one by one."""
+    """Rows of many designs in one batch call (one compiled pass, parallel over the designs); {} if the batch
+    cannot take them, and the rows then run one by one."""
     from ..batch import run_batch
 
     if not items:
