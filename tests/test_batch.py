@@ -152,6 +152,23 @@ def test_bad_calls_give_clear_errors(params):
         run_batch("nedc", {"vehicle.mass": [1500.0]}, params=params, gears=3)
 
 
+def test_forward_batch_per_variant_schedules(params):
+    # each variant on its own schedule (different numbers of gear changes): rows as forward.run gives them
+    from vpsim.methods import forward
+
+    cyc = load_cycle("nedc")
+    variants = {"transmission.final_drive": [3.2, 4.9], "vehicle.mass": [1300.0, 1800.0]}
+    df = run_batch(cyc, variants, method="forward", params=params, gears="per_variant")
+    shifts = []
+    for i in range(2):
+        p = variant_parameters(params, list(variants), [variants[k][i] for k in variants])
+        schedule = default_schedule(cyc, p, generate_engine_map(p.engine, exact=True))
+        shifts.append(schedule.shift_times.size)
+        r = forward.run(cyc, p, schedule=schedule, keep_series=False)
+        assert df["fuel_kg"][i] == r.fuel_kg and df["steps"][i] == r.steps
+    assert shifts[0] != shifts[1]
+
+
 def test_variants_are_checked_as_whole_engines(params):
     # bore 0.2 m and stroke 0.2 m are each plausible with the base engine's other field, not together
     crossed = {"engine.bore": [0.09, 0.2], "engine.stroke": [0.09, 0.2]}

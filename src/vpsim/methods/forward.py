@@ -1244,6 +1244,7 @@ FUEL_RATE_SCALE = 1.0e-3  # kg/s: about the flow of steady driving
 DISTANCE_RATE_SCALE = 10.0  # m/s
 SOLVERS = ("rosenbrock", "dopri5")
 DEFAULT_SOLVER = "rosenbrock"
+MAX_STEPS = 2_000_000  # accepted and rejected steps of one run, beyond which it stops with an error
 
 
 @register_jitable
@@ -1277,7 +1278,7 @@ def integrate(
     rtol=1e-3,
     max_step=np.inf,
     out_t=None,
-    max_steps=2_000_000,
+    max_steps=MAX_STEPS,
     solver=DEFAULT_SOLVER,
 ):
     """Run the kernel from seg_t[0] to seg_t[-1], restarting at each seg_t[k] with ratio seg_ratio[k].
@@ -1385,7 +1386,6 @@ def warm_up() -> None:
 
 V_FUEL, V_DIST, V_OUTSIDE, V_MAX_ERR, V_STEPS, V_STATUS = range(6)
 N_VARIANT_OUT = 6
-MAX_STEPS = 2_000_000
 
 
 @kernel(parallel=True)
