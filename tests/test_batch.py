@@ -179,6 +179,37 @@ def test_variants_are_checked_as_whole_engines(params):
     assert np.isfinite(df["fuel_kg"]).all()
 
 
+def test_whole_engine_check_of_all_variants_agrees_with_each_engine_alone(params):
+    # random engines, many implausible as a whole (full-load BMEP, motoring BMEP, idle), none in one field:
+    # the vectorised check flags exactly the variants whose own parameter set is refused
+    from vpsim.batch import _sections
+    from vpsim.model.record import records
+    from vpsim.params import engine_check_figures
+
+    rng = np.random.default_rng(3)
+    n = 80
+    cols = {
+        "engine.friction_coefficient": rng.uniform(1.0, 10.0, n),
+        "engine.boost_layout": rng.uniform(0.5, 3.0, n),
+        "engine.thermal_efficiency": rng.uniform(0.3, 0.9, n),
+        "engine.air_charge_slope": rng.uniform(0.8, 1.5, n),
+        "engine.air_charge_intercept": rng.uniform(-9e4, 5e4, n),
+        "engine.max_throttle_area": 10.0 ** rng.uniform(-5.5, -3.0, n),
+    }
+    names = list(cols)
+    values = np.column_stack([cols[k] for k in names])
+    ok = engine_check_figures(records(*_sections(params, names, values)[0]))["ok"]
+    refused = []
+    for i in range(n):
+        try:
+            variant_parameters(params, names, values[i])
+            refused.append(False)
+        except ParameterError:
+            refused.append(True)
+    assert list(~ok) == refused
+    assert 10 < sum(refused) < n - 10
+
+
 def test_forward_batch_rows_equal_individual_runs(params):
     from vpsim.methods import forward
 

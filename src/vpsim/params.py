@@ -447,7 +447,11 @@ def engine_check_figures(c) -> dict:
         p_idle = en.intake_pressure_for_torque(0.0, IDLE_CHECK_SPEED, c)
         flow = en.cylinder_air_flow(p_idle, IDLE_CHECK_SPEED, c)
         pressure_ok = np.isfinite(p_idle) & (0.0 < p_idle) & (p_idle < c.ambient_pressure)
-        area = en.throttle_for_flow_array(np.where(pressure_ok, p_idle, 0.5 * c.ambient_pressure), flow, c)
+        p_area = np.where(pressure_ok, p_idle, 0.5 * c.ambient_pressure)
+        if np.ndim(p_area) == 0:  # one engine: plain Python, no compiled loop to load when parameters load
+            area = en.throttle_for_flow(float(p_area), float(flow), c)
+        else:
+            area = en.throttle_for_flow_array(p_area, flow, c)
     lo, hi = DISPLACEMENT_RANGE
     f = {
         "displacement": c.displacement,
