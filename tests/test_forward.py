@@ -545,6 +545,16 @@ def _visited_states(params, cycle_name, mode, driver, stride=3):
     return c, D, c_, pts
 
 
+def _right_side_at(t, y_, ratio, c, D, cyc):
+    """(G, y, dy, aux): the gear constants, the state and the right side at a visited state (t, y_, ratio)."""
+    G = np.zeros(3)
+    forward._gear(ratio, c, G)
+    y = np.array(y_, dtype=float)
+    dy, aux = np.zeros(forward.NY), np.zeros(forward.N_AUX)
+    forward._rhs(t, y, G, c, D, cyc.time_s, cyc.speed_mps, dy, aux)
+    return G, y, dy, aux
+
+
 def _column_check(c, D, cyc, pts, column, dy_rel, label):
     """Compare an analytic Jacobian column with central differences of the right side; the branches seen."""
     seen = set()
@@ -706,11 +716,7 @@ def test_jacobian_keeps_the_energy_balance(params, mode):
     rows += [f._E_IDLE, f._E_ACC]
     at_rest = 0
     for t, y_, ratio in pts:
-        G = np.zeros(3)
-        f._gear(ratio, c, G)
-        y = np.array(y_, dtype=float)
-        dy, aux = np.zeros(f.NY), np.zeros(f.N_AUX)
-        f._rhs(t, y, G, c, D, cyc.time_s, cyc.speed_mps, dy, aux)
+        G, y, dy, aux = _right_side_at(t, y_, ratio, c, D, cyc)
         cols = np.zeros((3, f.NY))
         f._jacobian(y, aux, G, c, D, np.zeros(9), cols[0], cols[1], cols[2])
         scale = np.abs(cols[:, [f._E_IND, *rows]]).max(axis=1) + 1e-300
@@ -728,11 +734,7 @@ def test_switching_functions_alone_are_the_right_sides(params, mode):
     for driver in ("1", "2"):
         c, D, cyc, pts = _visited_states(q, "ftp75", mode, driver, stride=1)
         for t, y_, ratio in pts:
-            G = np.zeros(3)
-            forward._gear(ratio, c, G)
-            y = np.array(y_, dtype=float)
-            dy, aux = np.zeros(forward.NY), np.zeros(forward.N_AUX)
-            forward._rhs(t, y, G, c, D, cyc.time_s, cyc.speed_mps, dy, aux)
+            G, y, dy, aux = _right_side_at(t, y_, ratio, c, D, cyc)
             for k in range(forward.N_SW):
                 assert forward._switch(k, t, y, G, c, D, cyc.time_s, cyc.speed_mps) == aux[forward._X_SW + k]
     D[forward._OPEN] = 1.0
