@@ -1389,10 +1389,14 @@ N_VARIANT_OUT = 6
 
 
 @kernel(parallel=True)
-def _variants(seg_t, n_seg, seg_gear, ratios, sched_of, tab_t, tab_v, recs, D_all, paper, rtol, h_max, out):
+def _variants(
+    seg_t, n_seg, seg_gear, ratios, sched_of, tab_t, tab_v, recs, D_all, paper, rtol, h_max, max_steps, out
+):
     """:func:`run` without series for every variant m (record ``recs[m]``, settings ``D_all[m]``), in
     parallel: the same start (:func:`_start_state`), error scales and kernel (:func:`_integrate_ros`).
-    Schedule s = sched_of[m] restarts at seg_t[s, :n_seg[s] + 1] in the gears seg_gear[s] (1-based)."""
+    Schedule s = sched_of[m] restarts at seg_t[s, :n_seg[s] + 1] in the gears seg_gear[s] (1-based).
+    ``max_steps`` comes in as an argument, not as the constant MAX_STEPS: a constant would be a literal type,
+    a signature of :func:`_integrate_ros` of its own, compiled again (about 17 s) beside the one run's."""
     for m in prange(recs.size):
         c = recs[m]
         s = sched_of[m]
@@ -1424,7 +1428,7 @@ def _variants(seg_t, n_seg, seg_gear, ratios, sched_of, tab_t, tab_v, recs, D_al
             h_max,
             error_scales(c),
             quadrature_scales(c),
-            MAX_STEPS,
+            max_steps,
             np.zeros(0),
             np.zeros((0, NY)),
             np.zeros((0, N_AUX)),
@@ -1493,6 +1497,7 @@ def run_variants(cycle, recs, ratios, schedules, schedule_of_variant, D_all, mod
         rules.canonical_mode(mode) == "paper",
         np.ascontiguousarray(np.broadcast_to(np.asarray(rtol, dtype=float), (n_var,))),
         float(cycle.time_s[-1] - cycle.time_s[0]) / 50.0,
+        int(MAX_STEPS),
         out,
     )
     return out
