@@ -187,3 +187,45 @@ def test_bag_cycles_are_udds_windows():
     assert part.speed_mps[0] == pytest.approx(udds.speed_at(10.5))
     with pytest.raises(VpsimError, match="not inside"):
         time_window(udds, 0, 1e4)
+
+
+def test_model_inputs_are_all_the_builder_reads(tmp_path):
+    """Records equal in MODEL_INPUTS build one vehicle (the repeatability report relies on it): changing every
+    other field leaves the parameters, the gear rule and the technology class as they were; changing an input
+    changes the vehicle."""
+    import dataclasses
+
+    from vpsim.fleet.calibrate import vehicle_class
+    from vpsim.fleet.run import gear_rule
+    from vpsim.fleet.vehicle import MODEL_INPUTS, model_inputs
+    from vpsim.params import as_dict
+
+    cars = read_test_car_list(write_list(tmp_path / "list.csv", bad_rows=False))
+    cycles = [fleet_cycle("hwy")]
+    for rec in (cars.find("T002"), cars.find("T004")):
+
+        def changed(v):
+            if isinstance(v, bool):
+                return not v
+            if isinstance(v, str):
+                return v + " (other)"
+            if isinstance(v, int):
+                return v + 7
+            if isinstance(v, float):
+                return 1.0 if math.isnan(v) else 1.5 * v
+            return {k: 2 * x for k, x in v.items()}  # measured mpg, test counts
+
+        fields = [f.name for f in dataclasses.fields(rec) if f.name not in MODEL_INPUTS]
+        other = {name: changed(getattr(rec, name)) for name in fields}
+        assert {"vehicle_id", "configuration", "make", "lockup", "drive", "measured_mpg"} <= set(other)
+        twin = dataclasses.replace(rec, **other)
+        assert model_inputs(twin) == model_inputs(rec)
+
+        def built(r):
+            d = as_dict(record_parameters(r, cycles))
+            d.pop("name", None)
+            return d, gear_rule(r), vehicle_class(r)
+
+        assert built(twin) == built(rec)
+        heavier = dataclasses.replace(rec, etw_lb=rec.etw_lb + 500)
+        assert model_inputs(heavier) != model_inputs(rec) and built(heavier) != built(rec)

@@ -235,3 +235,59 @@ def test_automatics_and_cvts_get_a_converter_manuals_and_dcts_none(tmp_path):
     assert converter_fields(replace(auto, transmission_kind="cvt"))
     for kind in ("manual", "amt_dct"):
         assert converter_fields(replace(auto, transmission_kind=kind)) == {}
+
+
+def test_repeatability_of_twins_by_hand():
+    """Two groups of vehicles equal in every model input, one vehicle alone: the best single prediction per
+    group is its geometric mean (sqrt(20.8 x 12.9) = 16.38; (30 x 31 x 36)^(1/3) = 32.23 mpg)."""
+    from vpsim.fleet.report import repeatability
+
+    meas = {"A1": 20.8, "A2": 12.9, "B1": 30.0, "B2": 31.0, "B3": 36.0, "C1": 25.0}
+    df = pd.DataFrame(
+        {
+            "vehicle_id": list(meas),
+            "configuration": 0,
+            "make": "Acme",
+            "model": "Twin",
+            "cycle": "ftp_bag2",
+            "measured_mpg": list(meas.values()),
+            "error_pct": [10.0, -10.0, 1.0, 2.0, np.nan, 50.0],
+        }
+    )
+    inputs = {f"{k}#0": ("a",) if k[0] == "A" else ("b",) if k[0] == "B" else ("c",) for k in meas}
+    r = repeatability(df, inputs)["ftp_bag2"]
+    assert (r["rows"], r["groups"]) == (5, 2)  # C1 has no twin
+    # errors of the best prediction: 21.25, 26.98 (A); 7.43, 3.97, 10.47 % (B)
+    assert r["best_possible_median_abs_error_pct"] == pytest.approx(10.472, abs=1e-3)
+    assert r["best_possible_p90_abs_error_pct"] == pytest.approx(24.687, abs=1e-3)
+    # within 12 % one prediction reaches one of A (20.8 / 12.9 > 1.12 / 0.88) and all of B (36 / 30 < 1.27);
+    # within 5 % one of A and two of B (31 / 30 < 1.05 / 0.95 < 36 / 31)
+    assert r["rows_beyond_12_pct_whatever_the_model"] == 1
+    assert r["rows_beyond_5_pct_whatever_the_model"] == 2
+    assert r["vpsim_median_abs_error_pct"] == pytest.approx(6.0)  # |10, -10, 1, 2|: B3 has no prediction
+    assert r["widest_group"]["measured_mpg"] == [12.9, 20.8]
+    assert r["widest_group"]["spread_pct"] == pytest.approx(61.2)
+    # the worst list names the twin first: A1 measured 20.8 / 12.9 - 1 = +61 % against A2
+    from vpsim.fleet.report import mechanisms, twin_differences
+
+    diff = twin_differences(df, inputs)
+    assert diff[("A1", 0)] == pytest.approx(61.24, abs=0.01) and diff[("A2", 0)] == pytest.approx(
+        -37.98, abs=0.01
+    )
+    assert diff[("B3", 0)] == pytest.approx(100 * (36 / np.sqrt(30 * 31) - 1), abs=1e-9)
+    assert ("C1", 0) not in diff
+    df = df.assign(
+        transmission="automatic",
+        n_gears=6,
+        boosted=False,
+        power_to_mass_w_per_kg=80.0,
+        specific_power_kw_per_l=60.0,
+        test_mass_kg=1500.0,
+        cylinders=4,
+        trace_miss_s=0.0,
+    )
+    mech = mechanisms(df, inputs)
+    assert mech[("A1", 0)].startswith("measured 61 % above a twin with the same record inputs")
+    assert mech[("B2", 0)].startswith("measured 6 % below a twin")  # 31 against sqrt(30 x 36) = 32.9 mpg
+    assert "same record inputs" not in mech[("C1", 0)]  # no twin
+    assert "same record inputs" not in mechanisms(df)[("A1", 0)]  # without the inputs: not known

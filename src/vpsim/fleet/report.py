@@ -77,6 +77,12 @@ def summary(run) -> dict:
     return out
 
 
+def _inputs(run) -> dict[str, tuple]:
+    from .vehicle import model_inputs
+
+    return {rec.key: model_inputs(rec) for rec in run.cars.vehicles}
+
+
 def run_info(run) -> dict:
     """How the run was made and what it met: settings, counts, trace misses, runtime (``run.json``)."""
     df = run.frame()
@@ -96,6 +102,7 @@ def run_info(run) -> dict:
         "failed": {c: int(((df["cycle"] == c) & (df["status"] == "failed")).sum()) for c in run.cycles},
         "execution": run.execution,
         "runtime_s": {k: round(v, 2) for k, v in run.timings.items()},
+        "record_repeatability": repeatability(df, _inputs(run)),
         "peer": {"fastsim": dict(run.peer)},
     }
     if run.peer.get("available"):
@@ -108,12 +115,105 @@ def run_info(run) -> dict:
     return info
 
 
+# --- how repeatable the record is ---------------------------------------------------------------------------
+
+REPEATABILITY_TOLERANCES_PCT = (5.0, 12.0)  # the issue's median and 90th-percentile targets
+
+
+def _most_within(m_sorted: np.ndarray, tol: float) -> int:
+    """The most of the sorted measurements ``m_sorted`` one prediction p can have within ``tol`` of
+    (|p / m - 1| <= tol): those in a window [x, x (1 + tol) / (1 - tol)]."""
+    ratio = (1.0 + tol) / (1.0 - tol)
+    best, j = 0, 0
+    for i in range(m_sorted.size):
+        while m_sorted[i] > m_sorted[j] * ratio * (1.0 + 1e-12):
+            j += 1
+        best = max(best, i - j + 1)
+    return best
+
+
+def repeatability(df, inputs: dict[str, tuple]) -> dict:
+    """How far the measurements of vehicles the record cannot tell apart differ: per cycle, over the rows
+    whose vehicle shares every model input (:data:`vpsim.fleet.vehicle.MODEL_INPUTS`; ``inputs``: vehicle
+    key ``"id#configuration"`` -> those values) with another vehicle of the run.
+
+    A model of these inputs predicts one value for every vehicle of such a group, so on these rows no model of
+    the record can do better than the group's spread. Per cycle: ``rows``, ``groups``; the errors of the best
+    single prediction per group (its geometric mean of measured mpg, the least-squares prediction of ln mpg):
+    ``best_possible_median_abs_error_pct`` and ``..._p90_...``; ``rows_beyond_<tol>_pct_whatever_the_model``:
+    rows that miss by more than tol with every prediction (per group, all rows but the most one prediction
+    can be within tol of); vpsim's errors on the same rows; and the group with the widest spread.
+    """
+    out: dict = {}
+    if len(df) == 0:
+        return out
+    key = df["vehicle_id"].astype(str) + "#" + df["configuration"].astype(str)
+    group = key.map(lambda k: inputs.get(k))
+    for c in sorted(df["cycle"].unique()):
+        sel = (df["cycle"] == c).to_numpy() & group.notna().to_numpy()
+        sub = df[sel].assign(_g=group[sel].map(repr))
+        sizes = sub.groupby("_g")["vehicle_id"].transform("size")
+        sub = sub[sizes >= 2]
+        if len(sub) == 0:
+            out[c] = {"rows": 0, "groups": 0}
+            continue
+        ln = np.log(sub["measured_mpg"].to_numpy(float))
+        gmean = sub.assign(_ln=ln).groupby("_g")["_ln"].transform("mean").to_numpy()
+        best = 100.0 * np.abs(np.exp(gmean - ln) - 1.0)
+        entry = {
+            "rows": int(len(sub)),
+            "groups": int(sub["_g"].nunique()),
+            "best_possible_median_abs_error_pct": round(float(np.median(best)), 3),
+            "best_possible_p90_abs_error_pct": round(float(np.percentile(best, 90)), 3),
+        }
+        for tol in REPEATABILITY_TOLERANCES_PCT:
+            missed = 0
+            for _, g in sub.groupby("_g"):
+                m = np.sort(g["measured_mpg"].to_numpy(float))
+                missed += m.size - _most_within(m, tol / 100.0)
+            entry[f"rows_beyond_{tol:g}_pct_whatever_the_model"] = int(missed)
+        e = sub["error_pct"].to_numpy(float)
+        e = np.abs(e[np.isfinite(e)])
+        entry["vpsim_median_abs_error_pct"] = round(float(np.median(e)), 3) if e.size else None
+        entry["vpsim_p90_abs_error_pct"] = round(float(np.percentile(e, 90)), 3) if e.size else None
+        spread = sub.groupby("_g")["measured_mpg"].agg(lambda s: s.max() / s.min() - 1.0)
+        g = sub[sub["_g"] == spread.idxmax()].sort_values("measured_mpg")
+        entry["widest_group"] = {
+            "spread_pct": round(100.0 * float(spread.max()), 1),
+            "vehicles": [f"{r.make} {r.model} ({r.vehicle_id}#{r.configuration})" for r in g.itertuples()],
+            "measured_mpg": [float(x) for x in g["measured_mpg"]],
+        }
+        out[c] = entry
+    return out
+
+
 # --- mechanisms -----------------------------------------------------------------------------------------
 
 
-def mechanisms(df):
+TWIN_NOTE_PCT = 5.0  # a twin measured this much apart is named as the first mechanism
+
+
+def twin_differences(df, inputs: dict[str, tuple]) -> dict:
+    """Per vehicle with twins (equal in every model input; ``inputs`` as :func:`repeatability`): its
+    measured mpg against its twins' geometric mean, in %, the median over the cycles both measured."""
+    if len(df) == 0:
+        return {}
+    key = df["vehicle_id"].astype(str) + "#" + df["configuration"].astype(str)
+    d = df.assign(_k=key, _g=key.map(lambda k: repr(inputs.get(k))), _ln=np.log(df["measured_mpg"]))
+    d = d[key.map(lambda k: k in inputs)]
+    g = d.groupby(["_g", "cycle"])["_ln"]
+    n, total = g.transform("size"), g.transform("sum")
+    d = d[n >= 2].assign(_diff=lambda x: 100.0 * (np.exp(x["_ln"] - (total - x["_ln"]) / (n - 1)) - 1.0))
+    return {
+        tuple(k): float(v) for k, v in d.groupby(["vehicle_id", "configuration"])["_diff"].median().items()
+    }
+
+
+def mechanisms(df, inputs: dict[str, tuple] | None = None):
     """A data-derived mechanism per vehicle (a string): what sets it apart from the fleet, in order of the
-    model gaps it points at. ``df``: the rows of :func:`FleetRun.frame`."""
+    model gaps it points at. ``df``: the rows of :func:`FleetRun.frame`; with ``inputs`` (as
+    :func:`repeatability`), first a twin the record cannot tell apart that measured differently."""
+    twins = twin_differences(df, inputs) if inputs else {}
     per = df.groupby(["vehicle_id", "configuration"]).agg(
         transmission=("transmission", "first"),
         n_gears=("n_gears", "first"),
@@ -134,6 +234,10 @@ def mechanisms(df):
     out = {}
     for key, r in per.iterrows():
         parts = []
+        diff = twins.get(tuple(key))
+        if diff is not None and abs(diff) >= TWIN_NOTE_PCT:
+            side = "below" if diff < 0 else "above"
+            parts.append(f"measured {abs(diff):.0f} % {side} a twin with the same record inputs")
         if r["miss"] > 0:
             parts.append(
                 f"trace miss {r['miss']:.0f} s (NA model engine lacks full-load torque"
@@ -161,8 +265,9 @@ def mechanisms(df):
     return out
 
 
-def worst(df, n: int = N_WORST):
-    """The ``n`` vehicles with the largest median |error| over their cycles, with their mechanism."""
+def worst(df, n: int = N_WORST, inputs: dict[str, tuple] | None = None):
+    """The ``n`` vehicles with the largest median |error| over their cycles, with their mechanism
+    (:func:`mechanisms`)."""
     import pandas as pd
 
     ok = df[np.isfinite(df["error_pct"])].copy()
@@ -176,7 +281,7 @@ def worst(df, n: int = N_WORST):
         cycles=("cycle", lambda s: ",".join(s)),
     )
     per = per.sort_values("median_abs_error_pct", ascending=False).head(n)
-    mech = mechanisms(df)
+    mech = mechanisms(df, inputs)
     per["mechanism"] = [mech[k] for k in per.index]
     return per.reset_index() if len(per) else pd.DataFrame()
 
@@ -387,7 +492,7 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
     (out / "summary.json").write_text(json.dumps(s, indent=2) + "\n")
     (out / "run.json").write_text(json.dumps(info, indent=2) + "\n")
     peer = bool(run.peer.get("available"))
-    w = worst(df)
+    w = worst(df, inputs=_inputs(run))
     figs = {
         "predicted_vs_measured.png": figure_predicted_vs_measured(df, run.cycles, peer),
         "error_histograms.png": figure_histograms(df, run.cycles, peer),
@@ -402,6 +507,39 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
 
 def _fmt(x, spec="+.1f"):
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
+
+
+def _repeatability_md(rep: dict, cycles) -> list[str]:
+    rows = [c for c in cycles if rep.get(c, {}).get("rows")]
+    if not rows:
+        return []
+    lo, hi = (f"{t:g}" for t in REPEATABILITY_TOLERANCES_PCT)
+    L = [
+        "",
+        "## How repeatable the record is",
+        "",
+        "Vehicles equal in every field the model is built from (test mass, road load, engine, transmission, "
+        "N/V and axle ratio) get one prediction from any model of the record, so the spread of their "
+        "measurements is error no such model can remove. Best possible: each group predicted at the "
+        "geometric mean of its measurements.",
+        "",
+        f"| cycle | rows (groups) | best possible median / p90 abs | rows beyond {lo} / {hi} % whatever the "
+        "model | vpsim median / p90 abs on these rows | widest group |",
+        "|---|---|---|---|---|---|",
+    ]
+    for c in rows:
+        r = rep[c]
+        wg = r["widest_group"]
+        beyond = [r[f"rows_beyond_{t}_pct_whatever_the_model"] for t in (lo, hi)]
+        L.append(
+            f"| {c} | {r['rows']} ({r['groups']}) | {r['best_possible_median_abs_error_pct']:.1f} / "
+            f"{r['best_possible_p90_abs_error_pct']:.1f} % | {beyond[0]} / {beyond[1]} | "
+            f"{_fmt(r['vpsim_median_abs_error_pct'], '.1f')} / "
+            f"{_fmt(r['vpsim_p90_abs_error_pct'], '.1f')} % | {wg['vehicles'][0]}: "
+            + ", ".join(f"{m:g}" for m in wg["measured_mpg"])
+            + f" mpg (+{wg['spread_pct']:.0f} %) |"
+        )
+    return L
 
 
 def markdown(run, s, info, df, w, command: str) -> str:
@@ -470,6 +608,7 @@ def markdown(run, s, info, df, w, command: str) -> str:
         "",
         "![error histograms](error_histograms.png)",
     ]
+    L += _repeatability_md(info.get("record_repeatability", {}), run.cycles)
     L += [
         "",
         "## Technology fitted (out of fold)",
@@ -534,6 +673,7 @@ __all__ = [
     "SUMMARY_KEYS",
     "breakdown",
     "error_stats",
+    "repeatability",
     "summary",
     "worst",
     "write_outputs",

@@ -157,6 +157,34 @@ def converter_fields(rec: VehicleRecord) -> dict:
     }
 
 
+# The record fields a vehicle is built from: record_parameters, the gear rule (run.gear_rule), the technology
+# class (calibrate.vehicle_class) and the peer read nothing else. Two records equal in these are one vehicle
+# to the model, whatever their measurements (report.repeatability; a test checks the list is complete).
+MODEL_INPUTS = (
+    "etw_lb",
+    "target_a_lbf",
+    "target_b_lbf_per_mph",
+    "target_c_lbf_per_mph2",
+    "displacement_l",
+    "cylinders",
+    "rated_hp",
+    "boosted",
+    "transmission_kind",
+    "n_gears",
+    "nv_ratio",
+    "axle_ratio",
+)
+
+
+def model_inputs(rec: VehicleRecord) -> tuple:
+    """The values of :data:`MODEL_INPUTS` of a record (a missing axle ratio, NaN, as None: comparable)."""
+    out = []
+    for name in MODEL_INPUTS:
+        v = getattr(rec, name)
+        out.append(None if isinstance(v, float) and math.isnan(v) else v)
+    return tuple(out)
+
+
 @lru_cache(maxsize=1)
 def _base() -> Parameters:
     return load_parameters(BASE_PRESET)
@@ -427,9 +455,11 @@ def read_record_block(path: str | Path) -> dict:
 
 
 __all__ = [
+    "MODEL_INPUTS",
     "bore_stroke",
     "fold_road_load",
     "gear_ratios",
+    "model_inputs",
     "read_record_block",
     "record_parameters",
     "top_gear_total_ratio",
