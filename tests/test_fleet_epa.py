@@ -229,3 +229,25 @@ def test_model_inputs_are_all_the_builder_reads(tmp_path):
         assert built(twin) == built(rec)
         heavier = dataclasses.replace(rec, etw_lb=rec.etw_lb + 500)
         assert model_inputs(heavier) != model_inputs(rec) and built(heavier) != built(rec)
+
+
+def test_idle_fuel_flow_from_the_measured_idle_and_the_accessories(tmp_path):
+    """A 2.0 L car idles on 0.16 gal/h without load (Argonne: 0.16 x 3.785 L x 0.743 kg/L / 3600 s =
+    0.1250 g/s), plus its accessories' 300 W at the engine's marginal efficiency (between 20 and 50 %)."""
+    from vpsim.fleet.vehicle import ACCESSORY_POWER_W, FUEL_LHV_J_PER_KG, idle_fuel_flow
+
+    cars = read_test_car_list(write_list(tmp_path / "list.csv", bad_rows=False))
+    rec = cars.find("T004")  # 2.0 L
+    p = record_parameters(rec, [fleet_cycle("hwy")])
+    assert p.engine.displacement == pytest.approx(2.0e-3)
+    extra = p.simulation.idle_fuel_flow - 0.12500e-3
+    assert (
+        ACCESSORY_POWER_W / (0.5 * FUEL_LHV_J_PER_KG) < extra < ACCESSORY_POWER_W / (0.2 * FUEL_LHV_J_PER_KG)
+    )
+    assert p.simulation.idle_fuel_flow == pytest.approx(idle_fuel_flow(p.engine), rel=1e-12)
+    # no accessories: the measured no-load idle alone
+    bare = p.with_changes(engine={"accessory_power": 0.0})
+    assert idle_fuel_flow(bare.engine) == pytest.approx(0.12500e-3, rel=1e-4)
+    # an explicit technology value wins
+    q = record_parameters(rec, [fleet_cycle("hwy")], {"simulation.idle_fuel_flow": 2e-4})
+    assert q.simulation.idle_fuel_flow == 2e-4

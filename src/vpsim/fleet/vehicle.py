@@ -14,7 +14,8 @@ Mapping (record units -> SI; every default below is a module constant, documente
 * **engine**: displacement V_d and cylinders z give bore and stroke with the stroke/bore ratio
   :data:`STROKE_BORE_RATIO`: B = (4 V_d / (pi z k))^(1/3), S = k B; the rest of the engine is the preset
   ``hofman2011`` engine scaled by :func:`vpsim.scaling.scale_engine` (throttle areas with z B^2, speed range
-  with 1/S, manifold volume and inertia with V_d). The idle fuel flow scales with V_d. The rated power caps
+  with 1/S, manifold volume and inertia with V_d). The idle fuel flow is :func:`idle_fuel_flow`. The rated
+  power caps
   the full-load line (``engine.rated_power``); a boosted engine (:mod:`vpsim.fleet.epa` decides) gets the
   boost pressure that gives its rated power at :data:`RATED_SPEED_RADPS` (``engine.boost_pressure``,
   :func:`vpsim.model.engine.boost_for_power`), within [1.05 p_a, :data:`MAX_BOOST_PA`], and the full-load
@@ -71,6 +72,10 @@ GRAVITY = 9.81
 # a certification test runs with the accessories off but the alternator's base load (engine electronics, fuel
 # pump, ignition): some 200-400 W of electrical power, about 300-500 W at the crank
 ACCESSORY_POWER_W = 300.0
+# warm idle with no load, per litre of displacement: 0.16 gal/h for a 2.0 L gasoline compact sedan, Argonne
+# National Laboratory's idle measurements as published in U.S. DOE Vehicle Technologies Office Fact #861
+# (2015); its 4.6 L large sedan, 0.39 gal/h, is within 6 % of the same rate per litre
+IDLE_FUEL_L_PER_H_PER_L = 0.16 * 3.785411784 / 2.0
 # modern engine controls cut the fuel on overrun above about 1,000-1,500 rpm (Guzzella & Onder 2010)
 FUEL_CUTOFF_SPEED_RADPS = 1200.0 * 2.0 * math.pi / 60.0
 RATED_SPEED_RADPS = 5500.0 * 2.0 * math.pi / 60.0  # where a 2022 engine makes its rated power, typically
@@ -185,6 +190,22 @@ def model_inputs(rec: VehicleRecord) -> tuple:
     return tuple(out)
 
 
+def idle_fuel_flow(engine, fuel_density: float = FUEL_DENSITY_KG_PER_L) -> float:
+    """Fuel flow of the warm engine idling with its accessories, kg/s: :data:`IDLE_FUEL_L_PER_H_PER_L` times
+    the displacement (the no-load idle measured), plus what the model's own engine burns for the
+    accessories' torque at idle speed (its quasi-static fuel flow with that torque, less with none): the
+    model books the constant idle flow for an idling engine, so the accessories' share must be in it."""
+    from ..model import engine as en
+    from ..model.record import engine_record
+
+    e = engine
+    no_load = IDLE_FUEL_L_PER_H_PER_L * e.displacement * 1e3 * fuel_density / 3600.0
+    c = engine_record(e)  # one record for both evaluations (maps.bqm_fuel_flow builds one per call)
+    w_idle = np.full(2, c.idle_speed)
+    fuel = en.bqm_fuel_flow(np.array([e.accessory_power / c.idle_speed, 0.0]), w_idle, c)
+    return no_load + max(float(fuel[0] - fuel[1]), 0.0)
+
+
 @lru_cache(maxsize=1)
 def _base() -> Parameters:
     return load_parameters(BASE_PRESET)
@@ -206,7 +227,6 @@ def record_parameters(
     bore, stroke = bore_stroke(rec.displacement_l, rec.cylinders)
     eng = scale_engine(base.engine, bore=bore, stroke=stroke, cylinders=rec.cylinders)
     ratios, final = gear_ratios(rec)
-    vd_ratio = eng.displacement / base.engine.displacement
     engine = {
         "bore": eng.bore,
         "stroke": eng.stroke,
@@ -240,7 +260,6 @@ def record_parameters(
         },
         "engine": engine,
         "simulation": {
-            "idle_fuel_flow": base.simulation.idle_fuel_flow * vd_ratio,
             "fuel_density": FUEL_DENSITY_KG_PER_L,
             "fuel_cutoff_speed": FUEL_CUTOFF_SPEED_RADPS,
         },
@@ -250,12 +269,22 @@ def record_parameters(
         if sec not in sections:
             raise VpsimError(f"technology parameter {key!r} is not section.field")
         sections[sec][fld] = value
-    from dataclasses import replace
+    from dataclasses import fields, replace
 
     rated = rec.rated_power_kw * 1e3
     if math.isfinite(rated) and rated > 0:
         sections["engine"]["rated_power"] = rated
+    idle_given = "simulation.idle_fuel_flow" in (technology or {})
+    names = {f.name for f in fields(base.engine)}
+    if not idle_given and set(sections["engine"]) <= names:
+        # the engine as with_changes will build it (and then validate it with this value): one validation
+        engine_now = replace(
+            base.engine, **{k: tuple(v) if isinstance(v, list) else v for k, v in sections["engine"].items()}
+        )
+        sections["simulation"]["idle_fuel_flow"] = idle_fuel_flow(engine_now, FUEL_DENSITY_KG_PER_L)
     p = base.with_changes(**sections)
+    if not idle_given and "idle_fuel_flow" not in sections["simulation"]:  # e.g. engine.lambda overridden
+        p = p.with_changes(simulation={"idle_fuel_flow": idle_fuel_flow(p.engine, FUEL_DENSITY_KG_PER_L)})
     if rec.boosted and math.isfinite(rated) and rated > 0:
         from ..model import engine as en
         from ..model.record import record
@@ -352,7 +381,8 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         "engine.bore": f"record: {rec.displacement_l:g} L, {rec.cylinders} cyl., S/B {STROKE_BORE_RATIO}",
         "engine.thermal_efficiency": technology_note or "preset",
         "engine.friction_coefficient": technology_note or "preset",
-        "simulation.idle_fuel_flow": "preset, scaled with displacement",
+        "simulation.idle_fuel_flow": f"default: {IDLE_FUEL_L_PER_H_PER_L:.4g} L/h per litre, warm idle "
+        "without load (Argonne), plus the accessories' share (kg/s)",
         "simulation.fuel_density": "Tier 2 certification gasoline",
         "engine.fuel_heating_value": "Tier 2 certification gasoline",
     }
@@ -459,6 +489,7 @@ __all__ = [
     "bore_stroke",
     "fold_road_load",
     "gear_ratios",
+    "idle_fuel_flow",
     "model_inputs",
     "read_record_block",
     "record_parameters",
