@@ -15,9 +15,8 @@ Mapping (record units -> SI; every default below is a module constant, documente
   :data:`STROKE_BORE_RATIO`: B = (4 V_d / (pi z k))^(1/3), S = k B; the rest of the engine is the preset
   ``hofman2011`` engine scaled by :func:`vpsim.scaling.scale_engine` (throttle areas with z B^2, speed range
   with 1/S, manifold volume and inertia with V_d). The idle fuel flow is :func:`idle_fuel_flow`. The rated
-  power caps
-  the full-load line (``engine.rated_power``); a boosted engine (:mod:`vpsim.fleet.epa` decides) gets the
-  boost pressure that gives its rated power at :data:`RATED_SPEED_RADPS` (``engine.boost_pressure``,
+  power caps the full-load line (``engine.rated_power``); a boosted engine (:mod:`vpsim.fleet.epa` decides)
+  gets the boost pressure that gives its rated power at :data:`RATED_SPEED_RADPS` (``engine.boost_pressure``,
   :func:`vpsim.model.engine.boost_for_power`), within [1.05 p_a, :data:`MAX_BOOST_PA`], and the full-load
   enrichment :data:`BOOST_ENRICHMENT` (``engine.boost_enrichment``).
 * **transmission**: the top-gear total ratio from the N/V ratio (engine rpm per mph in top gear):
