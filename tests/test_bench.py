@@ -72,3 +72,25 @@ def test_peer_is_the_pinned_fastsim():
 def test_unknown_profile_is_an_error():
     with pytest.raises(ValueError, match="profile must be one of"):
         run_benchmarks("huge")
+
+
+def test_forward_steps_per_cycle_second_counted_in_both_modes():
+    """The issue's step target (<= 2 accepted steps per second of UDDS) as counts: the forward runs' own
+    accepted steps over the cycle's 1369 s, paper and realistic mode; a profile without the forward method
+    reports it as not measured."""
+    from dataclasses import replace
+
+    from vpsim.bench import PROFILES, TARGETS, _forward_steps, _targets
+    from vpsim.simulation import simulate
+
+    steps = _forward_steps(replace(PROFILES["tiny"], methods=(("forward", "1"),)))
+    for mode in ("paper", "realistic"):
+        r = simulate("udds", "forward", driver="1", mode=mode, keep_series=False)
+        assert steps[mode]["accepted_steps"] == r.solver["accepted_steps"]
+        assert steps[mode]["per_cycle_s"] == pytest.approx(r.solver["accepted_steps"] / 1369.0)
+        assert f"forward_udds_steps_per_cycle_s_{mode}" in TARGETS
+    assert _forward_steps(PROFILES["tiny"]) == {}
+    report = {"ratios": {}, "forward_udds_steps_per_cycle_s_paper": 1.5}
+    met = {t["figure"]: t["met"] for t in _targets(report)}
+    assert met["forward_udds_steps_per_cycle_s_paper"] is True
+    assert met["forward_udds_steps_per_cycle_s_realistic"] is None
