@@ -134,11 +134,16 @@ def car_rows(car, fuel="Tier 2 Cert Gasoline", scale=1.0, model=None, **override
     return rows
 
 
-def write_list(path: Path, *, perturb: str | None = None, bad_rows: bool = True) -> Path:
-    """The made-up list; ``perturb``: a vehicle id whose measured mpg are all x 0.6."""
+def write_list(
+    path: Path, *, perturb: str | None = None, bad_rows: bool = True, twin: str | None = None
+) -> Path:
+    """The made-up list; ``perturb``: a vehicle id whose measured mpg are all x 0.6; ``twin``: a vehicle id
+    that gets a twin (id + "T", every field equal) whose measured mpg are all x 1.3."""
     rows = []
     for car in CARS:
         rows += car_rows(car, scale=0.6 if car[0] == perturb else 1.0)
+        if car[0] == twin:
+            rows += car_rows((car[0] + "T",) + car[1:], scale=1.3)
     if bad_rows:
         base = CARS[1]
         rows += car_rows(("X100",) + base[1:], model="Family Hybrid")  # hybrid by name

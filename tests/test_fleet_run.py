@@ -291,3 +291,24 @@ def test_repeatability_of_twins_by_hand():
     assert mech[("B2", 0)].startswith("measured 6 % below a twin")  # 31 against sqrt(30 x 36) = 32.9 mpg
     assert "same record inputs" not in mech[("C1", 0)]  # no twin
     assert "same record inputs" not in mechanisms(df)[("A1", 0)]  # without the inputs: not known
+
+
+def test_fleet_reports_twins_the_record_cannot_tell_apart(tmp_path, capsys):
+    """A vehicle and its twin (every field equal, measured 1.3x): one prediction for both, so one of the two
+    rows misses by more than 12 % whatever the model (1.3 > 1.12 / 0.88); said on the console, in run.json,
+    in report.md and in the worst-vehicle mechanism."""
+    out = tmp_path / "fleet"
+    lst = write_list(tmp_path / "list.csv", bad_rows=False, twin="T002")
+    args = ["fleet", str(lst), "--out", str(out), "--folds", "3", "--cycles", "ftp_bag2,hwy", "--quiet"]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "cannot tell apart" in text and "ftp_bag2 2, 1" in text
+    rep = json.loads((out / "run.json").read_text())["record_repeatability"]
+    assert rep["ftp_bag2"]["rows"] == 2 and rep["ftp_bag2"]["groups"] == 1
+    assert rep["ftp_bag2"]["rows_beyond_12_pct_whatever_the_model"] == 1
+    assert rep["ftp_bag2"]["widest_group"]["spread_pct"] == pytest.approx(30.0, abs=0.2)
+    report = (out / "report.md").read_text()
+    assert "## How repeatable the record is" in report
+    # 13 vehicles, all among the 20 worst: each named against the other, 1.3 - 1 = +30 %, 1 / 1.3 - 1 = -23 %
+    assert "measured 30 % above a twin with the same record inputs" in report
+    assert "measured 23 % below a twin with the same record inputs" in report

@@ -87,6 +87,13 @@ def fleet(file, out, cycles, folds, method, local_cluster, scheduler, workers, n
         click.echo(line)
     if not measured:
         click.echo(f"FASTSim not measured: {fs.get('reason')}")
+    rep = {c: r for c, r in info.get("record_repeatability", {}).items() if r.get("rows")}
+    if rep:
+        beyond = "rows_beyond_12_pct_whatever_the_model"
+        click.echo(
+            "rows the record cannot tell apart (identical inputs), and of them beyond 12 % whatever the "
+            "model: " + ", ".join(f"{c} {r['rows']}, {r[beyond]}" for c, r in rep.items()) + " (report.md)"
+        )
     rt = info["runtime_s"]
     click.echo(
         f"runtime {rt['total_s']:.1f} s ({info['execution']}): "
