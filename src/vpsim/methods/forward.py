@@ -1280,12 +1280,14 @@ def integrate(
     out_t=None,
     max_steps=MAX_STEPS,
     solver=DEFAULT_SOLVER,
+    scales=None,
 ):
     """Run the kernel from seg_t[0] to seg_t[-1], restarting at each seg_t[k] with ratio seg_ratio[k].
 
     (table_t, table_v) is the cycle speed the PI driver follows or, with ``open_loop``, the throttle area
     fed to the engine as it is. ``solver``: ``rosenbrock`` (RODAS3, the default) or ``dopri5`` (the
-    paper's ode45). Returns (y_end, out_y, out_aux, info); raises VpsimError if the solver fails.
+    paper's ode45). ``scales``: the Rosenbrock error scales of ``c`` (:func:`error_scales`) if already at
+    hand. Returns (y_end, out_y, out_aux, info); raises VpsimError if the solver fails.
     """
     if solver not in SOLVERS:
         raise VpsimError(f"unknown solver {solver!r}; expected one of {', '.join(SOLVERS)}")
@@ -1309,7 +1311,7 @@ def integrate(
         D,
         float(rtol),
         float(max_step),
-        ERROR_THRESHOLDS if solver == "dopri5" else error_scales(c),
+        ERROR_THRESHOLDS if solver == "dopri5" else (error_scales(c) if scales is None else scales),
     )
     if solver == "dopri5":
         work = np.zeros((11, NY))
@@ -1593,6 +1595,7 @@ def run(
         max_step=h_max,
         out_t=out_t,
         solver=solver,
+        scales=memo(params, "forward_error_scales", lambda p: error_scales(record(p))),
     )
     fuel_kg = float(y_end[_FUEL])
     distance = float(y_end[_DIST])
@@ -1600,7 +1603,8 @@ def run(
 
     info.update(restarts=int(seg_t.size - 2), rtol=rtol, max_step_s=h_max)
     v = out_y[:, _V]
-    v_ref = np.interp(out_t, cycle.time_s, cycle.speed_mps)
+    on_samples = out_t is cycle.time_s  # the default output: the cycle's own samples
+    v_ref = cycle.speed_mps.copy() if on_samples else np.interp(out_t, cycle.time_s, cycle.speed_mps)
     max_err = max(info.pop("max_speed_error_mps"), float(np.max(np.abs(v - v_ref), initial=0.0)))
     rms = math.sqrt(max(float(y_end[_ERR2]), 0.0) / duration) if duration > 0 else 0.0
     outside = float(y_end[_OUTSIDE])
@@ -1630,7 +1634,7 @@ def run(
             "reference_speed_mps": v_ref,
             "speed_mps": v,
             "accel_mps2": x[:, _X_ACC],
-            "gear": schedule.gear_at(out_t),
+            "gear": schedule.on_cycle(cycle).copy() if on_samples else schedule.gear_at(out_t),
             "engine_speed_radps": x[:, _X_W],
             "crank_torque_nm": x[:, _X_TCR],
             "engine_torque_nm": x[:, _X_TE],
