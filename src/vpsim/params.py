@@ -167,17 +167,7 @@ class Parameters:
         """A copy with some fields changed, validated: ``p.with_changes(vehicle={"mass": 1200.0})``."""
         new = self
         for sec, changes in sections.items():
-            if sec not in _SECTIONS:
-                raise ParameterError(f"unknown section {sec!r}; expected one of {', '.join(_SECTIONS)}")
-            obj = getattr(new, sec)
-            names = {f.name for f in fields(obj)}
-            kw = {}
-            for k, v in changes.items():
-                attr = _ATTR_ALIASES.get(k, k)
-                if attr not in names:
-                    raise ParameterError(f"unknown field {sec}.{k}")
-                kw[attr] = _coerce(sec, k, v, "with_changes")
-            new = replace(new, **{sec: replace(obj, **kw)})
+            new = replace(new, **{sec: changed_section(new, sec, changes)})
         validate(new)
         return new
 
@@ -192,6 +182,22 @@ class Parameters:
             for f in fields(d):
                 out[f"drivers.{k}.{f.name}"] = getattr(d, f.name)
         return out
+
+
+def changed_section(params: Parameters, sec: str, changes: dict[str, Any]):
+    """Section ``sec`` of ``params`` with ``changes`` (TOML names, values coerced as the loader does), not yet
+    validated as a whole: what :meth:`Parameters.with_changes` builds before it validates."""
+    if sec not in _SECTIONS:
+        raise ParameterError(f"unknown section {sec!r}; expected one of {', '.join(_SECTIONS)}")
+    obj = getattr(params, sec)
+    names = {f.name for f in fields(obj)}
+    kw = {}
+    for k, v in changes.items():
+        attr = _ATTR_ALIASES.get(k, k)
+        if attr not in names:
+            raise ParameterError(f"unknown field {sec}.{k}")
+        kw[attr] = _coerce(sec, k, v, "with_changes")
+    return replace(obj, **kw)
 
 
 _SECTIONS = {"vehicle": Vehicle, "transmission": Transmission, "engine": Engine, "simulation": Simulation}

@@ -268,22 +268,18 @@ def record_parameters(
         if sec not in sections:
             raise VpsimError(f"technology parameter {key!r} is not section.field")
         sections[sec][fld] = value
-    from dataclasses import fields, replace
+    from dataclasses import replace
+
+    from ..params import changed_section
 
     rated = rec.rated_power_kw * 1e3
     if math.isfinite(rated) and rated > 0:
         sections["engine"]["rated_power"] = rated
-    idle_given = "simulation.idle_fuel_flow" in (technology or {})
-    names = {f.name for f in fields(base.engine)}
-    if not idle_given and set(sections["engine"]) <= names:
+    if "simulation.idle_fuel_flow" not in (technology or {}):
         # the engine as with_changes will build it (and then validate it with this value): one validation
-        engine_now = replace(
-            base.engine, **{k: tuple(v) if isinstance(v, list) else v for k, v in sections["engine"].items()}
-        )
+        engine_now = changed_section(base, "engine", sections["engine"])
         sections["simulation"]["idle_fuel_flow"] = idle_fuel_flow(engine_now, FUEL_DENSITY_KG_PER_L)
     p = base.with_changes(**sections)
-    if not idle_given and "idle_fuel_flow" not in sections["simulation"]:  # e.g. engine.lambda overridden
-        p = p.with_changes(simulation={"idle_fuel_flow": idle_fuel_flow(p.engine, FUEL_DENSITY_KG_PER_L)})
     if rec.boosted and math.isfinite(rated) and rated > 0:
         from ..model import engine as en
         from ..model.record import record
