@@ -312,3 +312,11 @@ def test_fleet_reports_twins_the_record_cannot_tell_apart(tmp_path, capsys):
     # 13 vehicles, all among the 20 worst: each named against the other, 1.3 - 1 = +30 %, 1 / 1.3 - 1 = -23 %
     assert "measured 30 % above a twin with the same record inputs" in report
     assert "measured 23 % below a twin with the same record inputs" in report
+
+
+def test_groups_read_in_order_mass_bins_light_to_heavy():
+    from vpsim.fleet.report import MASS_LABELS, _in_order, _mass_bin
+
+    assert [_mass_bin(m) for m in (1500, 1700, 2000, 2400, 3000)] == list(MASS_LABELS)
+    assert _in_order(list(reversed(MASS_LABELS))) == list(MASS_LABELS)  # alphabetically "<1600 kg" is last
+    assert _in_order(["6 cyl", "3 cyl", ">=8 cyl", "4 cyl"]) == ["3 cyl", "4 cyl", "6 cyl", ">=8 cyl"]

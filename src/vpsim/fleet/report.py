@@ -289,13 +289,20 @@ def worst(df, n: int = N_WORST, inputs: dict[str, tuple] | None = None):
 # --- breakdowns -----------------------------------------------------------------------------------------
 
 
+MASS_LABELS = ("<1600 kg", "1600-1900", "1900-2200", "2200-2600", ">2600 kg")  # light to heavy
+
+
 def _mass_bin(m):
     edges = [0, 1600, 1900, 2200, 2600, 10000]
-    labels = ["<1600 kg", "1600-1900", "1900-2200", "2200-2600", ">2600 kg"]
-    for lo, hi, lab in zip(edges[:-1], edges[1:], labels, strict=True):
+    for lo, hi, lab in zip(edges[:-1], edges[1:], MASS_LABELS, strict=True):
         if lo <= m < hi:
             return lab
-    return labels[-1]
+    return MASS_LABELS[-1]
+
+
+def _in_order(groups):
+    """Groups in reading order: the mass bins light to heavy, the others sorted ("<1600 kg" sorts last)."""
+    return sorted(groups, key=lambda g: (MASS_LABELS.index(g), "") if g in MASS_LABELS else (-1, str(g)))
 
 
 GROUPS = {
@@ -416,7 +423,7 @@ def figure_by_group(df, cycles):
     colours = ["tab:blue", "tab:green", "tab:purple", "tab:red"]
     for ax, (kind, fn) in zip(axes, GROUPS.items(), strict=False):
         ok["group"] = fn(ok)
-        groups = sorted(ok["group"].unique())
+        groups = _in_order(ok["group"].unique())
         for j, c in enumerate(cycles):
             xs, med, q1, q3 = [], [], [], []
             for i, g in enumerate(groups):
@@ -638,7 +645,7 @@ def markdown(run, s, info, df, w, command: str) -> str:
                 "| group | " + " | ".join(run.cycles) + " |",
                 "|---|" + "---|" * len(run.cycles),
             ]
-            for g in sorted(sub["group"].unique()):
+            for g in _in_order(sub["group"].unique()):
                 cells = []
                 for c in run.cycles:
                     r = sub[(sub["group"] == g) & (sub["cycle"] == c)]
