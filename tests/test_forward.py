@@ -114,8 +114,8 @@ def test_right_side_is_the_affine_form_21(params, v, p, a_eff, gear):
     c = record(params)
     D = forward.settings(params)
     D[forward._OPEN] = 1.0
-    G = np.empty(3)
-    forward._gear(ratio, c, G)
+    G = np.empty(forward.N_G)
+    forward._gear(ratio, gear, c, G)
     y = np.zeros(forward.NY)
     y[forward._V], y[forward._P] = v, p
     dy, aux = np.empty(forward.NY), np.empty(forward.N_AUX)
@@ -434,7 +434,8 @@ def test_rosenbrock_steps_follow_accuracy_not_stability(mode):
     assert r.steps / c.duration_s < 3.0
     assert old.steps / c.duration_s > 5.0
     assert r.solver["rhs_evaluations"] < 0.67 * old.solver["rhs_evaluations"]
-    assert r.solver["jacobians"] == r.steps
+    # one Jacobian per step (again after a step across a jump, where a rejected step ends at its crossing)
+    assert r.steps <= r.solver["jacobians"] <= 1.01 * r.steps
 
 
 @pytest.mark.parametrize("mode", ["paper", "extended"])
@@ -456,8 +457,8 @@ def test_time_derivative_from_the_pi_structure(params, mode, driver, v, p_i, z, 
     pi = PIDriver.from_params(params, driver, mode, None)
     D = forward.settings(params, pi, mode)
     D[forward._TAB_INV] = (cyc.time_s.size - 1) / (cyc.time_s[-1] - cyc.time_s[0])
-    G = np.zeros(3)
-    forward._gear(params.transmission.ratios[1] * params.transmission.final_drive, c, G)
+    G = np.zeros(forward.N_G)
+    forward._gear(params.transmission.ratios[1] * params.transmission.final_drive, 2, c, G)
     y = np.zeros(forward.NY)
     y[[forward._V, forward._P, forward._Z]] = v, p_i, z
 
@@ -531,24 +532,36 @@ def _visited_states(params, cycle_name, mode, driver, stride=3):
     pi = PIDriver.from_params(p, driver, mode, None)
     D = forward.settings(p, pi, mode)
     ratios = np.asarray(p.transmission.ratios)
-    seg_t, seg_r = forward.segments(c_, s, ratios)
+    seg_t, seg_r, seg_g = forward.segments(c_, s, ratios)
     y0 = forward.initial_state(c_, p, seg_r[0], pi, mode)
     _, out_y, _, _ = forward.integrate(
-        seg_t, seg_r, y0, c, D, c_.time_s, c_.speed_mps, out_t=c_.time_s, max_step=c_.time_s[-1] / 50
+        seg_t,
+        seg_r,
+        y0,
+        c,
+        D,
+        c_.time_s,
+        c_.speed_mps,
+        out_t=c_.time_s,
+        max_step=c_.time_s[-1] / 50,
+        seg_gear=seg_g,
     )
     D[forward._TAB_INV] = (c_.time_s.size - 1) / (c_.time_s[-1] - c_.time_s[0])
     gears = s.gear_at(c_.time_s)
     # a little off the cycle's nodes (where v_cycle has kinks), inside the step's time interval
     pts = [
-        (t + 0.37, out_y[k], ratios[gears[k] - 1]) for k, t in enumerate(c_.time_s[:-1]) if k % stride == 0
+        (t + 0.37, out_y[k], (ratios[gears[k] - 1], gears[k]))
+        for k, t in enumerate(c_.time_s[:-1])
+        if k % stride == 0
     ]
     return c, D, c_, pts
 
 
 def _right_side_at(t, y_, ratio, c, D, cyc):
-    """(G, y, dy, aux): the gear constants, the state and the right side at a visited state (t, y_, ratio)."""
-    G = np.zeros(3)
-    forward._gear(ratio, c, G)
+    """(G, y, dy, aux): the gear constants, the state and the right side at a visited state (t, y_, (ratio,
+    gear))."""
+    G = np.zeros(forward.N_G)
+    forward._gear(*ratio, c, G)
     y = np.array(y_, dtype=float)
     dy, aux = np.zeros(forward.NY), np.zeros(forward.N_AUX)
     forward._rhs(t, y, G, c, D, cyc.time_s, cyc.speed_mps, dy, aux)
@@ -560,8 +573,8 @@ def _column_check(c, D, cyc, pts, column, dy_rel, label):
     seen = set()
     worst = 0.0
     for t, y_, ratio in pts:
-        G = np.zeros(3)
-        forward._gear(ratio, c, G)
+        G = np.zeros(forward.N_G)
+        forward._gear(*ratio, c, G)
         y = np.array(y_, dtype=float)
 
         def f(yy, t=t, G=G):
@@ -748,8 +761,8 @@ def test_jacobian_open_loop_has_no_z_column(params):
     y = np.zeros(forward.NY)
     y[[forward._V, forward._P]] = 10.0, 5e4
     dy, aux = np.zeros(forward.NY), np.zeros(forward.N_AUX)
-    G = np.zeros(3)
-    forward._gear(10.0, c, G)
+    G = np.zeros(forward.N_G)
+    forward._gear(10.0, 3, c, G)
     forward._rhs(3.0, y, G, c, D, np.array([0.0, 10.0]), np.array([1e-4, 1e-4]), dy, aux)
     cols = np.ones((3, forward.NY))
     forward._jacobian(y, aux, G, c, D, np.zeros(9), cols[0], cols[1], cols[2])

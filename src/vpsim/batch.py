@@ -115,13 +115,6 @@ def run_batch(
     if method == "backward":
         out = _backward(cycle, params, names, values, schedules, schedule_of_variant, mode)
     else:
-        from .simulation import refuse_converter_forward
-
-        key = "transmission.converter_capacity_factor"
-        refuse_converter_forward(
-            mode,
-            values[:, names.index(key)] if key in names else [params.transmission.converter_capacity_factor],
-        )
         out = _forward(cycle, params, names, values, schedules, schedule_of_variant, mode, driver, rtol)
     df = pd.DataFrame({name: values[:, j] for j, name in enumerate(names)})
     for col, arr in out.items():

@@ -39,17 +39,6 @@ def resolve_inputs(cycle, params, gears=None):
     return cycle, params, schedule
 
 
-def refuse_converter_forward(mode: str, capacity_factors) -> None:
-    """The forward method has no torque converter yet: a realistic-mode run of a transmission with one is
-    refused in one line rather than run as if the driveline were stiff (the paper mode has no converter for
-    any method)."""
-    if mode == "realistic" and any(float(k) > 0.0 for k in capacity_factors):
-        raise VpsimError(
-            "the forward method has no torque converter model yet: use the backward or inverse method, or "
-            "set transmission.converter_capacity_factor = 0"
-        )
-
-
 def simulate(
     cycle: str | Path | Cycle = "nedc",
     method: str = "backward",

@@ -184,6 +184,7 @@ def _book(
         clutch,
         fired,
         rules.accessories_torque(w, realistic, c),
+        1.0,
         c,
     )
     if with_engine:  # the engine's terms need the model's physics at the operating point (plain sums: their

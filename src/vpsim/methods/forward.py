@@ -83,8 +83,9 @@ BAND_KMH = 2.0  # the regulation's speed tolerance (UN ECE R83 / EPA: +-2 km/h r
 _KP, _KI, _ULO, _UHI, _AWG, _AMIN, _KB = range(7)  # PIDriver.as_array()
 _EXT, _AIDLE, _OPEN, _BAND, _TAB_INV = range(7, 12)
 N_SETTINGS = 12
-# per-gear constants G: i, 1 / m_eq, i / r
-_G_I, _G_INV_MEQ, _G_KIN = range(3)
+# per-gear constants G: i, 1 / m_eq, i / r, the gear's number (1-based; the converter's lock-up reads it)
+_G_I, _G_INV_MEQ, _G_KIN, _G_GEAR = range(4)
+N_G = 4
 
 # --- states ---------------------------------------------------------------------------------------------
 _V, _P, _Z = 0, 1, 2
@@ -100,10 +101,10 @@ N_ERR = 3  # states in the error norm: v, p_i, z
 N_DYN = 3
 
 # --- auxiliary outputs ----------------------------------------------------------------------------------
-_X_THR, _X_W, _X_TCR, _X_TE, _X_MF, _X_MFU, _X_BRK, _X_ACC, _X_VREF, _X_CMD, _X_COUPLED = range(11)
+_X_THR, _X_W, _X_TCR, _X_TE, _X_MF, _X_MFU, _X_BRK, _X_ACC, _X_VREF, _X_CMD, _X_COUPLED, _X_CONV = range(12)
 # switching functions: where one changes sign the right side changes form (a jump or a kink); the Rosenbrock
 # integrator locates these instants and restarts there (the Dormand-Prince path ignores them)
-_X_SW = 11
+_X_SW = 12
 (
     _SW_CLUTCH,  # w_wheel - idle speed: clutch engaged / slipping (extended mode)
     _SW_SAT_LO,  # u_raw - u_lo: PI command saturated at its lower limit
@@ -112,14 +113,16 @@ _X_SW = 11
     _SW_BRAKE,  # u: brakes on below zero (extended mode)
     _SW_MOVING,  # v: moving / at rest (static friction, v >= 0)
     _SW_SLIP_TORQUE,  # T_cr while the clutch slips: it passes max(T_cr, 0)
-) = range(7)
-N_SW = 7
+    _SW_LOCKUP,  # v - lock-up speed, in the gears the converter's lock-up clutch may close in
+    _SW_CONVERTER,  # the unlocked converter's margin (rules.converter_drive): engine free / held / overrun
+) = range(9)
+N_SW = 9
 # (the idle fuel floor max(mdot_f, mdot_idle) is no event: only the fuel quadrature sees its kink, and the
 # fuel is in the error norm; locating it cost a quarter of the right-side evaluations with driver 2)
 # a sign change is an event only where the switching function ends clearly on the other side (|g| above this):
 # a function that settles at zero (the slipping clutch's torque at idle, where A_idle gives T_cr = 0) would
 # otherwise give an event at every step
-SWITCH_SIGNIFICANCE = (1e-6, 1e-12, 1e-12, 1e-12, 1e-12, 1e-9, 1e-4)
+SWITCH_SIGNIFICANCE = (1e-6, 1e-12, 1e-12, 1e-12, 1e-12, 1e-9, 1e-4, 1e-9, 1e-4)
 SWITCHES = (
     "clutch",
     "saturation_low",
@@ -128,6 +131,8 @@ SWITCHES = (
     "brake",
     "moving",
     "slip_torque",
+    "lockup",
+    "converter",
 )
 # the engine's inputs at the point (the Rosenbrock step's analytic Jacobian column in p_i reads them)
 _X_AENG, _X_FIRED, _X_TACC = _X_SW + N_SW, _X_SW + N_SW + 1, _X_SW + N_SW + 2
@@ -170,25 +175,32 @@ STATUS_OK, STATUS_STEP_TOO_SMALL, STATUS_TOO_MANY_STEPS = 0, 1, 2
 
 
 @register_jitable
-def _gear(ratio, c, G):
-    """Fill the per-gear constants G for total ratio i."""
+def _gear(ratio, gear, c, G):
+    """Fill the per-gear constants G for total ratio i of gear number ``gear``."""
     G[_G_I] = ratio
     G[_G_INV_MEQ] = 1.0 / vh.equivalent_mass(ratio, c)
     G[_G_KIN] = vh.engine_speed(1.0, ratio, c)  # w_e per unit v
+    G[_G_GEAR] = gear
 
 
 @register_jitable(inline="always")
-def _switch_value(k, v, w_wheel, t_slip, raw, cmd, c, D):
+def _switch_value(k, v, w_wheel, t_slip, raw, cmd, conv, g_conv, G, c, D):
     """Switching function k (where the right side changes form) from the right side's own values: the speed
     v, the wheel-side engine speed, the slipping engine's crank torque, the PI's unclipped and clipped
-    command. Written once for :func:`_rhs` (every evaluation) and :func:`_switch` (the events' location)."""
+    command, whether the torque converter is unlocked and its margin (:func:`.rules.converter_drive`).
+    Written once for :func:`_rhs` (every evaluation) and :func:`_switch` (the events' location)."""
     ext = D[_EXT] != 0.0
     if k == _SW_MOVING:
         return v
     if k == _SW_CLUTCH:
         return w_wheel - c.idle_speed if ext else 1.0
     if k == _SW_SLIP_TORQUE:  # the clutch passes max(T_cr, 0) while it slips
-        return 1.0 if not ext or rules.clutch_engaged(w_wheel, c) else t_slip
+        return 1.0 if not ext or conv or rules.clutch_engaged(w_wheel, c) else t_slip
+    if k == _SW_LOCKUP:  # in a gear with lock-up: closed at and above its speed
+        lockable = c.converter_capacity_factor > 0.0 and G[_G_GEAR] >= c.lockup_min_gear
+        return v - c.lockup_min_speed if ext and lockable else 1.0
+    if k == _SW_CONVERTER:  # the engine drives the unlocked converter (brakes off): free if > 0
+        return g_conv if conv and cmd > 0.0 else 1.0
     if D[_OPEN] != 0.0:  # no driver
         return 1.0
     if k == _SW_SAT_LO:
@@ -223,28 +235,60 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
         cmd, dz = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], D[_ULO], D[_UHI], D[_AWG])
         throttle, brake = pedal_split(cmd, D[_AMIN], D[_KB])
         raw, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], -math.inf, math.inf, D[_AWG])  # unclipped
-    # driveline kinematics: stiff, or slipping clutch with the engine held at idle (extended mode)
+    # driveline kinematics: stiff, or slipping clutch with the engine held at idle (realistic mode), or an
+    # unlocked torque converter: driven by the engine while the brakes are off (rules.converter_drive: the
+    # engine's speed where its torque meets the pump's, at least idle), the drive engaged progressively over
+    # the pedal's floor band, as a neutral-idle clutch does when the brake is released (a step there would
+    # make the PI chatter); with the brakes on the engine idles decoupled (as in the backward method)
     ratio = G[_G_I]
     w_wheel = vh.engine_speed(vv, ratio, c)  # (14),(17)
-    coupled = D[_EXT] == 0.0 or rules.clutch_engaged(w_wheel, c)
-    if coupled:
-        w = w_wheel
+    ext = D[_EXT] != 0.0
+    conv = ext and not vh.converter_locked(G[_G_GEAR], vv, c)
+    drive = conv and cmd > 0.0
+    passed = 1.0
+    if drive and cmd < D[_AMIN]:
+        passed = cmd / D[_AMIN]
+    g_conv = 1.0
+    t_turbine = t_pump = 0.0
+    state = -1
+    if drive:
+        w, t_pump, t_turbine, state, g_conv = rules.converter_drive(p, w_wheel, c)
+        coupled = True
         a_eng = throttle
+        if state == rules.CONVERTER_HELD:  # the idle governor opens the throttle for the pump's torque
+            a_gov = en.steady_point(t_pump + rules.accessories_torque(w, True, c), w, c)[1]
+            if a_gov > a_eng:
+                a_eng = a_gov
     else:
-        w = c.idle_speed
-        a_eng = throttle if throttle > D[_AIDLE] else D[_AIDLE]
+        coupled = not ext or (not conv and rules.clutch_engaged(w_wheel, c))
+        if coupled:
+            w = w_wheel
+            a_eng = throttle
+        else:
+            w = c.idle_speed
+            a_eng = throttle if throttle > D[_AIDLE] else D[_AIDLE]
     # engine: manifold (9),(10), torque (2)-(8), fuel (7); fuel cut-off in overrun (realistic mode, engaged):
     # the pedal's floor band cuts cylinders (rules.fired_fraction_of_command: engine_braking's line at a
     # steady state)
     fired = 1.0
-    if coupled and D[_EXT] != 0.0 and D[_OPEN] == 0.0:
+    if coupled and ext and not conv and D[_OPEN] == 0.0:
         fired = rules.fired_fraction_of_command(cmd, D[_AMIN], w, c)
     t_cr = en.partly_fired_torque(p, w, fired, c) if fired < 1.0 else en.crank_torque(p, w, c)
     dp = en.manifold_pressure_rate(p, a_eng, w, c)
     mdot_f = fired * en.fuel_flow(p, w, c)
     # vehicle (18) with the engine inertia (1),(14)-(17)
-    t_acc = rules.accessories_torque(w, D[_EXT] != 0.0, c)
-    if coupled:
+    t_acc = rules.accessories_torque(w, ext, c)
+    if drive:  # the converter passes the turbine's torque; the engine's inertia is decoupled (quasi-static)
+        acc = vh.acceleration(vh.engine_to_wheel_force(passed * t_turbine, ratio, c), v, brake, c.mass, c)
+        dw = 0.0
+        clutch = rules.CLUTCH_CONVERTER
+        t_e = t_pump
+    elif conv:  # without traction the engine idles, decoupled (as in the backward method)
+        acc = vh.acceleration(0.0, v, brake, c.mass, c)
+        dw = 0.0
+        clutch = rules.CLUTCH_OPEN
+        t_e = 0.0
+    elif coupled:
         t_clutch = t_cr - t_acc
         acc = vh.acceleration(vh.engine_to_wheel_force(t_clutch, ratio, c), v, brake, 1.0 / G[_G_INV_MEQ], c)
         dw = G[_G_KIN] * acc
@@ -263,7 +307,7 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     used = rules.fuel_used(mdot_f, fired, c)
     dy[_FUEL] = used
     dy[_DIST] = vv
-    pw = rules.powers(p, w, dw, t_cr, 0.0, w_wheel, vv, acc, brake, clutch, fired, t_acc, c)
+    pw = rules.powers(p, w, dw, t_cr, 0.0, w_wheel, vv, acc, brake, clutch, fired, t_acc, passed, c)
     dy[_E_IND] = pw[0]
     dy[_E_FRIC] = pw[1]
     dy[_E_PUMP] = pw[2]
@@ -289,8 +333,9 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     aux[_X_VREF] = v_ref
     aux[_X_CMD] = cmd
     aux[_X_COUPLED] = 1.0 if coupled else 0.0
+    aux[_X_CONV] = 1.0 if conv else 0.0
     for k in range(N_SW):
-        aux[_X_SW + k] = _switch_value(k, v, w_wheel, t_cr, raw, cmd, c, D)
+        aux[_X_SW + k] = _switch_value(k, v, w_wheel, t_cr, raw, cmd, conv, g_conv, G, c, D)
     aux[_X_AENG] = a_eng
     aux[_X_FIRED] = fired
     aux[_X_TACC] = t_acc
@@ -464,6 +509,40 @@ def _jacobian(y, aux, G, c, D, jac, col_v, col_p, col_z):
 
 
 @register_jitable
+def _jacobian_fd(t, y, f0, G, c, D, tab_t, tab_v, thr, jac, col_v, col_p, col_z, ytmp, f, aux):
+    """As :func:`_jacobian`, by forward differences of the right side (``f0`` at (t, y)), for the unlocked
+    torque converter, whose engine speed is the root of the converter's torque balance
+    (:func:`.rules.converter_drive`) rather than an explicit function of the state: increments sqrt(eps)
+    times max(|y_k|, thr_k); as there, the speed's column is zero at rest and z's open loop. Returns the
+    evaluations of the right side it made."""
+    ny = y.size
+    n = 0
+    for k in range(N_DYN):
+        col = col_v if k == _V else (col_p if k == _P else col_z)
+        if (k == _V and not y[_V] > 0.0) or (k == _Z and D[_OPEN] != 0.0):
+            for i in range(ny):
+                col[i] = 0.0
+            continue
+        for i in range(N_DYN):
+            ytmp[i] = y[i]
+        sc = abs(y[k])
+        if thr[k] > sc:
+            sc = thr[k]
+        ytmp[k] = y[k] + _FD_STEP * sc
+        d = ytmp[k] - y[k]
+        _rhs(t, ytmp, G, c, D, tab_t, tab_v, f, aux)
+        n += 1
+        for i in range(ny):
+            col[i] = (f[i] - f0[i]) / d
+        col[_OUTSIDE] = 0.0
+    for i in range(N_DYN):
+        jac[N_DYN * i + _V] = col_v[i]
+        jac[N_DYN * i + _P] = col_p[i]
+        jac[N_DYN * i + _Z] = col_z[i]
+    return n
+
+
+@register_jitable
 def _initial_step(y, f, thr, n, rtol, pw, hmax):
     """ode45's initial step for an error estimate of order 1/pw: the largest |f_i| / max(|y_i|, thr_i) over
     the first n states sets h = (0.8 rtol^pw) / that, at most hmax."""
@@ -515,6 +594,7 @@ def _output(t_out, y, h, k1, k3, k4, k5, k6, k7, s, row_y, G, c, D, tab_t, tab_v
 def _integrate(
     seg_t,
     seg_ratio,
+    seg_gear,
     y0,
     tab_t,
     tab_v,
@@ -533,12 +613,13 @@ def _integrate(
     aux,
     G,
 ):
-    """Dormand-Prince 5(4) from seg_t[0] to seg_t[-1], restarting at every seg_t[k] in gear seg_ratio[k].
+    """Dormand-Prince 5(4) from seg_t[0] to seg_t[-1], restarting at every seg_t[k] in gear seg_gear[k] of
+    total ratio seg_ratio[k].
 
     Fills out_y/out_aux at out_t (sorted, within [seg_t[0], seg_t[-1]]); a time equal to a restart instant
     gets the state there with the new gear. stats: [accepted, rejected, rhs evaluations, status];
     fstats: [largest |v_cycle - v| at the step ends].
-    ``work`` (11 x len(y0)), ``aux`` (N_AUX) and ``G`` (3) are scratch space; the state reached is left in
+    ``work`` (11 x len(y0)), ``aux`` (N_AUX) and ``G`` (N_G) are scratch space; the state reached is left in
     ``work[0]``.
     """
     ny = y0.size
@@ -565,7 +646,7 @@ def _integrate(
     for sgi in range(n_seg):
         t = seg_t[sgi]
         t_end = seg_t[sgi + 1]
-        _gear(seg_ratio[sgi], c, G)
+        _gear(seg_ratio[sgi], seg_gear[sgi], c, G)
         last = sgi == n_seg - 1
         _rhs(t, y, G, c, D, tab_t, tab_v, k1, aux)
         nfev += 1
@@ -803,14 +884,49 @@ def _switch(k, t, y, G, c, D, tab_t, tab_v):
     v = y[_V]
     vv = v if v > 0.0 else 0.0
     w_wheel = vh.engine_speed(vv, G[_G_I], c)  # (14),(17)
-    t_slip = raw = cmd = 0.0
+    t_slip = raw = cmd = g_conv = 0.0
+    conv = D[_EXT] != 0.0 and not vh.converter_locked(G[_G_GEAR], vv, c)
     if k == _SW_SLIP_TORQUE:
         t_slip = en.crank_torque(y[_P], c.idle_speed, c)  # the slipping engine at idle, all cylinders fired
-    elif k != _SW_MOVING and k != _SW_CLUTCH and D[_OPEN] == 0.0:
+    elif k == _SW_CONVERTER:
+        if conv:
+            if D[_OPEN] != 0.0:
+                cmd = tb.interp_at(t, tab_t, tab_v, D[_TAB_INV])
+            else:
+                v_ref = tb.interp_at(t, tab_t, tab_v, D[_TAB_INV])
+                cmd, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], D[_ULO], D[_UHI], D[_AWG])
+            g_conv = rules.converter_drive_margin(y[_P], w_wheel, c)
+    elif k != _SW_MOVING and k != _SW_CLUTCH and k != _SW_LOCKUP and D[_OPEN] == 0.0:
         v_ref = tb.interp_at(t, tab_t, tab_v, D[_TAB_INV])
         raw, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], -math.inf, math.inf, D[_AWG])
         cmd, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], D[_ULO], D[_UHI], D[_AWG])
-    return _switch_value(k, v, w_wheel, t_slip, raw, cmd, c, D)
+    return _switch_value(k, v, w_wheel, t_slip, raw, cmd, conv, g_conv, G, c, D)
+
+
+@register_jitable
+def _cross(k, t, t_lim, y, f, aux_y, g_old, ytmp, r, aux, G, c, D, tab_t, tab_v):
+    """Step across the zero of switching function k from (t, y) (right side ``f``, ``aux_y`` there; the
+    function's sign before the crossing that of ``g_old``), by explicit Euler steps of 1, 2, 4 ...
+    microseconds (error ~ their square) ending before ``t_lim`` and 1 ms: the first that reaches the new side
+    replaces (y, f, aux_y). Returns the time reached (t if none crossed) and the evaluations made."""
+    dt = EVENT_TOLERANCE_S
+    n = 0
+    while t + dt < t_lim and dt < 1e-3:
+        for i in range(y.size):
+            ytmp[i] = y[i] + dt * f[i]
+        if ytmp[_V] < 0.0:
+            ytmp[_V] = 0.0
+        _rhs(t + dt, ytmp, G, c, D, tab_t, tab_v, r, aux)
+        n += 1
+        if (aux[_X_SW + k] > 0.0) != (g_old > 0.0):
+            for i in range(y.size):
+                y[i] = ytmp[i]
+                f[i] = r[i]
+            for i in range(aux_y.size):
+                aux_y[i] = aux[i]
+            return t + dt, n
+        dt *= 2.0
+    return t, n
 
 
 @register_jitable
@@ -852,6 +968,7 @@ def _locate(k, t, h, ga, gb, y, ynew, f0, f1, ytmp, G, c, D, tab_t, tab_v):
 def _integrate_ros(
     seg_t,
     seg_ratio,
+    seg_gear,
     y0,
     tab_t,
     tab_v,
@@ -872,14 +989,15 @@ def _integrate_ros(
     aux1,
     G,
 ):
-    """RODAS3 from seg_t[0] to seg_t[-1], restarting at every seg_t[k] in gear seg_ratio[k].
+    """RODAS3 from seg_t[0] to seg_t[-1], restarting at every seg_t[k] in gear seg_gear[k] of total ratio
+    seg_ratio[k].
 
     Steps end at every node of the table (tab_t, tab_v) (where the cycle speed, or the open-loop throttle,
     has a kink) and at every event (a switching function changing sign, located on the dense output; the
     step is then taken again to end there). Arguments as :func:`_integrate`; ``qthr`` holds the rate scales
     of the fuel and distance in the error norm; stats: [accepted, rejected, rhs evaluations, status, events,
-    Jacobians]. ``work`` (20 x len(y0)), ``aux`` and ``aux1`` (N_AUX), ``G`` (3) are scratch space; the state
-    reached is left in ``work[0]``.
+    Jacobians]. ``work`` (20 x len(y0)), ``aux`` and ``aux1`` (N_AUX), ``G`` (N_G) are scratch space; the
+    state reached is left in ``work[0]``.
     """
     ny = y0.size
     y = work[0]
@@ -916,10 +1034,14 @@ def _integrate_ros(
     n_jac = 0
     n_seg = seg_t.size - 1
     h_carry = 0.0
+    k_event = 0
+    # the right side jumps where an unlocked torque converter's state changes (lock-up, the drive engaged
+    # or not): steps across such an instant need the crossing below (without one the kernel steps as before)
+    jumps = D[_EXT] != 0.0 and c.converter_capacity_factor > 0.0
     for sgi in range(n_seg):
         t = seg_t[sgi]
         t_end = seg_t[sgi + 1]
-        _gear(seg_ratio[sgi], c, G)
+        _gear(seg_ratio[sgi], seg_gear[sgi], c, G)
         last = sgi == n_seg - 1
         _rhs(t, y, G, c, D, tab_t, tab_v, f0, aux1)
         nfev += 1
@@ -941,6 +1063,7 @@ def _integrate_ros(
         have_jac = False
         nofailed = True
         t_event = -1.0  # > t: the step is being taken again to end at a located event
+        t_target = -1.0  # > t: ... at a jump's crossing estimated after a rejected step (jumps)
         h_want = h
         while True:
             hmin = 16.0 * _EPS * abs(t)
@@ -957,6 +1080,9 @@ def _integrate_ros(
                 t_stop = out_t[j_stop]
             if t_event > t:
                 tnew = t_event
+                to_stop = False
+            elif t_target > t and t_target < t_stop:
+                tnew = t_target
                 to_stop = False
             else:
                 if h > hmax:
@@ -997,8 +1123,14 @@ def _integrate_ros(
                     task += 1
                     continue
                 if task < N_DYN:
-                    # the Jacobian in v, p_i and z in closed form (the model's equations differentiated)
-                    _jacobian(y, aux1, G, c, D, jac, gq0, gq1, gq2)
+                    # the Jacobian in v, p_i and z in closed form (the model's equations differentiated), or
+                    # by differences while the torque converter is unlocked
+                    if aux1[_X_CONV] != 0.0:
+                        nfev += _jacobian_fd(
+                            t, y, f0, G, c, D, tab_t, tab_v, thr, jac, gq0, gq1, gq2, ytmp, r, aux
+                        )
+                    else:
+                        _jacobian(y, aux1, G, c, D, jac, gq0, gq1, gq2)
                     task = N_DYN
                     continue
                 tgt_f = r
@@ -1108,9 +1240,65 @@ def _integrate_ros(
                         fac = 0.2
                 elif errn == errn:
                     fac = 0.5
+                h_tried = h
                 h = h * fac
                 nofailed = False
                 t_event = -1.0
+                t_target = -1.0
+                # a switching function that changes sign inside the rejected step: where the right side
+                # jumps there (the unlocking converter's engine speed and fuel) no step across passes the
+                # fuel's error test, however short. The next try ends where the function crosses zero along
+                # the step's explicit Euler line (bisection), from where Euler steps take it across (as after
+                # an event); a crossing the line does not show is left to the step size
+                th = 1.0
+                for i in range(N_DYN):
+                    ytmp[i] = y[i] + h_tried * f0[i]
+                for k in range(N_SW if jumps else 0):
+                    g_a = sw0[k]
+                    g_b = _switch(k, t + h_tried, ytmp, G, c, D, tab_t, tab_v)
+                    if (g_a > 0.0) != (g_b > 0.0) and abs(g_b) > SWITCH_SIGNIFICANCE[k]:
+                        sa, sb = 0.0, 1.0
+                        while (sb - sa) * h_tried > EVENT_TOLERANCE_S:
+                            sm = 0.5 * (sa + sb)
+                            for i in range(N_DYN):
+                                ytmp[i] = y[i] + sm * h_tried * f0[i]
+                            if (_switch(k, t + sm * h_tried, ytmp, G, c, D, tab_t, tab_v) > 0.0) == (
+                                g_a > 0.0
+                            ):
+                                sa = sm
+                            else:
+                                sb = sm
+                        if sa < th:
+                            th = sa
+                            k_event = k
+                        for i in range(N_DYN):
+                            ytmp[i] = y[i] + h_tried * f0[i]
+                if th < 1.0 and th * h_tried > EVENT_TOLERANCE_S:
+                    t_target = t + th * h_tried
+                elif th < 1.0:  # at the crossing already: across it, and the step from there
+                    t_x, n_x = _cross(
+                        k_event,
+                        t,
+                        t_stop - hmin,
+                        y,
+                        f0,
+                        aux1,
+                        sw0[k_event],
+                        ytmp,
+                        r,
+                        aux,
+                        G,
+                        c,
+                        D,
+                        tab_t,
+                        tab_v,
+                    )
+                    nfev += n_x
+                    if t_x > t:
+                        t = t_x
+                        for k in range(N_SW):
+                            sw0[k] = aux1[_X_SW + k]
+                        have_jac = False
                 continue
             if t_event < 0.0:
                 # did the right side change form inside the step? locate the first such instant
@@ -1121,6 +1309,7 @@ def _integrate_ros(
                         tb, _ = _locate(k, t, h, g_a, g_b, y, ynew, f0, f1, ytmp, G, c, D, tab_t, tab_v)
                         if tb < tb_min:
                             tb_min = tb
+                            k_event = k
                 if tb_min < tnew and tb_min - t > EVENT_TOLERANCE_S + 1e-3 * h:
                     for k in range(N_SW):
                         g_a, g_b = sw0[k], aux1[_X_SW + k]
@@ -1148,6 +1337,35 @@ def _integrate_ros(
                     _hermite((out_t[j_out] - t) / h, h, y, ynew, f0, f1, ny, out_y[j_out])
                     _rhs(out_t[j_out], out_y[j_out], G, c, D, tab_t, tab_v, scratch, out_aux[j_out])
                 j_out += 1
+            if (
+                jumps
+                and (t_event > t or t_target > t)
+                and (aux1[_X_SW + k_event] > 0.0) == (sw0[k_event] > 0.0)
+                and not done
+            ):
+                # the step taken again to end at the event ended short of it (the event's bracket is on the
+                # first step's dense output, or on the Euler line of a rejected step; the step's own solution
+                # differs from either by its local error): cross it, so that the next step starts on the new
+                # side of a right side that jumps there, where, started on the old side, its error would not
+                # shrink with h
+                tnew, n_x = _cross(
+                    k_event,
+                    tnew,
+                    t_stop - hmin,
+                    ynew,
+                    f1,
+                    aux1,
+                    sw0[k_event],
+                    ytmp,
+                    r,
+                    aux,
+                    G,
+                    c,
+                    D,
+                    tab_t,
+                    tab_v,
+                )
+                nfev += n_x
             # next step: the controller's proposal (no growth right after a rejection), or the step wanted
             # before it was cut to a stop or an event
             fac = 5.0
@@ -1171,6 +1389,7 @@ def _integrate_ros(
             have_jac = False
             nofailed = True
             t_event = -1.0
+            t_target = -1.0
             h = h_next
             if done:
                 h_carry = h_next
@@ -1222,11 +1441,7 @@ def _start_state(v0, a0, ratio, paper, u_lo, u_hi, c, y):
     if v0 > 0.0:
         f = vh.equivalent_mass(ratio, c) * a0 + vh.road_load(v0, c)
         w = vh.engine_speed(v0, ratio, c)
-        p = en.intake_pressure_for_torque(vh.wheel_to_engine_torque(f, ratio, c), w, c)
-        p_top = en.full_load_pressure(w, c) if en.is_boosted(c) else c.ambient_pressure
-        if p > 0.99 * p_top:
-            p = 0.99 * p_top
-        u = en.command_for_flow(p, en.cylinder_air_flow(p, w, c), w, c)
+        p, u = en.steady_point(vh.wheel_to_engine_torque(f, ratio, c), w, c)
         y[_P] = p
         y[_Z] = u_hi if u > u_hi else (u_lo if u < u_lo else u)
     elif paper:
@@ -1285,8 +1500,11 @@ def integrate(
     max_steps=MAX_STEPS,
     solver=DEFAULT_SOLVER,
     scales=None,
+    seg_gear=None,
 ):
-    """Run the kernel from seg_t[0] to seg_t[-1], restarting at each seg_t[k] with ratio seg_ratio[k].
+    """Run the kernel from seg_t[0] to seg_t[-1], restarting at each seg_t[k] with ratio seg_ratio[k] in
+    gear number seg_gear[k] (default: every segment in a gear of its own above any lock-up gear, which only
+    a torque converter reads).
 
     (table_t, table_v) is the cycle speed the PI driver follows or, with ``open_loop``, the throttle area
     fed to the engine as it is. ``solver``: ``rosenbrock`` (RODAS3, the default) or ``dopri5`` (the
@@ -1308,6 +1526,7 @@ def integrate(
     args = (
         np.array(seg_t, dtype=float),
         np.array(seg_ratio, dtype=float),
+        np.full(len(seg_ratio), np.inf) if seg_gear is None else np.array(seg_gear, dtype=float),
         np.array(y0, dtype=float),
         np.array(table_t, dtype=float),
         np.array(table_v, dtype=float),
@@ -1320,7 +1539,7 @@ def integrate(
     if solver == "dopri5":
         work = np.zeros((11, NY))
         _integrate(
-            *args, int(max_steps), out_t, out_y, out_aux, stats, fstats, work, np.empty(N_AUX), np.empty(3)
+            *args, int(max_steps), out_t, out_y, out_aux, stats, fstats, work, np.empty(N_AUX), np.empty(N_G)
         )
     else:
         work = np.zeros((20, NY))
@@ -1336,7 +1555,7 @@ def integrate(
             work,
             np.empty(N_AUX),
             np.empty(N_AUX),
-            np.empty(3),
+            np.empty(N_G),
         )
     y_end = work[0].copy()
     if stats[3] == STATUS_STEP_TOO_SMALL:
@@ -1357,14 +1576,15 @@ def integrate(
     return y_end, out_y, out_aux, info
 
 
-def segments(cycle, schedule: GearSchedule, ratios) -> tuple[np.ndarray, np.ndarray]:
-    """Restart instants (cycle start, every gear change, cycle end) and the ratio engaged after each."""
+def segments(cycle, schedule: GearSchedule, ratios) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Restart instants (cycle start, every gear change, cycle end), the ratio engaged after each and the
+    gear's number (1-based)."""
     t0, t1 = float(cycle.time_s[0]), float(cycle.time_s[-1])
     shifts = schedule.shift_times
     shifts = shifts[(shifts > t0) & (shifts < t1)]
     seg_t = np.concatenate([[t0], shifts, [t1]])
     gears = schedule.gear_at(seg_t[:-1])
-    return seg_t, np.asarray(ratios, float)[gears - 1]
+    return seg_t, np.asarray(ratios, float)[gears - 1], gears
 
 
 def warm_up() -> None:
@@ -1409,10 +1629,12 @@ def _variants(
         ns = n_seg[s]
         st = np.empty(ns + 1)
         sr = np.empty(ns)
+        sg = np.empty(ns)
         for k in range(ns + 1):
             st[k] = seg_t[s, k]
         for k in range(ns):
             sr[k] = ratios[m, seg_gear[s, k] - 1]
+            sg[k] = seg_gear[s, k]
         D = D_all[m].copy()
         if D[_EXT] != 0.0:
             D[_AIDLE] = en.idle_throttle(c)
@@ -1425,6 +1647,7 @@ def _variants(
         _integrate_ros(
             st,
             sr,
+            sg,
             y0,
             tab_t,
             tab_v,
@@ -1443,7 +1666,7 @@ def _variants(
             work,
             np.empty(N_AUX),
             np.empty(N_AUX),
-            np.empty(3),
+            np.empty(N_G),
         )
         out[m, V_FUEL] = work[0, _FUEL]
         out[m, V_DIST] = work[0, _DIST]
@@ -1478,7 +1701,7 @@ def run_variants(cycle, recs, ratios, schedules, schedule_of_variant, D_all, mod
     variant with ``keep_series=False`` (a test checks it).
     """
     n_var = recs.size
-    segs = [segments(cycle, sch, np.arange(1.0, sch.gear.max(initial=1) + 1.0)) for sch in schedules]
+    segs = [segments(cycle, sch, np.arange(1.0, sch.gear.max(initial=1) + 1.0))[:2] for sch in schedules]
     n_seg = np.array([st.size - 1 for st, _ in segs], dtype=np.int64)
     seg_t = np.zeros((len(segs), n_seg.max() + 1))
     seg_gear = np.ones((len(segs), n_seg.max()), dtype=np.int64)
@@ -1541,9 +1764,6 @@ def run(
     from dataclasses import replace
 
     mode = rules.canonical_mode(mode)
-    from ..simulation import refuse_converter_forward
-
-    refuse_converter_forward(mode, [params.transmission.converter_capacity_factor])
     if solver not in SOLVERS:
         raise VpsimError(f"unknown solver {solver!r}; expected one of {', '.join(SOLVERS)}")
     rtol = params.simulation.ode_relative_tolerance if rtol is None else float(rtol)
@@ -1571,7 +1791,7 @@ def run(
 
     t_cpu = time.process_time()
     ratios = np.asarray(params.transmission.ratios)
-    seg_t, seg_ratio = segments(cycle, schedule, ratios)
+    seg_t, seg_ratio, seg_gear = segments(cycle, schedule, ratios)
     c = record(params)
     D = settings(params, pi, mode)
     y0 = initial_state(cycle, params, seg_ratio[0], pi, mode)
@@ -1599,6 +1819,7 @@ def run(
         max_step=h_max,
         out_t=out_t,
         solver=solver,
+        seg_gear=seg_gear,
         scales=memo(params, "forward_error_scales", lambda p: error_scales(record(p))),
     )
     fuel_kg = float(y_end[_FUEL])

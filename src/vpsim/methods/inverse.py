@@ -428,6 +428,7 @@ def account(v, dv, vc, rows, left, right, dt, recs, realistic, band, weight, acc
             clutch,
             fired,
             rules.accessories_torque(rows[R_WENG, k], realistic, c),
+            1.0,
             c,
         )
         acc[0] += wk * pw[0]

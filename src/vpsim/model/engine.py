@@ -564,6 +564,18 @@ def boost_for_power(power, w_e, c):
 
 
 @equation
+def steady_point(t_cr, w_e, c):
+    """(p_i, throttle command) that hold crank torque ``t_cr`` at engine speed ``w_e`` steady (the FQM
+    inverted: :func:`intake_pressure_for_torque`, then :func:`command_for_flow`), the manifold pressure
+    taken at most 99 % of full load's (ambient for an aspirated engine), where the command stays finite."""
+    p = intake_pressure_for_torque(t_cr, w_e, c)
+    p_top = full_load_pressure(w_e, c) if is_boosted(c) else c.ambient_pressure
+    if p > 0.99 * p_top:
+        p = 0.99 * p_top
+    return p, command_for_flow(p, cylinder_air_flow(p, w_e, c), w_e, c)
+
+
+@equation
 def idle_throttle(c):
     """Steady throttle area holding the engine at idle speed with zero crank torque (FQM inverted), m²."""
     p = intake_pressure_for_torque(0.0, c.idle_speed, c)

@@ -199,6 +199,91 @@ def converter_point(f_wheel, w_wheel, dw_wheel, ratio, c):
     return c.idle_speed, 0.0, t_p + en.accessory_torque(c.idle_speed, c), (brake if brake > 0.0 else 0.0)
 
 
+# the unlocked converter driven by the engine (the forward method, :func:`converter_drive`)
+CONVERTER_FREE, CONVERTER_HELD, CONVERTER_OVERRUN = 0, 1, 2
+
+
+@equation
+def converter_drive_margin(p_i, w_t, c):
+    """The engine's net torque T_cr(p_i, w) - T_acc(w) less the pump's phi(nu) w^2 at the lowest speed at
+    which the engine can drive the unlocked converter, w = max(idle, w_t): positive where the engine runs
+    faster than that (:func:`converter_drive`); the forward method's switching function."""
+    w = w_t if w_t > c.idle_speed else c.idle_speed
+    return en.crank_torque(p_i, w, c) - en.accessory_torque(w, c) - vh.converter_pump_torque(w, w_t, c)
+
+
+@equation
+def _converter_margin_dw(w, w_t, c):
+    """d/dw of the margin T_cr(p_i, w) - T_acc(w) - T_p(w, w_t) at fixed p_i and w_t (w above idle)."""
+    return (
+        en.crank_torque_dw(w, c)
+        - en.accessory_torque_rate(w, 1.0, c)
+        - vh.converter_pump_torque_dw(w, w_t, c)
+    )
+
+
+@inline
+def converter_drive(p_i, w_t, c):
+    """The unlocked torque converter driven by the engine at manifold pressure p_i, turbine speed ``w_t``
+    >= 0 (the forward method, traction asked). Quasi-static like the slipping clutch: the engine's inertia
+    is decoupled and its speed w_e is where its net torque T_cr(p_i, w_e) - T_acc(w_e) equals the pump's
+    phi(nu) w_e^2 (nu = w_t / w_e), found by Newton's method safeguarded by bisection on a bracket (the
+    margin falls with w_e: the pump torque grows as w_e^2, the engine's falls with friction).
+
+    Returns (w_e, pump torque T_p, turbine torque T_t, state, margin at max(idle, w_t)), the state:
+
+    * CONVERTER_FREE: the root above max(idle, w_t); T_t = mu(nu) T_p, slip 1 - nu > 0.
+    * CONVERTER_HELD: below idle turbine speed, an engine too weak to turn the pump faster than idle: it is
+      held at idle speed (its governor makes up the difference; :func:`powers` books it as idle control),
+      the converter passes mu(nu) phi(nu) idle^2 at nu = w_t / idle (creep), as :func:`converter_point`.
+    * CONVERTER_OVERRUN: the turbine at or above idle speed and the engine unable to keep ahead of it (net
+      torque at w_t at most what the pump takes, zero at nu = 1): the converter runs as a coupling at
+      nu = 1 and passes the engine's net torque, <= 0 (engine braking).
+
+    Where the state changes (margin zero, or w_t = idle) w_e and T_t are continuous.
+    """
+    idle = c.idle_speed
+    lo = w_t if w_t > idle else idle
+    g_lo = converter_drive_margin(p_i, w_t, c)
+    if g_lo <= 0.0:
+        if w_t < idle:
+            t_p = vh.converter_pump_torque(idle, w_t, c)
+            return idle, t_p, vh.converter_torque_ratio(w_t / idle, c) * t_p, CONVERTER_HELD, g_lo
+        t_net = en.crank_torque(p_i, w_t, c) - en.accessory_torque(w_t, c)
+        return w_t, t_net, t_net, CONVERTER_OVERRUN, g_lo
+    hi = 2.0 * lo
+    g_hi = en.crank_torque(p_i, hi, c) - en.accessory_torque(hi, c) - vh.converter_pump_torque(hi, w_t, c)
+    n = 0
+    while g_hi > 0.0 and n < 60:
+        lo, g_lo = hi, g_hi
+        hi = 2.0 * hi
+        g_hi = en.crank_torque(p_i, hi, c) - en.accessory_torque(hi, c) - vh.converter_pump_torque(hi, w_t, c)
+        n += 1
+    w = lo + (hi - lo) * g_lo / (g_lo - g_hi)  # regula falsi start
+    for _ in range(60):
+        g = en.crank_torque(p_i, w, c) - en.accessory_torque(w, c) - vh.converter_pump_torque(w, w_t, c)
+        if g > 0.0:
+            lo = w
+        else:
+            hi = w
+        dg = _converter_margin_dw(w, w_t, c)
+        w_new = w - g / dg if dg < 0.0 else 0.5 * (lo + hi)
+        if not lo < w_new < hi:
+            w_new = 0.5 * (lo + hi)
+        done = abs(w_new - w) <= 1e-13 * w
+        w = w_new
+        if done:
+            break
+    t_p = vh.converter_pump_torque(w, w_t, c)
+    return (
+        w,
+        t_p,
+        vh.converter_torque_ratio(w_t / w, c) * t_p,
+        CONVERTER_FREE,
+        converter_drive_margin(p_i, w_t, c),
+    )
+
+
 @inline
 def operating_point(v, a, ratio, gear, t_closed, extended, c):
     """Engine operating point that speed v and acceleration a impose through gear ``gear`` (1-based) of
@@ -265,7 +350,7 @@ N_TERMS = len(ENERGY_TERMS)
 
 
 @inline
-def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired, t_acc, c):
+def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired, t_acc, passed, c):
     """Power (W) of every energy term at one instant, in the order of :data:`ENERGY_TERMS`.
 
     ``t_cr`` is the crank torque the engine makes and ``t_missing`` what the demand asked beyond it (trace
@@ -277,7 +362,9 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
     negative crank torque of the declutched engine would take (``idle_control``). With the clutch open
     (quasi-static methods at rest, or an unlocked converter without traction) the idling engine is outside
     the balance. ``fired``: the fraction of the cylinders fired (0: fuel cut, no indicated work).
-    ``t_acc``: the accessories' torque (:func:`accessories_torque`).
+    ``t_acc``: the accessories' torque (:func:`accessories_torque`). ``passed``: the share of the unlocked
+    converter's turbine torque that reaches the gearbox (the forward method's pedal floor band engages the
+    drive progressively; 1 otherwise), the rest dissipated in the driveline term.
     """
     vv = v if v > 0.0 else 0.0
     road = (c.mass * vv * a, vh.aero_force(vv, c) * vv, vh.rolling_force(vv, c) * vv, brake * vv)
@@ -294,13 +381,16 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
         engine_kinetic = c.inertia * w_e * dw_e
         driveline = (1.0 - c.efficiency) * (t_asked - c.inertia * dw_e) * w_e  # (1),(15)
         idle = 0.0
-    elif clutch == CLUTCH_CONVERTER:  # the pump takes the flywheel's power, the turbine passes mu nu of it
+    elif clutch == CLUTCH_CONVERTER:  # the pump takes its torque at w_e, the turbine passes mu nu of it
         engine_kinetic = c.inertia * w_e * dw_e
         nu = w_wheel / w_e
-        driveline = (
-            (1.0 - c.efficiency * vh.converter_torque_ratio(nu, c) * nu) * (t_asked - c.inertia * dw_e) * w_e
-        )
-        idle = 0.0
+        flywheel = t_asked - c.inertia * dw_e
+        # the pump's torque; at nu = 1 a coupling that passes the flywheel's (converter_drive's overrun)
+        t_p = vh.converter_pump_torque(w_e, w_wheel, c) if nu < 1.0 else flywheel
+        driveline = (1.0 - passed * c.efficiency * vh.converter_torque_ratio(nu, c) * nu) * t_p * w_e
+        # the flywheel gives the pump's torque (to rounding), but the governor of an engine held at idle makes
+        # up the difference (converter_drive, CONVERTER_HELD): negative, work supplied
+        idle = (flywheel - t_p) * w_e
     else:
         engine_kinetic = 0.0
         t_clutch = slipping_clutch_torque(t_asked)
@@ -349,8 +439,9 @@ def powers_tangent(
 ):
     """Directional derivative of :func:`powers` (``t_missing`` = 0) along a change d_x of each of its
     arguments x (p_i, w_e, dw_e/dt, T_cr, w_wheel, v, a, brake force, fired fraction, accessories' torque):
-    the forward method's Jacobian. Same terms and branches as :func:`powers` (at v <= 0, the branch of rest:
-    no rolling resistance)."""
+    the forward method's closed-form Jacobian. Same terms and branches as :func:`powers` (at v <= 0, the
+    branch of rest: no rolling resistance), except the unlocked converter's (CLUTCH_CONVERTER), where the
+    forward method differences its right side instead."""
     vv = v if v > 0.0 else 0.0
     road = (
         c.mass * (d_v * a + vv * d_a),
@@ -378,18 +469,10 @@ def powers_tangent(
     indicated *= c.fuel_heating_value * c.thermal_efficiency
     t_asked = t_cr - t_acc
     d_asked = d_tcr - d_tacc
-    if clutch == CLUTCH_ENGAGED or clutch == CLUTCH_CONVERTER:
+    if clutch == CLUTCH_ENGAGED:
         engine_kinetic = c.inertia * (d_w * dw_e + w_e * d_dw)
-        flywheel = (t_asked - c.inertia * dw_e) * w_e
         d_flywheel = (d_asked - c.inertia * d_dw) * w_e + (t_asked - c.inertia * dw_e) * d_w
-        if clutch == CLUTCH_ENGAGED:
-            driveline = (1.0 - c.efficiency) * d_flywheel  # (1),(15)
-        else:
-            nu = w_wheel / w_e
-            d_nu = (d_wheel - nu * d_w) / w_e
-            mu = vh.converter_torque_ratio(nu, c)
-            d_pass = c.efficiency * (vh.converter_torque_ratio_dnu(nu, c) * nu + mu) * d_nu
-            driveline = (1.0 - c.efficiency * mu * nu) * d_flywheel - d_pass * flywheel
+        driveline = (1.0 - c.efficiency) * d_flywheel  # (1),(15)
         idle = 0.0
     else:
         engine_kinetic = 0.0

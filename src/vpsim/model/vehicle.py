@@ -137,15 +137,6 @@ def road_load_dv(v, c):
 
 
 @equation
-def converter_torque_ratio_dnu(nu, c):
-    """d/dnu of :func:`converter_torque_ratio`."""
-    nc = c.converter_coupling_speed_ratio
-    if nu >= nc:
-        return 0.0
-    return (1.0 - c.converter_stall_torque_ratio) / nc
-
-
-@equation
 def acceleration_dforce(f_drive, v, brake, mass, c):
     """d/dF_drive of :func:`acceleration` (and minus its derivative in the brake force): 1 / mass while
     moving or pushed off, 0 while static friction (rolling resistance and brakes) holds the car at rest."""
@@ -189,6 +180,27 @@ def converter_capacity(nu, c):
     if nu >= 1.0:
         return 0.0
     return k * (1.0 - nu) / (1.0 - nc)
+
+
+@equation
+def converter_pump_torque(w_p, w_t, c):
+    """T_p = phi(nu) w_p^2 at pump speed ``w_p`` > 0 and turbine speed ``w_t`` (nu = w_t / w_p)."""
+    return converter_capacity(w_t / w_p, c) * w_p * w_p
+
+
+@equation
+def converter_pump_torque_dw(w_p, w_t, c):
+    """d/dw_p of :func:`converter_pump_torque` at fixed turbine speed: 2 w_p / K^2 up to the coupling
+    point; above it T_p = (w_p^2 - w_t w_p) / (K^2 (1 - nu_c)), so (2 w_p - w_t) / (K^2 (1 - nu_c)); 0 at
+    and beyond nu = 1."""
+    k = 1.0 / (c.converter_capacity_factor * c.converter_capacity_factor)
+    nc = c.converter_coupling_speed_ratio
+    nu = w_t / w_p
+    if nu <= nc:
+        return 2.0 * k * w_p
+    if nu >= 1.0:
+        return 0.0
+    return k * (2.0 * w_p - w_t) / (1.0 - nc)
 
 
 @equation
