@@ -212,8 +212,7 @@ def test_a_manual_gets_the_drivers_shift_point(tmp_path):
 
 
 def test_automatics_and_cvts_get_a_converter_manuals_and_dcts_none(tmp_path):
-    """The converter follows the transmission type; a forward fleet leaves it out (the forward method has
-    none) and so still runs the automatics."""
+    """The converter follows the transmission type; ``converter=False`` leaves it out."""
     from dataclasses import replace
 
     from vpsim.fleet.epa import read_test_car_list

@@ -16,8 +16,8 @@ Steps (:mod:`vpsim.fleet.calibrate` explains the calibration):
 4. per vehicle and cycle: one run at its fold's technology with ``method`` (backward, or forward with the
    preset PI driver 2, which keeps within the +-2 km/h band of the test): the prediction reported. The
    technology is fitted on the backward grid for both methods (the same physical model; the forward
-   method differs by the driver's tracking only). The forward method has no torque converter: a forward
-   fleet leaves the converters of automatics and CVTs out, on the grid and in the predictions alike.
+   method differs by the driver's tracking and, while a torque converter slips, by the engine's inertia,
+   which its quasi-static converter leaves out; docs/model.md).
 
 Steps 2 and 4 run in chunks of vehicles, in this process or on Dask (``local_cluster`` workers, or a
 ``scheduler`` address); chunks are deterministic, so every execution gives the same rows.
@@ -114,14 +114,13 @@ def _kernels_on_one_thread():
         numba.set_num_threads(before)
 
 
-def grid_chunk(items: list[tuple[VehicleRecord, tuple[str, ...]]], converter: bool = True) -> list[dict]:
-    """Backward runs over the technology grid; one dict per vehicle x cycle (``log_fuel`` on the grid).
-    ``converter`` False: the records' torque converters left out (a forward fleet, see :func:`run_fleet`)."""
+def grid_chunk(items: list[tuple[VehicleRecord, tuple[str, ...]]]) -> list[dict]:
+    """Backward runs over the technology grid; one dict per vehicle x cycle (``log_fuel`` on the grid)."""
     with _kernels_on_one_thread():
-        return _grid_chunk(items, converter)
+        return _grid_chunk(items)
 
 
-def _grid_chunk(items: list[tuple[VehicleRecord, tuple[str, ...]]], converter: bool) -> list[dict]:
+def _grid_chunk(items: list[tuple[VehicleRecord, tuple[str, ...]]]) -> list[dict]:
     from ..batch import run_batch
     from ..gears import default_schedule
     from .vehicle import record_parameters
@@ -134,7 +133,7 @@ def _grid_chunk(items: list[tuple[VehicleRecord, tuple[str, ...]]], converter: b
             row = {"key": rec.key, "cycle": name, "log_fuel": None, "gear": None, "error": ""}
             try:
                 cyc = fleet_cycle(name)
-                p = record_parameters(rec, [cyc], converter=converter)
+                p = record_parameters(rec, [cyc])
                 sched = default_schedule(cyc, p, None, rule=gear_rule(rec))
                 df = run_batch(cyc, variants, method="backward", params=p, mode=MODE, gears=sched)
                 fuel = df["fuel_l_per_100km"].to_numpy()
@@ -165,9 +164,7 @@ def _predict_chunk(items, method: str) -> list[dict]:
         try:
             cyc = fleet_cycle(name)
             sched = GearSchedule(cyc.time_s.copy(), gear.astype(np.int64), source="fleet: default rule")
-            p = record_parameters(
-                rec, [cyc], technology={k: tech[k] for k in cal.TECH_PARAMS}, converter=method != "forward"
-            )
+            p = record_parameters(rec, [cyc], technology={k: tech[k] for k in cal.TECH_PARAMS})
             drv = {"driver": FORWARD_DRIVER} if method == "forward" else {}
             df = run_batch(cyc, None, method=method, params=p, mode=MODE, gears=sched, **drv)
             l100 = float(df["fuel_l_per_100km"].iloc[0])
@@ -320,7 +317,7 @@ def run_fleet(
         # 2. the technology grid
         t0 = time.perf_counter()
         grid_rows: list[dict] = []
-        for i, part in enumerate(executor.map(grid_chunk, chunks, method != "forward")):
+        for i, part in enumerate(executor.map(grid_chunk, chunks)):
             grid_rows += part
             _progress("technology grid, vehicles", min((i + 1) * CHUNK, len(work)), len(work), t0, progress)
         timings["grid_s"] = time.perf_counter() - t0

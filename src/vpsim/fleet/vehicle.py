@@ -215,7 +215,7 @@ def record_parameters(
 ) -> Parameters:
     """The :class:`~vpsim.params.Parameters` of a record; road load folded over ``cycles`` (default: all
     four fleet cycles). ``technology``: ``{"engine.thermal_efficiency": ..., ...}`` overrides.
-    ``converter`` False leaves the torque converter out (for the forward method, which has none)."""
+    ``converter`` False leaves the torque converter out (the clutch slips at launch instead)."""
     from ..scaling import scale_engine
     from .cycles import FLEET_CYCLES, fleet_cycle
 
@@ -370,7 +370,7 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         else "default: N/V with a 0.70 top gear",
         "transmission.efficiency": "default",
         "transmission.converter_capacity_factor": f"default: stalls at {CONVERTER_STALL_RPM:g} rpm under the "
-        "torque of the rated power (rad/s per sqrt(N m); the forward method has no converter: set 0)",
+        "torque of the rated power (rad/s per sqrt(N m); 0: none, the clutch slips at launch instead)",
         "transmission.lockup_min_gear": "default: lock-up clutch closed from this gear",
         "transmission.lockup_min_speed": f"default: ... and above {LOCKUP_MIN_SPEED_KMH:g} km/h (m/s)",
         "engine.bore": f"record: {rec.displacement_l:g} L, {rec.cylinders} cyl., S/B {STROKE_BORE_RATIO}",
