@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import vpsim
 from vpsim.batch import run_batch
@@ -560,6 +562,41 @@ def test_converter_drive_is_the_root_of_the_torque_balance(params):
                 assert t_t <= 0.0
             seen.add(state)
     assert seen == {rules.CONVERTER_FREE, rules.CONVERTER_HELD, rules.CONVERTER_OVERRUN}
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    p_i=st.floats(1e3, 2.5e5),
+    w_t=st.floats(0.0, 900.0),
+    capacity=st.floats(6.0, 30.0),
+    stall=st.floats(1.2, 2.6),
+    coupling=st.floats(0.6, 0.95),
+)
+def test_converter_drive_properties(params, p_i, w_t, capacity, stall, coupling):
+    """Any manifold pressure, turbine speed and converter: the engine turns at least at max(idle, w_t), the
+    balance holds at the root (free) to rounding of its terms, the turbine torque is mu(nu) times the pump's,
+    and the state is the one the margin's sign and the turbine speed name."""
+    conv = {
+        "converter_capacity_factor": capacity,
+        "converter_stall_torque_ratio": stall,
+        "converter_coupling_speed_ratio": coupling,
+    }
+    c = record(params.with_changes(transmission=conv))
+    w, t_p, t_t, state, margin = rules.converter_drive(p_i, w_t, c)
+    lo = max(c.idle_speed, w_t)
+    assert np.isfinite([w, t_p, t_t, margin]).all()
+    assert w >= lo
+    if margin > 0.0:
+        assert state == rules.CONVERTER_FREE
+        net = en.crank_torque(p_i, w, c) - en.accessory_torque(w, c)
+        # rounding of the terms, and of w itself (Newton stops at 1e-13 of it) times the balance's slope
+        scale = abs(net) + abs(en.crank_torque(0.0, w, c)) + en.torque_slope(c) * p_i
+        slope = abs(rules._converter_margin_dw(w, w_t, c))
+        assert abs(net - vh.converter_pump_torque(w, w_t, c)) <= 1e-11 * scale + 1e-12 * w * slope
+        assert t_t == pytest.approx(vh.converter_torque_ratio(w_t / w, c) * t_p, rel=1e-14)
+    else:
+        assert state == (rules.CONVERTER_HELD if w_t < c.idle_speed else rules.CONVERTER_OVERRUN)
+        assert w == lo
 
 
 @pytest.mark.parametrize("cycle", ["udds", "us06"])
