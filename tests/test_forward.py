@@ -623,8 +623,8 @@ def _column_check(c, D, cyc, pts, column, dy_rel, label):
 
 def _column(k):
     def col_k(y, aux, G, c, D, col):
-        cols = np.zeros((3, forward.NY))
-        forward._jacobian(y, aux, G, c, D, np.zeros(9), cols[0], cols[1], cols[2])
+        cols = np.zeros((4, forward.NY))
+        forward._jacobian(y, aux, G, c, D, np.zeros(16), cols[0], cols[1], cols[2], cols[3])
         col[:] = cols[k]
 
     col_k.index = k
@@ -730,8 +730,8 @@ def test_jacobian_keeps_the_energy_balance(params, mode):
     at_rest = 0
     for t, y_, ratio in pts:
         G, y, dy, aux = _right_side_at(t, y_, ratio, c, D, cyc)
-        cols = np.zeros((3, f.NY))
-        f._jacobian(y, aux, G, c, D, np.zeros(9), cols[0], cols[1], cols[2])
+        cols = np.zeros((4, f.NY))
+        f._jacobian(y, aux, G, c, D, np.zeros(16), cols[0], cols[1], cols[2], cols[3])
         scale = np.abs(cols[:, [f._E_IND, *rows]]).max(axis=1) + 1e-300
         residual = cols[:, f._E_IND] - cols[:, rows].sum(axis=1)
         assert np.all(np.abs(residual) <= 1e-12 * scale), (t, y[:3], residual / scale)
@@ -764,6 +764,6 @@ def test_jacobian_open_loop_has_no_z_column(params):
     G = np.zeros(forward.N_G)
     forward._gear(10.0, 3, c, G)
     forward._rhs(3.0, y, G, c, D, np.array([0.0, 10.0]), np.array([1e-4, 1e-4]), dy, aux)
-    cols = np.ones((3, forward.NY))
-    forward._jacobian(y, aux, G, c, D, np.zeros(9), cols[0], cols[1], cols[2])
+    cols = np.ones((4, forward.NY))
+    forward._jacobian(y, aux, G, c, D, np.zeros(16), cols[0], cols[1], cols[2], cols[3])
     assert np.all(cols[2] == 0.0) and cols[0][forward._Z] == 0.0 and cols[0][forward._ERR2] == 0.0

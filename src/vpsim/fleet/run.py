@@ -16,8 +16,7 @@ Steps (:mod:`vpsim.fleet.calibrate` explains the calibration):
 4. per vehicle and cycle: one run at its fold's technology with ``method`` (backward, or forward with the
    preset PI driver 2, which keeps within the +-2 km/h band of the test): the prediction reported. The
    technology is fitted on the backward grid for both methods (the same physical model; the forward
-   method differs by the driver's tracking and, while a torque converter slips, by the engine's inertia,
-   which its quasi-static converter leaves out; docs/model.md).
+   method differs by the driver's tracking).
 
 Steps 2 and 4 run in chunks of vehicles, in this process or on Dask (``local_cluster`` workers, or a
 ``scheduler`` address); chunks are deterministic, so every execution gives the same rows.

@@ -199,89 +199,54 @@ def converter_point(f_wheel, w_wheel, dw_wheel, ratio, c):
     return c.idle_speed, 0.0, t_p + en.accessory_torque(c.idle_speed, c), (brake if brake > 0.0 else 0.0)
 
 
-# the unlocked converter driven by the engine (the forward method, :func:`converter_drive`)
-CONVERTER_FREE, CONVERTER_HELD, CONVERTER_OVERRUN = 0, 1, 2
+@equation
+def converter_margin_at_idle(p_i, w_t, share, fired, c):
+    """The engine's net torque T_cr(p_i, idle) - T_acc(idle) (``fired`` of its cylinders fired) less the
+    share ``share`` of the pump's phi(w_t / idle) idle^2 that loads it: where it is not positive an engine
+    at idle speed cannot turn the unlocked converter faster (it is held at idle, :func:`converter_engine`)."""
+    idle = c.idle_speed
+    t_cr = en.partly_fired_torque(p_i, idle, fired, c) if fired < 1.0 else en.crank_torque(p_i, idle, c)
+    return t_cr - en.accessory_torque(idle, c) - share * vh.converter_pump_torque(idle, w_t, c)
 
 
 @equation
-def converter_drive_margin(p_i, w_t, c):
-    """The engine's net torque T_cr(p_i, w) - T_acc(w) less the pump's phi(nu) w^2 at the lowest speed at
-    which the engine can drive the unlocked converter, w = max(idle, w_t): positive where the engine runs
-    faster than that (:func:`converter_drive`); the forward method's switching function."""
-    w = w_t if w_t > c.idle_speed else c.idle_speed
-    return en.crank_torque(p_i, w, c) - en.accessory_torque(w, c) - vh.converter_pump_torque(w, w_t, c)
-
-
-@equation
-def _converter_margin_dw(w, w_t, c):
-    """d/dw of the margin T_cr(p_i, w) - T_acc(w) - T_p(w, w_t) at fixed p_i and w_t (w above idle)."""
-    return (
-        en.crank_torque_dw(w, c)
-        - en.accessory_torque_rate(w, 1.0, c)
-        - vh.converter_pump_torque_dw(w, w_t, c)
-    )
+def converter_idle_command(w_t, share, c):
+    """The idle governor's throttle command while the converter is unlocked: the steady one that holds the
+    engine at idle speed against the share ``share`` of the pump's torque there and the accessories'
+    (:func:`.engine.steady_point`). As a floor under the driver's, the engine settles at idle, not below."""
+    idle = c.idle_speed
+    load = share * vh.converter_pump_torque(idle, w_t, c) + en.accessory_torque(idle, c)
+    return en.steady_point(load, idle, c)[1]
 
 
 @inline
-def converter_drive(p_i, w_t, c):
-    """The unlocked torque converter driven by the engine at manifold pressure p_i, turbine speed ``w_t``
-    >= 0 (the forward method, traction asked). Quasi-static like the slipping clutch: the engine's inertia
-    is decoupled and its speed w_e is where its net torque T_cr(p_i, w_e) - T_acc(w_e) equals the pump's
-    phi(nu) w_e^2 (nu = w_t / w_e), found by Newton's method safeguarded by bisection on a bracket (the
-    margin falls with w_e: the pump torque grows as w_e^2, the engine's falls with friction).
+def converter_engine(p_i, w_e, w_t, share, fired, c):
+    """The engine on the unlocked torque converter, its speed w_e a state (the forward method):
+    J_e dw_e/dt = T_cr(p_i, w_e) - T_acc(w_e) - s phi(nu) w_e^2, nu = w_t / w_e, with ``fired`` of the
+    cylinders fired; the converter loads the engine with the share s = ``share`` of the pump's torque and
+    passes s mu(nu) T_p to the gearbox (s < 1: the neutral-idle clutch between turbine and gearbox slipping,
+    the forward method's pedal floor band; s = 0: the engine decoupled, the brakes on). Beyond nu = 1 (the
+    turbine overrunning the engine) the pump's torque is negative (:func:`.vehicle.converter_capacity`):
+    the coupling drives the engine. At idle speed an engine whose net torque is below that load is held
+    there by its governor (the difference is the governor's, :func:`powers`), as :func:`converter_point`
+    holds it; the governor's throttle (:func:`converter_idle_command`) brings the torque up to the load.
 
-    Returns (w_e, pump torque T_p, turbine torque T_t, state, margin at max(idle, w_t)), the state:
-
-    * CONVERTER_FREE: the root above max(idle, w_t); T_t = mu(nu) T_p, slip 1 - nu > 0.
-    * CONVERTER_HELD: below idle turbine speed, an engine too weak to turn the pump faster than idle: it is
-      held at idle speed (its governor makes up the difference; :func:`powers` books it as idle control),
-      the converter passes mu(nu) phi(nu) idle^2 at nu = w_t / idle (creep), as :func:`converter_point`.
-    * CONVERTER_OVERRUN: the turbine at or above idle speed and the engine unable to keep ahead of it (net
-      torque at w_t at most what the pump takes, zero at nu = 1): the converter runs as a coupling at
-      nu = 1 and passes the engine's net torque, <= 0 (engine braking).
-
-    Where the state changes (margin zero, or w_t = idle) w_e and T_t are continuous.
-    """
+    Returns (engine speed, load torque s T_p, torque to the gearbox s mu T_p, dw_e/dt, held, switching
+    value): the switching value is w_e - idle above idle, else :func:`converter_margin_at_idle` (positive:
+    the engine speeds up from idle)."""
     idle = c.idle_speed
-    lo = w_t if w_t > idle else idle
-    g_lo = converter_drive_margin(p_i, w_t, c)
-    if g_lo <= 0.0:
-        if w_t < idle:
-            t_p = vh.converter_pump_torque(idle, w_t, c)
-            return idle, t_p, vh.converter_torque_ratio(w_t / idle, c) * t_p, CONVERTER_HELD, g_lo
-        t_net = en.crank_torque(p_i, w_t, c) - en.accessory_torque(w_t, c)
-        return w_t, t_net, t_net, CONVERTER_OVERRUN, g_lo
-    hi = 2.0 * lo
-    g_hi = en.crank_torque(p_i, hi, c) - en.accessory_torque(hi, c) - vh.converter_pump_torque(hi, w_t, c)
-    n = 0
-    while g_hi > 0.0 and n < 60:
-        lo, g_lo = hi, g_hi
-        hi = 2.0 * hi
-        g_hi = en.crank_torque(p_i, hi, c) - en.accessory_torque(hi, c) - vh.converter_pump_torque(hi, w_t, c)
-        n += 1
-    w = lo + (hi - lo) * g_lo / (g_lo - g_hi)  # regula falsi start
-    for _ in range(60):
-        g = en.crank_torque(p_i, w, c) - en.accessory_torque(w, c) - vh.converter_pump_torque(w, w_t, c)
-        if g > 0.0:
-            lo = w
-        else:
-            hi = w
-        dg = _converter_margin_dw(w, w_t, c)
-        w_new = w - g / dg if dg < 0.0 else 0.5 * (lo + hi)
-        if not lo < w_new < hi:
-            w_new = 0.5 * (lo + hi)
-        done = abs(w_new - w) <= 1e-13 * w
-        w = w_new
-        if done:
-            break
-    t_p = vh.converter_pump_torque(w, w_t, c)
-    return (
-        w,
-        t_p,
-        vh.converter_torque_ratio(w_t / w, c) * t_p,
-        CONVERTER_FREE,
-        converter_drive_margin(p_i, w_t, c),
-    )
+    if w_e > idle:
+        w = w_e
+        sw = w_e - idle
+    else:
+        w = idle
+        sw = converter_margin_at_idle(p_i, w_t, share, fired, c)
+    t_p = share * vh.converter_pump_torque(w, w_t, c)
+    t_t = vh.converter_torque_ratio(w_t / w, c) * t_p
+    if sw <= 0.0:
+        return w, t_p, t_t, 0.0, True, sw
+    t_cr = en.partly_fired_torque(p_i, w, fired, c) if fired < 1.0 else en.crank_torque(p_i, w, c)
+    return w, t_p, t_t, (t_cr - en.accessory_torque(w, c) - t_p) / c.inertia, False, sw
 
 
 @inline
@@ -363,8 +328,8 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
     (quasi-static methods at rest, or an unlocked converter without traction) the idling engine is outside
     the balance. ``fired``: the fraction of the cylinders fired (0: fuel cut, no indicated work).
     ``t_acc``: the accessories' torque (:func:`accessories_torque`). ``passed``: the share of the unlocked
-    converter's turbine torque that reaches the gearbox (the forward method's pedal floor band engages the
-    drive progressively; 1 otherwise), the rest dissipated in the driveline term.
+    converter's torque that loads the engine and reaches the gearbox (the forward method's neutral-idle
+    clutch, :func:`converter_engine`; 1 otherwise).
     """
     vv = v if v > 0.0 else 0.0
     road = (c.mass * vv * a, vh.aero_force(vv, c) * vv, vh.rolling_force(vv, c) * vv, brake * vv)
@@ -385,11 +350,10 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
         engine_kinetic = c.inertia * w_e * dw_e
         nu = w_wheel / w_e
         flywheel = t_asked - c.inertia * dw_e
-        # the pump's torque; at nu = 1 a coupling that passes the flywheel's (converter_drive's overrun)
-        t_p = vh.converter_pump_torque(w_e, w_wheel, c) if nu < 1.0 else flywheel
-        driveline = (1.0 - passed * c.efficiency * vh.converter_torque_ratio(nu, c) * nu) * t_p * w_e
+        t_p = passed * vh.converter_pump_torque(w_e, w_wheel, c)
+        driveline = (1.0 - c.efficiency * vh.converter_torque_ratio(nu, c) * nu) * t_p * w_e
         # the flywheel gives the pump's torque (to rounding), but the governor of an engine held at idle makes
-        # up the difference (converter_drive, CONVERTER_HELD): negative, work supplied
+        # up the difference (converter_engine): negative, work supplied
         idle = (flywheel - t_p) * w_e
     else:
         engine_kinetic = 0.0

@@ -172,13 +172,12 @@ def converter_torque_ratio(nu, c):
 @equation
 def converter_capacity(nu, c):
     """phi(nu) = T_pump / w_pump^2 = 1 / K(nu)^2: 1 / K_stall^2 up to the coupling point, then linearly to 0
-    at nu = 1."""
+    at nu = 1 and on below zero beyond it (the turbine overrunning the pump: the coupling passes torque back
+    to the engine, which only the forward method, with the engine speed a state, reaches)."""
     k = 1.0 / (c.converter_capacity_factor * c.converter_capacity_factor)
     nc = c.converter_coupling_speed_ratio
     if nu <= nc:
         return k
-    if nu >= 1.0:
-        return 0.0
     return k * (1.0 - nu) / (1.0 - nc)
 
 
@@ -191,15 +190,12 @@ def converter_pump_torque(w_p, w_t, c):
 @equation
 def converter_pump_torque_dw(w_p, w_t, c):
     """d/dw_p of :func:`converter_pump_torque` at fixed turbine speed: 2 w_p / K^2 up to the coupling
-    point; above it T_p = (w_p^2 - w_t w_p) / (K^2 (1 - nu_c)), so (2 w_p - w_t) / (K^2 (1 - nu_c)); 0 at
-    and beyond nu = 1."""
+    point; above it T_p = (w_p^2 - w_t w_p) / (K^2 (1 - nu_c)), so (2 w_p - w_t) / (K^2 (1 - nu_c))."""
     k = 1.0 / (c.converter_capacity_factor * c.converter_capacity_factor)
     nc = c.converter_coupling_speed_ratio
     nu = w_t / w_p
     if nu <= nc:
         return 2.0 * k * w_p
-    if nu >= 1.0:
-        return 0.0
     return k * (2.0 * w_p - w_t) / (1.0 - nc)
 
 
