@@ -847,11 +847,11 @@ EVENT_TOLERANCE_S = 1e-6  # events are located to this width (plus rounding of t
 
 
 @register_jitable
-def _inverse3(jac, q, winv):
+def _inverse3(jac, q, winv, nd):
     """The factors of (q I - J)^-1 for the 4 x 4 Jacobian ``jac`` (row-major; v, p_i, z, w_e) by the Schur
     complement of its v, p_i, z block A = (q I - J)[:3, :3], inverted by cofactors: winv[0:9] = A^-1,
     winv[9:12] = A^-1 b, winv[12:15] = c A^-1 (b, c: the block's column and row in w_e), winv[15] = 1 / (d -
-    c A^-1 b). Without a converter nothing depends on w_e (b = 0): v, p_i, z are A^-1 r, as a 3 x 3 system."""
+    c A^-1 b). ``nd`` = 3 (no converter: nothing depends on w_e, b = 0): A^-1 alone, a 3 x 3 system."""
     n = N_DYN
     a, b, cc = q - jac[0], -jac[1], -jac[2]
     d, e, f = -jac[n], q - jac[n + 1], -jac[n + 2]
@@ -869,6 +869,8 @@ def _inverse3(jac, q, winv):
     winv[6] = co2 * inv_det
     winv[7] = (b * g - a * hh) * inv_det
     winv[8] = (a * e - b * d) * inv_det
+    if nd < N_DYN:
+        return
     b0, b1, b2 = -jac[3], -jac[n + 3], -jac[2 * n + 3]
     c0, c1, c2 = -jac[3 * n], -jac[3 * n + 1], -jac[3 * n + 2]
     for k in range(3):
@@ -878,12 +880,17 @@ def _inverse3(jac, q, winv):
 
 
 @register_jitable
-def _solve3(r, winv, u):
-    """u = (I/(h gamma) - J)^-1 r for v, p_i, z, w_e (the factors of :func:`_inverse3`)."""
+def _solve3(r, winv, u, nd):
+    """u = (I/(h gamma) - J)^-1 r for v, p_i, z and (``nd`` = 4) w_e (the factors of :func:`_inverse3`)."""
     r0, r1, r2 = r[0], r[1], r[2]
     x0 = winv[0] * r0 + winv[1] * r1 + winv[2] * r2
     x1 = winv[3] * r0 + winv[4] * r1 + winv[5] * r2
     x2 = winv[6] * r0 + winv[7] * r1 + winv[8] * r2
+    if nd < N_DYN:
+        u[0] = x0
+        u[1] = x1
+        u[2] = x2
+        return
     xw = (r[3] - (winv[12] * r0 + winv[13] * r1 + winv[14] * r2)) * winv[15]
     u[0] = x0 - winv[9] * xw
     u[1] = x1 - winv[10] * xw
@@ -892,12 +899,22 @@ def _solve3(r, winv, u):
 
 
 @register_jitable(inline="always")
-def _quadrature_stages(i, h, ih, hg, y, ynew, f0, k3, k4, ft, u1, u2, u3, u4, e, g0, g1, g2, g3, err):
+def _quadrature_stages(i, h, ih, hg, y, ynew, f0, k3, k4, ft, u1, u2, u3, u4, e, g0, g1, g2, g3, err, nd):
     """The four stages of quadrature state i (its column of J is zero, its row G_i = (g0, g1, g2, g3)[i] in
     v, p_i, z, w_e): u_j = hg (f_j + sum_k c_jk u_k / h + gamma_j h df/dt + G_i u_j[v, p_i, z, w_e]); sets
     ynew[i] and err[i], the filtered error estimate u_4 + hg G_i e (e: the filtered estimate of v, p_i, z,
-    w_e over hg). ``ih`` = 1/h: products, where the quotients cost 45 divisions per step."""
-    a, b, cc, dd = g0[i], g1[i], g2[i], g3[i]
+    w_e over hg; ``nd`` = 3: v, p_i, z alone). ``ih`` = 1/h: products, where the quotients cost 45 divisions
+    per step."""
+    a, b, cc = g0[i], g1[i], g2[i]
+    if nd < N_DYN:
+        q1 = hg * (f0[i] + (_WG1 * h) * ft[i] + a * u1[0] + b * u1[1] + cc * u1[2])
+        q2 = hg * (f0[i] + (_WC21 * ih) * q1 + (_WG2 * h) * ft[i] + a * u2[0] + b * u2[1] + cc * u2[2])
+        q3 = hg * (k3[i] + (_WC31 * q1 + _WC32 * q2) * ih + a * u3[0] + b * u3[1] + cc * u3[2])
+        q4 = hg * (k4[i] + (_WC41 * q1 + _WC42 * q2 + _WC43 * q3) * ih + a * u4[0] + b * u4[1] + cc * u4[2])
+        ynew[i] = y[i] + _WM1 * q1 + _WM3 * q3 + _WM4 * q4
+        err[i] = q4 + hg * (a * e[0] + b * e[1] + cc * e[2])
+        return
+    dd = g3[i]
     q1 = hg * (f0[i] + (_WG1 * h) * ft[i] + a * u1[0] + b * u1[1] + cc * u1[2] + dd * u1[3])
     q2 = hg * (
         f0[i] + (_WC21 * ih) * q1 + (_WG2 * h) * ft[i] + a * u2[0] + b * u2[1] + cc * u2[2] + dd * u2[3]
@@ -1095,6 +1112,7 @@ def _integrate_ros(
     # the right side jumps where an unlocked torque converter's state changes (lock-up, the drive engaged
     # or not): steps across such an instant need the crossing below (without one the kernel steps as before)
     jumps = D[_EXT] != 0.0 and c.converter_capacity_factor > 0.0
+    nd = N_DYN if jumps else N_ERR  # the states the step solves for: w_e only with a converter
     for sgi in range(n_seg):
         t = seg_t[sgi]
         t_end = seg_t[sgi + 1]
@@ -1201,27 +1219,27 @@ def _integrate_ros(
                         d = 0.5 * (t_stop - t)
                     ts = t + d
                     d = ts - t
-                    for i in range(N_DYN):
+                    for i in range(nd):
                         ytmp[i] = y[i]
                 else:
                     if task == N_DYN + 1:
                         # stages 1 and 2 of v, p_i, z (the quadratures' stages follow after the error test)
-                        _inverse3(jac, 1.0 / hg, winv)
-                        for i in range(N_DYN):
+                        _inverse3(jac, 1.0 / hg, winv, nd)
+                        for i in range(nd):
                             r[i] = f0[i] + (_WG1 * h) * ft[i]
-                        _solve3(r, winv, u1)
-                        for i in range(N_DYN):  # stage 2 at (t, y): f is stage 1's
+                        _solve3(r, winv, u1, nd)
+                        for i in range(nd):  # stage 2 at (t, y): f is stage 1's
                             r[i] = f0[i] + (_WC21 * ih) * u1[i] + (_WG2 * h) * ft[i]
-                        _solve3(r, winv, u2)
-                        for i in range(N_DYN):
+                        _solve3(r, winv, u2, nd)
+                        for i in range(nd):
                             ytmp[i] = y[i] + _WA31 * u1[i]
                         tgt_f = k3
                     elif task == N_DYN + 2:
-                        for i in range(N_DYN):
+                        for i in range(nd):
                             ytmp[i] = y[i] + _WA41 * u1[i] + _WA43 * u3[i]
                         tgt_f = k4
                     else:  # the right side at the step's end (the next step's first stage)
-                        for i in range(N_DYN):
+                        for i in range(nd):
                             ytmp[i] = ynew[i]
                         tgt_f = f1
                         tgt_a = aux1
@@ -1234,26 +1252,46 @@ def _integrate_ros(
                     n_jac += 1
                     have_jac = True
                 elif task == N_DYN + 1:
-                    for i in range(N_DYN):
+                    for i in range(nd):
                         r[i] = k3[i] + (_WC31 * u1[i] + _WC32 * u2[i]) * ih
-                    _solve3(r, winv, u3)
+                    _solve3(r, winv, u3, nd)
                 elif task == N_DYN + 2:
-                    for i in range(N_DYN):
+                    for i in range(nd):
                         r[i] = k4[i] + (_WC41 * u1[i] + _WC42 * u2[i] + _WC43 * u3[i]) * ih
-                    _solve3(r, winv, u4)
-                    for i in range(N_DYN):
+                    _solve3(r, winv, u4, nd)
+                    for i in range(nd):
                         ynew[i] = y[i] + _WM1 * u1[i] + _WM3 * u3[i] + _WM4 * u4[i]
                     # error estimate u_4 (y_new minus the embedded solution), filtered by (I - h gamma J)^-1
                     # as Hairer & Wanner (IV.8, (8.19)-(8.20)) do for stiff codes, so that its part in the
                     # damped stiff (manifold) direction is not taken for error: e = (I/hg - J)^-1 u_4 / hg
-                    _solve3(u4, winv, ytmp)
-                    for i in range(N_DYN):
+                    _solve3(u4, winv, ytmp, nd)
+                    for i in range(nd):
                         ytmp[i] = ytmp[i] / hg
                     # the quadratures' stages, explicit (their columns of J are zero): for the fuel and the
                     # distance now (their errors are in the norm), for the others once the step is accepted
                     for i in (_FUEL, _DIST):
                         _quadrature_stages(
-                            i, h, ih, hg, y, ynew, f0, k3, k4, ft, u1, u2, u3, u4, ytmp, gq0, gq1, gq2, gq3, r
+                            i,
+                            h,
+                            ih,
+                            hg,
+                            y,
+                            ynew,
+                            f0,
+                            k3,
+                            k4,
+                            ft,
+                            u1,
+                            u2,
+                            u3,
+                            u4,
+                            ytmp,
+                            gq0,
+                            gq1,
+                            gq2,
+                            gq3,
+                            r,
+                            nd,
                         )
                     # the RMS norm over v, p_i, z (ode45's scales) and the fuel and distance (relative to
                     # their increment over the step plus a rate scale times h)
@@ -1308,6 +1346,7 @@ def _integrate_ros(
                                 gq2,
                                 gq3,
                                 r,
+                                nd,
                             )
                     if ynew[_V] < 0.0:  # keep v >= 0 (the car does not roll backwards)
                         ynew[_V] = 0.0

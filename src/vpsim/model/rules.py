@@ -219,7 +219,7 @@ def converter_idle_command(w_t, share, c):
     return en.steady_point(load, idle, c)[1]
 
 
-@inline
+@equation
 def converter_engine(p_i, w_e, w_t, share, fired, c):
     """The engine on the unlocked torque converter, its speed w_e a state (the forward method):
     J_e dw_e/dt = T_cr(p_i, w_e) - T_acc(w_e) - s phi(nu) w_e^2, nu = w_t / w_e, with ``fired`` of the
