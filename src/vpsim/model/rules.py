@@ -15,7 +15,10 @@ car has, and every method applies the same rules:
   With traction the engine runs at the pump speed w_t / nu (nu from :func:`.vehicle.converter_speed_ratio`,
   slip 1 - nu > 0) and gives the pump torque T_t / mu(nu); if that speed is below idle the engine idles,
   the converter passes more than asked and the brakes hold the rest (creep). Without traction the engine
-  idles, decoupled. The converter dissipates T_p w_p (1 - mu nu), booked in the driveline loss.
+  idles, decoupled. The converter dissipates T_p w_p (1 - mu nu), booked in the driveline loss. The forward
+  method, which takes the pedal rather than the wheel torque, integrates the engine speed behind the
+  unlocked converter instead (:func:`converter_engine`; decoupled with the brakes on); at steady state the
+  two agree.
 
 Quasi-static methods (backward) impose the operating point (:func:`operating_point`); the dynamic methods
 integrate or invert the same physics with the same clutch test (:func:`clutch_engaged`) and clutch torque
