@@ -1,7 +1,7 @@
 """Forward dynamic method (FDM), paper section 2: the model integrated in time with a PI driver.
 
 States: vehicle speed v (18) and intake-manifold pressure p_i (9); the driver's integral state z
-(:mod:`vpsim.drivers.pi`); the engine speed w_e while it drives an unlocked torque converter
+(:mod:`vpsim.drivers.pi`); the engine speed w_e behind an unlocked torque converter
 (:func:`vpsim.model.rules.converter_engine`; elsewhere the engine speed is the wheels' or idle); and
 quadrature states that integrate the fuel, the distance and every term of the
 energy balance along the solution, so the bookkeeping closes to the integrator's accuracy:
@@ -104,7 +104,7 @@ _FUEL, _DIST, _E_IND, _E_FRIC, _E_PUMP, _E_ENG, _E_DRV, _E_VEH, _E_AERO, _E_ROLL
 _ERR2, _OUTSIDE = 16, 17  # int (v_cycle - v)^2 dt and the time with |v_cycle - v| above the band
 _E_ACC = 18  # the accessories' work
 NY = 19
-N_ERR = 3  # states always in the error norm: v, p_i, z (w_e too while it drives a converter)
+N_ERR = 3  # states always in the error norm: v, p_i, z (w_e too while a converter is unlocked)
 # states the right side reads (v, p_i, z, w_e): the quadrature states' stage values are never used, so the
 # stages are formed for these only (the quadratures enter the step through their derivatives k_j alone)
 N_DYN = 4
@@ -123,12 +123,11 @@ W_TRACK_S = 0.05  # s: the time constant of w_e following the engine's speed whe
     _X_VREF,
     _X_CMD,
     _X_COUPLED,
-    _X_CONV,  # the converter's lock-up clutch open
-    _X_DRIVE,  # ... and the engine driving it (w_e a state)
-) = range(13)
+    _X_CONV,  # the converter's lock-up clutch open (w_e a state)
+) = range(12)
 # switching functions: where one changes sign the right side changes form (a jump or a kink); the Rosenbrock
 # integrator locates these instants and restarts there (the Dormand-Prince path ignores them)
-_X_SW = 13
+_X_SW = 12
 (
     _SW_CLUTCH,  # w_wheel - idle speed: clutch engaged / slipping (extended mode)
     _SW_SAT_LO,  # u_raw - u_lo: PI command saturated at its lower limit
@@ -354,7 +353,6 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     aux[_X_CMD] = cmd
     aux[_X_COUPLED] = 1.0 if coupled else 0.0
     aux[_X_CONV] = 1.0 if conv else 0.0
-    aux[_X_DRIVE] = 1.0 if conv else 0.0
     for k in range(N_SW):
         aux[_X_SW + k] = _switch_value(k, v, w_wheel, t_cr, raw, cmd, conv, g_conv, G, c, D)
     aux[_X_AENG] = a_eng
@@ -1295,14 +1293,14 @@ def _integrate_ros(
                         )
                     # the RMS norm over v, p_i, z (ode45's scales) and the fuel and distance (relative to
                     # their increment over the step plus a rate scale times h)
-                    # (w_e too while it drives a converter)
+                    # (w_e too while a converter is unlocked)
                     err = 0.0
                     n_norm = N_ERR + 2
                     for m in range(N_ERR + 3):
                         if m < N_ERR:
                             i = m
                         elif m == N_ERR:
-                            if aux1[_X_DRIVE] == 0.0:
+                            if aux1[_X_CONV] == 0.0:
                                 continue
                             i = _W
                             n_norm += 1
@@ -1615,7 +1613,7 @@ def error_scales(c) -> np.ndarray:
     the dopri5 solver keeps for the paper's Table 3) measured a manifold at 30 kPa and a PI state near 0
     against their own size: on UDDS (driver 1, paper mode) 2.43 accepted steps per cycle second against
     1.99, for a cycle fuel that stays within 1.4e-4 of the rtol 1e-8 reference (5.6e-5 before). w_e (while it
-    drives a converter): the idle speed."""
+    is a state, behind an unlocked converter): the idle speed."""
     return np.array([1.0, c.ambient_pressure, en.max_command(c), c.idle_speed])
 
 
