@@ -270,9 +270,7 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     passed = 1.0
     g_conv = 1.0
     if conv:
-        passed = cmd / D[_AMIN] if cmd < D[_AMIN] else 1.0
-        if passed < 0.0:
-            passed = 0.0
+        passed = rules.neutral_idle_share(cmd, D[_AMIN])
         w = y[_W] if y[_W] > c.idle_speed else c.idle_speed
         coupled = passed > 0.0
         # the idle governor: at least the throttle that holds the engine at idle speed against its load
@@ -292,7 +290,7 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     fired = 1.0
     if (coupled or conv) and ext and D[_OPEN] == 0.0:
         fired = rules.fired_fraction_of_command(cmd, D[_AMIN], w, c)
-    t_cr = en.partly_fired_torque(p, w, fired, c) if fired < 1.0 else en.crank_torque(p, w, c)
+    t_cr = en.fired_crank_torque(p, w, fired, c)
     dp = en.manifold_pressure_rate(p, a_eng, w, c)
     mdot_f = fired * en.fuel_flow(p, w, c)
     # vehicle (18) with the engine inertia (1),(14)-(17)
@@ -960,9 +958,7 @@ def _switch(k, t, y, G, c, D, tab_t, tab_v):
                 cmd, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], D[_ULO], D[_UHI], D[_AWG])
             g_conv = y[_W] - c.idle_speed
             if not g_conv > 0.0:
-                share = cmd / D[_AMIN] if cmd < D[_AMIN] else 1.0
-                if share < 0.0:
-                    share = 0.0
+                share = rules.neutral_idle_share(cmd, D[_AMIN])
                 fired = 1.0
                 if D[_OPEN] == 0.0:
                     fired = rules.fired_fraction_of_command(cmd, D[_AMIN], c.idle_speed, c)

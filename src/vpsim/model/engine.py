@@ -228,6 +228,13 @@ def partly_fired_torque(p_i, w_e, fired, c):
 
 
 @equation
+def fired_crank_torque(p_i, w_e, fired, c):
+    """Crank torque with ``fired`` of the cylinders fired: :func:`crank_torque` when all fire, else
+    :func:`partly_fired_torque`."""
+    return partly_fired_torque(p_i, w_e, fired, c) if fired < 1.0 else crank_torque(p_i, w_e, c)
+
+
+@equation
 def imep_per_pressure(c):
     """dIMEP/dp_i of (4),(8): Q s_i."""
     return c.heat_factor * c.air_charge_slope

@@ -203,13 +203,26 @@ def converter_point(f_wheel, w_wheel, dw_wheel, ratio, c):
 
 
 @equation
+def neutral_idle_share(u, a_min):
+    """The share of the unlocked converter's torque its neutral-idle clutch (between turbine and gearbox)
+    passes in the forward method: 0 with the brakes on (pedal command ``u`` <= 0), rising over the pedal's
+    floor band to 1 at A_min (a step there made the PI driver chatter: some 1,900 events on UDDS)."""
+    if u >= a_min:
+        return 1.0
+    return u / a_min if u > 0.0 else 0.0
+
+
+@equation
 def converter_margin_at_idle(p_i, w_t, share, fired, c):
     """The engine's net torque T_cr(p_i, idle) - T_acc(idle) (``fired`` of its cylinders fired) less the
     share ``share`` of the pump's phi(w_t / idle) idle^2 that loads it: where it is not positive an engine
     at idle speed cannot turn the unlocked converter faster (it is held at idle, :func:`converter_engine`)."""
     idle = c.idle_speed
-    t_cr = en.partly_fired_torque(p_i, idle, fired, c) if fired < 1.0 else en.crank_torque(p_i, idle, c)
-    return t_cr - en.accessory_torque(idle, c) - share * vh.converter_pump_torque(idle, w_t, c)
+    return (
+        en.fired_crank_torque(p_i, idle, fired, c)
+        - en.accessory_torque(idle, c)
+        - share * vh.converter_pump_torque(idle, w_t, c)
+    )
 
 
 @equation
@@ -248,7 +261,7 @@ def converter_engine(p_i, w_e, w_t, share, fired, c):
     t_t = vh.converter_torque_ratio(w_t / w, c) * t_p
     if sw <= 0.0:
         return w, t_p, t_t, 0.0, True, sw
-    t_cr = en.partly_fired_torque(p_i, w, fired, c) if fired < 1.0 else en.crank_torque(p_i, w, c)
+    t_cr = en.fired_crank_torque(p_i, w, fired, c)
     return w, t_p, t_t, (t_cr - en.accessory_torque(w, c) - t_p) / c.inertia, False, sw
 
 
