@@ -290,6 +290,12 @@ def test_repeatability_of_twins_by_hand():
     assert mech[("B2", 0)].startswith("measured 6 % below a twin")  # 31 against sqrt(30 x 36) = 32.9 mpg
     assert "same record inputs" not in mech[("C1", 0)]  # no twin
     assert "same record inputs" not in mechanisms(df)[("A1", 0)]  # without the inputs: not known
+    # a trace miss names its method's cause: the backward method's engine, the forward method's PI driver
+    missed = df.assign(trace_miss_s=np.where(df["vehicle_id"] == "C1", 0.024, 0.0))
+    assert "trace miss 0.024 s (the engine lacks" in mechanisms(missed)[("C1", 0)]
+    tracked = missed.assign(max_speed_error_mps=0.7)
+    assert "trace miss 0.024 s (the PI driver outside" in mechanisms(tracked)[("C1", 0)]
+    assert "trace miss" not in mechanisms(tracked)[("A1", 0)]
 
 
 def test_fleet_reports_twins_the_record_cannot_tell_apart(tmp_path, capsys):

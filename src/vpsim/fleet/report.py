@@ -214,6 +214,7 @@ def mechanisms(df, inputs: dict[str, tuple] | None = None):
     model gaps it points at. ``df``: the rows of :func:`FleetRun.frame`; with ``inputs`` (as
     :func:`repeatability`), first a twin the record cannot tell apart that measured differently."""
     twins = twin_differences(df, inputs) if inputs else {}
+    forward = "max_speed_error_mps" in df  # the forward method's rows carry its tracking
     per = df.groupby(["vehicle_id", "configuration"]).agg(
         transmission=("transmission", "first"),
         n_gears=("n_gears", "first"),
@@ -239,10 +240,11 @@ def mechanisms(df, inputs: dict[str, tuple] | None = None):
             side = "below" if diff < 0 else "above"
             parts.append(f"measured {abs(diff):.0f} % {side} a twin with the same record inputs")
         if r["miss"] > 0:
-            parts.append(
-                f"trace miss {r['miss']:.0f} s (NA model engine lacks full-load torque"
-                + (", the car is boosted)" if r["boosted"] else ")")
-            )
+            if forward:  # the PI driver's tracking, outside the band somewhere
+                cause = "the PI driver outside the +-2 km/h band"
+            else:
+                cause = "the engine lacks the full-load torque the trace asks"
+            parts.append(f"trace miss {r['miss']:.2g} s ({cause})")
         if r["pw"] >= pw90:
             parts.append(f"high power/mass {r['pw']:.0f} W/kg (engine at very low load)")
         elif r["pw"] <= pw10:
