@@ -240,6 +240,13 @@ def validate_variants(params: Parameters, names: list[str], values: np.ndarray) 
     n = values.shape[0]
     for j, name in enumerate(names):
         sec, fld, gear = _split(name, params)
+        if _canonical(name) == "transmission.cvt_ratio_step" or (
+            gear is not None and params.transmission.is_cvt
+        ):
+            raise ParameterError(
+                f"variants: {name} changes the ratio grid of a CVT (another number of ratios per variant); "
+                "run one batch per CVT range and step"
+            )
         col = values[:, j]
         bad = np.flatnonzero(~np.isfinite(col))
         rows = [int(bad[0])] if bad.size else []
@@ -314,7 +321,7 @@ def _sections(params: Parameters, names: list[str], values: np.ndarray):
     total ratios per variant and gear (n_variants, n_gears)."""
     n = values.shape[0]
     changes: dict[str, dict] = {s: {} for s in _SECTIONS}
-    gearbox = np.tile(np.asarray(params.transmission.gearbox_ratios, float), (n, 1))
+    gearbox = np.tile(np.asarray(params.transmission.gearbox_steps, float), (n, 1))
     for j, name in enumerate(names):
         sec, fld, gear = _split(name, params)
         if gear is not None:

@@ -20,6 +20,10 @@ The default rule (documented in docs/methods.md):
    gear within that limit (the lowest admissible gear if none).
 5. While decelerating, the engine does not upshift (a driver holds or downshifts when braking).
 6. Short engagements (< ``min_hold_s``) are merged into the preceding gear where that gear is admissible.
+
+A CVT (``transmission.cvt_ratio_step`` > 0) has the points of its ratio grid for gears (gear 1 its launch
+ratio): rules 1-5 choose its ratio on every interval, and rule 6 does not apply (nothing to hold), so the
+engine runs at the lowest speed at or above ``min_engine_speed`` that carries the load with the reserve.
 """
 
 from __future__ import annotations
@@ -74,6 +78,7 @@ class GearSchedule:
 
 
 RULE_STEP_S = 1.0  # longest interval the gear rule looks at (longer ones are subdivided)
+FULL_LOAD_NODES = 2048  # speeds at which the rule evaluates the full-load line for a CVT's grid
 
 
 @dataclass(frozen=True)
@@ -134,7 +139,15 @@ def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | Non
     ratios = np.asarray(params.transmission.ratios)
     n_g = len(ratios)
     _, a, w_e, _, t_cr, _ = interval_demand(cycle, ratios[:, None], params)  # shape (gears, intervals)
-    t_max = engine_map.max_torque(w_e) if engine_map is not None else max_torque(w_e, params.engine)
+    if engine_map is not None:
+        t_max = engine_map.max_torque(w_e)
+    elif params.transmission.is_cvt and w_e.size > 4 * FULL_LOAD_NODES:
+        # a CVT's grid has many points: the full-load line at FULL_LOAD_NODES speeds, interpolated linearly
+        # (the line is smooth; its deviation is far below the rule's torque reserve)
+        nodes = np.linspace(float(w_e.min()), float(w_e.max()), FULL_LOAD_NODES)
+        t_max = np.interp(w_e, nodes, max_torque(nodes, params.engine))
+    else:
+        t_max = max_torque(w_e, params.engine)
     speed_ok = w_e <= rule.max_engine_speed
     admissible = speed_ok & (t_cr <= rule.torque_reserve * t_max)
     # nothing fits: the gear with the largest traction reserve within the speed limit (the highest gear if
@@ -166,17 +179,18 @@ def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | Non
     for k in range(1, n):
         if a[k] < 0 and gear[k] > gear[k - 1] and admissible[gear[k - 1] - 1, k]:
             gear[k] = gear[k - 1]
-    # merge short engagements into the preceding gear where admissible
+    # merge short engagements into the preceding gear where admissible (a CVT has no shift to hold)
     dt = np.diff(cycle.time_s)
+    hold = 0.0 if params.transmission.is_cvt else rule.min_hold_s
     k = 1
-    while k < n:
+    while hold > 0.0 and k < n:
         if gear[k] != gear[k - 1]:
             j = k
             while j < n and gear[j] == gear[k]:
                 j += 1
             dur = float(np.sum(dt[k:j]))
             prev = gear[k - 1]
-            if dur < rule.min_hold_s and j < n and np.all(admissible[prev - 1, k:j]):
+            if dur < hold and j < n and np.all(admissible[prev - 1, k:j]):
                 gear[k:j] = prev
             k = j
         else:

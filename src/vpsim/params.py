@@ -73,15 +73,46 @@ class Transmission:
     # the lock-up clutch closes from this gear at or above this vehicle speed (m/s)
     lockup_min_gear: int = 2
     lockup_min_speed: float = 0.0
+    # a CVT (> 0): gearbox_ratios is its range [launch, overdrive], and the ratio is chosen on each cycle
+    # interval from a geometric grid over the range whose neighbours differ by at most this fraction
+    # (gearbox_steps); 0: a stepped gearbox, gearbox_ratios are its gears
+    cvt_ratio_step: float = 0.0
+
+    @property
+    def is_cvt(self) -> bool:
+        return self.cvt_ratio_step > 0.0
+
+    @property
+    def gearbox_steps(self) -> tuple[float, ...]:
+        """The gearbox ratios a gear number (1-based) selects: the gears of a stepped gearbox, or a CVT's grid
+        from its launch ratio (1) to its overdrive, neighbours at most ``cvt_ratio_step`` apart
+        (:func:`cvt_grid`)."""
+        if self.is_cvt:
+            return cvt_grid(self.gearbox_ratios[0], self.gearbox_ratios[-1], self.cvt_ratio_step)
+        return tuple(self.gearbox_ratios)
 
     @property
     def ratios(self) -> tuple[float, ...]:
-        """Total ratios i = gearbox x final drive, one per gear (gear 1 first)."""
-        return tuple(g * self.final_drive for g in self.gearbox_ratios)
+        """Total ratios i = gearbox x final drive, one per gear (gear 1 first; a CVT's grid point)."""
+        return tuple(g * self.final_drive for g in self.gearbox_steps)
 
     @property
     def n_gears(self) -> int:
-        return len(self.gearbox_ratios)
+        """Gears of a stepped gearbox, or points of a CVT's grid."""
+        return len(self.gearbox_steps)
+
+
+MAX_CVT_STEPS = 500  # points of a CVT's ratio grid (a range of 20 at 0.6 % steps)
+
+
+def cvt_grid(launch: float, overdrive: float, step: float) -> tuple[float, ...]:
+    """A CVT's gearbox ratios from ``launch`` down to ``overdrive`` in equal relative steps of at most
+    ``step`` (a fraction): launch * (overdrive / launch) ** (k / (n - 1)), k = 0 .. n - 1."""
+    if not (launch > overdrive > 0.0 and step > 0.0):
+        return (float(launch),)
+    n = max(2, math.ceil(math.log(launch / overdrive) / math.log1p(step) - 1e-9) + 1)
+    n = min(n, MAX_CVT_STEPS)
+    return tuple(launch * (overdrive / launch) ** (k / (n - 1)) for k in range(n))
 
 
 @dataclass(frozen=True)
@@ -219,6 +250,7 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "transmission.converter_stall_torque_ratio": (1.0, 4.0, True),
     "transmission.converter_coupling_speed_ratio": (0.5, 0.99, True),
     "transmission.lockup_min_speed": (0.0, 100.0, True),
+    "transmission.cvt_ratio_step": (0.0, 0.2, True),
     "engine.bore": (0.02, 0.5, False),
     "engine.stroke": (0.02, 0.5, False),
     "engine.inertia": (0.0, 50.0, False),
@@ -414,6 +446,24 @@ def validate(p: Parameters, where: str = "parameters") -> None:
     for i, g in enumerate(p.transmission.gearbox_ratios, 1):
         if not 0.0 < g <= 20.0:
             raise ParameterError(f"{where}: transmission.gearbox_ratios[{i}] = {g:g} is outside (0, 20]")
+    tr = p.transmission
+    if tr.is_cvt:
+        r = tr.gearbox_ratios
+        if len(r) != 2 or not r[0] > r[1]:
+            raise ParameterError(
+                f"{where}: with transmission.cvt_ratio_step set (a CVT), transmission.gearbox_ratios must be "
+                f"its range [launch, overdrive], launch > overdrive; got {list(r)}"
+            )
+        if tr.cvt_ratio_step < 0.005:
+            raise ParameterError(
+                f"{where}: transmission.cvt_ratio_step = {tr.cvt_ratio_step:g} is below 0.005 (0.5 % between "
+                "neighbouring ratios); 0 for a stepped gearbox"
+            )
+        if math.log(r[0] / r[1]) / math.log1p(tr.cvt_ratio_step) + 1 > MAX_CVT_STEPS:
+            raise ParameterError(
+                f"{where}: a CVT range {r[0]:g} / {r[1]:g} at steps of {tr.cvt_ratio_step:g} needs more than "
+                f"{MAX_CVT_STEPS} ratios; take a larger cvt_ratio_step"
+            )
     if len(p.engine.map_speed_range) != 2:
         raise ParameterError(
             f"{where}: engine.map_speed_range has {len(p.engine.map_speed_range)} values, "

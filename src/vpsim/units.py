@@ -135,6 +135,7 @@ FIELD_DIMENSIONS: dict[str, str] = {
     "transmission.efficiency": "fraction",
     "transmission.gearbox_ratios": "dimensionless",
     "transmission.final_drive": "dimensionless",
+    "transmission.cvt_ratio_step": "fraction",
     "engine.bore": "length",
     "engine.stroke": "length",
     "engine.cylinders": "count",

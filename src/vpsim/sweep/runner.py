@@ -319,7 +319,7 @@ def _compute_chunk(chunk: Chunk) -> pd.DataFrame:
     for (ci, method, driver), items in groups.items():
         cycle, schedule = chunk.cycles[ci], chunk.schedules[ci]
         if method in ("backward", "forward") and schedule is not None and batch_available():
-            batchable = [(t, pid) for t, pid in items if "transmission.gearbox_ratios" not in t.changes]
+            batchable = [(t, pid) for t, pid in items if not _changes_grid(t.changes, chunk.base)]
             done = _batch_rows(cycle, schedule, chunk, batchable, method, driver)
             out.update(done)
             items = [(t, pid) for t, pid in items if pid not in done]
@@ -382,8 +382,16 @@ def _batch_only(chunk: Chunk) -> bool:
         and not chunk.acceleration.enabled
         and all(s is not None for s in chunk.schedules)
         and all(r[2] in ("backward", "forward") for t in chunk.tasks for r in t.rows)
-        and not any("transmission.gearbox_ratios" in t.changes for t in chunk.tasks)
+        and not any(_changes_grid(t.changes, chunk.base) for t in chunk.tasks)
     )
+
+
+def _changes_grid(changes, base) -> bool:
+    """A design that changes the whole gearbox, a CVT's step or its range (another ratio grid): not one
+    ratio matrix with the rest of its batch."""
+    if "transmission.gearbox_ratios" in changes or "transmission.cvt_ratio_step" in changes:
+        return True
+    return base.transmission.is_cvt and any(k.startswith("transmission.gearbox_ratios[") for k in changes)
 
 
 def _valid_together(chunk: Chunk) -> bool:
