@@ -125,7 +125,33 @@ def test_gear_ratios_follow_the_record(tmp_path):
         assert final == pytest.approx(rec.axle_ratio)
         assert ratios[-1] * final == pytest.approx(top_gear_total_ratio(rec.nv_ratio))
         assert all(np.diff(ratios) < 0)
-        assert len(ratios) == (8 if rec.transmission_kind == "cvt" else rec.n_gears)
+        assert len(ratios) == (2 if rec.transmission_kind == "cvt" else rec.n_gears)  # a CVT: its range
+
+
+def test_a_cvt_record_is_a_cvt_over_its_range(tmp_path):
+    """A CVT record: range [6.5 x overdrive, overdrive], ratio grid of 2 % steps, lock-up by speed alone;
+    the TOML of ``vpsim vehicle from-epa`` reads back to the same CVT."""
+    from vpsim.fleet.vehicle import CVT_RATIO_STEP, CVT_SPREAD, record_parameters, vehicle_toml
+    from vpsim.params import load_parameters
+
+    cars = read_test_car_list(write_list(tmp_path / "list.csv", bad_rows=False))
+    rec = cars.find("T008")
+    assert rec.transmission_kind == "cvt"
+    p = record_parameters(rec)
+    tr = p.transmission
+    assert tr.is_cvt and tr.cvt_ratio_step == CVT_RATIO_STEP and tr.lockup_min_gear == 1
+    launch, overdrive = tr.gearbox_ratios
+    assert launch / overdrive == pytest.approx(CVT_SPREAD)
+    steps = np.asarray(tr.gearbox_steps)
+    assert steps[0] == launch and steps[-1] == pytest.approx(overdrive, rel=1e-12)
+    # ln 6.5 / ln 1.02 = 94.5: 96 points, equal steps of 6.5^(1/95) - 1 = 1.99 %
+    assert tr.n_gears == 96
+    assert np.allclose(steps[:-1] / steps[1:], CVT_SPREAD ** (1 / 95), rtol=1e-12)
+    path = tmp_path / "cvt.toml"
+    path.write_text(vehicle_toml(rec, p))
+    q = load_parameters(path).transmission  # (the file rounds to 6 significant digits)
+    assert q.cvt_ratio_step == tr.cvt_ratio_step and q.n_gears == tr.n_gears and q.lockup_min_gear == 1
+    np.testing.assert_allclose(q.ratios, tr.ratios, rtol=1e-5)
 
 
 def test_road_load_fold_is_exact_without_b_term(tmp_path):

@@ -231,7 +231,7 @@ def test_automatics_and_cvts_get_a_converter_manuals_and_dcts_none(tmp_path):
     assert k * np.sqrt(torque) == pytest.approx(CONVERTER_STALL_RPM * np.pi / 30)  # stalls at 2400 rpm
     assert p.transmission.lockup_min_gear == 2 and p.transmission.lockup_min_speed == pytest.approx(25 / 3.6)
     assert record_parameters(auto, converter=False).transmission.converter_capacity_factor == 0.0
-    assert converter_fields(replace(auto, transmission_kind="cvt"))
+    assert converter_fields(replace(auto, transmission_kind="cvt"))["lockup_min_gear"] == 1  # by speed alone
     for kind in ("manual", "amt_dct"):
         assert converter_fields(replace(auto, transmission_kind=kind)) == {}
 

@@ -252,7 +252,7 @@ def mechanisms(df, inputs: dict[str, tuple] | None = None):
         if r["sp"] >= sp90:
             parts.append(f"high specific power {r['sp']:.0f} kW/L (high-output engine)")
         if r["transmission"] == "cvt":
-            parts.append("CVT (model: 8 fixed ratios, default converter)")
+            parts.append("CVT (model: default ratio range and strategy, default converter)")
         elif r["transmission"] == "automatic":
             parts.append("automatic (model: default converter and lock-up, one shift rule)")
         elif r["transmission"] == "manual":

@@ -139,7 +139,7 @@ def _grid_chunk(items: list[tuple[VehicleRecord, tuple[str, ...]]]) -> list[dict
                 if not np.all(np.isfinite(fuel) & (fuel > 0)):
                     raise VpsimError("non-positive or non-finite fuel on the technology grid")
                 row["log_fuel"] = np.log(fuel).reshape(shape)
-                row["gear"] = sched.gear.astype(np.int8)
+                row["gear"] = sched.gear.astype(np.int16)  # a CVT's grid has up to MAX_CVT_STEPS points
             except Exception as exc:  # one vehicle's failure never stops the fleet
                 row["error"] = _one_line(exc)
             out.append(row)

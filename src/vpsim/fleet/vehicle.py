@@ -23,7 +23,9 @@ Mapping (record units -> SI; every default below is a module constant, documente
   i_top = N/V x r x 2 pi / (60 x 0.44704); the final drive is the axle ratio (when the record lacks a
   plausible one, i_top / :data:`DEFAULT_TOP_GEAR`); the gearbox ratios are a geometric progression from
   the top gear with the total spread of :data:`RATIO_SPREAD` for the number of gears. A CVT (listed with
-  1 gear) is represented today by :data:`CVT_VIRTUAL_GEARS` discrete ratios over :data:`CVT_SPREAD`.
+  1 gear) has the range [overdrive x :data:`CVT_SPREAD`, overdrive] (overdrive from N/V), its ratio chosen
+  per second on a grid of :data:`CVT_RATIO_STEP` steps (``transmission.cvt_ratio_step``; the shift rule
+  without a minimum hold), and its lock-up clutch closes by speed alone.
 * **fuel**: the gasoline certification fuel, density :data:`FUEL_DENSITY_KG_PER_L`, lower heating value
   :data:`FUEL_LHV_J_PER_KG`.
 * **technology** (global, not per vehicle): ``engine.thermal_efficiency`` and
@@ -53,8 +55,11 @@ DEFAULT_TOP_GEAR = 0.70  # gearbox ratio of the top gear when the record has no 
 TRANSMISSION_EFFICIENCY = 0.92
 # total ratio spread (gear 1 / top gear) by number of gears: typical values of 2010-2022 transmissions
 RATIO_SPREAD = {3: 2.8, 4: 4.0, 5: 4.5, 6: 6.0, 7: 7.0, 8: 7.0, 9: 9.0, 10: 7.4, 11: 8.0, 12: 8.0}
-CVT_VIRTUAL_GEARS = 8
 CVT_SPREAD = 6.5  # ratio range of a typical belt CVT
+# a CVT's ratio is chosen per second on a grid over its range (transmission.cvt_ratio_step): 2 % between
+# neighbours, the engine speed within 1 % of the continuous choice (a finer step changes no fleet figure by
+# more than its rounding and costs time in the forward method, which restarts at every ratio change)
+CVT_RATIO_STEP = 0.02
 # torque converter of automatics and CVTs (automated manuals / DCTs and manuals have clutches): sized so
 # that it stalls at CONVERTER_STALL_RPM under the torque the engine makes at its rated power (rated power over
 # RATED_SPEED_RADPS, a proxy of its torque level known from the record), the middle of the 2,000-2,800 rpm
@@ -102,12 +107,13 @@ def top_gear_total_ratio(nv_ratio: float, wheel_radius: float = WHEEL_RADIUS_M) 
 
 
 def gear_ratios(rec: VehicleRecord) -> tuple[list[float], float]:
-    """(gearbox ratios gear 1 first, final drive) by the documented defaults."""
+    """(gearbox ratios gear 1 first, final drive) by the documented defaults; a CVT's are its range
+    [launch, overdrive]."""
     i_top = top_gear_total_ratio(rec.nv_ratio)
     final = rec.axle_ratio if math.isfinite(rec.axle_ratio) else i_top / DEFAULT_TOP_GEAR
     top = i_top / final
-    if rec.transmission_kind == "cvt":
-        n, spread = CVT_VIRTUAL_GEARS, CVT_SPREAD
+    if rec.transmission_kind == "cvt":  # its range [launch, overdrive] (transmission.cvt_ratio_step)
+        n, spread = 2, CVT_SPREAD
     else:
         n = rec.n_gears
         spread = RATIO_SPREAD.get(n, 7.0)
@@ -156,7 +162,8 @@ def converter_fields(rec: VehicleRecord) -> dict:
     w_stall = CONVERTER_STALL_RPM * math.pi / 30.0
     return {
         "converter_capacity_factor": w_stall / math.sqrt(rated / RATED_SPEED_RADPS),
-        "lockup_min_gear": LOCKUP_MIN_GEAR,
+        # a CVT locks by speed alone (its gear numbers are points of its ratio grid)
+        "lockup_min_gear": 1 if rec.transmission_kind == "cvt" else LOCKUP_MIN_GEAR,
         "lockup_min_speed": LOCKUP_MIN_SPEED_KMH / 3.6,
     }
 
@@ -255,6 +262,7 @@ def record_parameters(
             "efficiency": TRANSMISSION_EFFICIENCY,
             "gearbox_ratios": ratios,
             "final_drive": final,
+            **({"cvt_ratio_step": CVT_RATIO_STEP} if rec.transmission_kind == "cvt" else {}),
             **(converter_fields(rec) if converter else {}),
         },
         "engine": engine,
@@ -364,7 +372,10 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         "simulation.fuel_cutoff_speed": "default: fuel cut on overrun above 1200 rpm (rad/s)",
         "vehicle.frontal_area": "default: nominal",
         "vehicle.wheel_radius": "default",
-        "transmission.gearbox_ratios": "top gear: record N/V; geometric, default spread",
+        "transmission.gearbox_ratios": "CVT range [launch, overdrive]: overdrive from N/V, default spread"
+        if rec.transmission_kind == "cvt"
+        else "top gear: record N/V; geometric, default spread",
+        "transmission.cvt_ratio_step": "default: the CVT's ratio chosen per second on a grid of 2 % steps",
         "transmission.final_drive": "record: axle ratio"
         if math.isfinite(rec.axle_ratio)
         else "default: N/V with a 0.70 top gear",
@@ -401,6 +412,7 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         (
             "transmission",
             ("efficiency", "gearbox_ratios", "final_drive")
+            + (("cvt_ratio_step",) if params.transmission.is_cvt else ())
             + (tuple(converter_fields(rec)) if params.transmission.converter_capacity_factor > 0 else ()),
         ),
         (
