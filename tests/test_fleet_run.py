@@ -211,6 +211,38 @@ def test_a_manual_gets_the_drivers_shift_point(tmp_path):
     assert fuel[1] > 1.05 * fuel[0]
 
 
+def test_the_vehicle_file_carries_the_fleets_gear_rule(tmp_path):
+    """``vpsim vehicle from-epa`` writes the rule the fleet shifts by, so ``vpsim simulate --vehicle`` derives
+    the fleet's schedule and fuel (an automatic, a manual with its shift point, a CVT)."""
+    from dataclasses import replace
+
+    import vpsim
+    from vpsim.fleet.cycles import fleet_cycle
+    from vpsim.fleet.epa import read_test_car_list
+    from vpsim.fleet.run import gear_rule
+    from vpsim.fleet.vehicle import record_parameters, vehicle_toml
+    from vpsim.gears import GearRule, default_schedule
+    from vpsim.params import load_parameters
+
+    cars = read_test_car_list(write_list(tmp_path / "a.csv"))
+    auto = next(v for v in cars.vehicles if v.transmission_kind == "automatic")
+    cyc = fleet_cycle("ftp_bag2")
+    for rec in (auto, replace(auto, transmission_kind="manual", transmission_code="M"), cars.find("T008")):
+        p = record_parameters(rec)
+        path = tmp_path / f"{rec.vehicle_id}-{rec.transmission_kind}.toml"
+        path.write_text(vehicle_toml(rec, p))
+        q = load_parameters(path)
+        rule, fleet_rule = GearRule.of(q), gear_rule(rec)  # (the file rounds to 6 significant digits)
+        assert rule.min_engine_speed == fleet_rule.min_engine_speed
+        point = fleet_rule.upshift_engine_speed or 0.0
+        assert (rule.upshift_engine_speed or 0.0) == pytest.approx(point, rel=1e-5)
+        fleet = default_schedule(cyc, p, None, rule=gear_rule(rec))
+        np.testing.assert_array_equal(default_schedule(cyc, q, None).gear, fleet.gear)
+        r = vpsim.simulate(cyc, "backward", q)  # the default schedule: the file's rule
+        assert r.fuel_kg == pytest.approx(vpsim.simulate(cyc, "backward", q, gears=fleet).fuel_kg, rel=1e-12)
+    assert GearRule.of(load_parameters("hofman2011")) == GearRule()  # the preset: the documented 200 rad/s
+
+
 def test_automatics_and_cvts_get_a_converter_manuals_and_dcts_none(tmp_path):
     """The converter follows the transmission type; ``converter=False`` leaves it out."""
     from dataclasses import replace

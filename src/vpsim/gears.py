@@ -102,6 +102,14 @@ class GearRule:
         if w is not None and not (math.isfinite(w) and w > 0):
             raise CycleError(f"gear rule: upshift_engine_speed must be a positive speed in rad/s, got {w!r}")
 
+    @classmethod
+    def of(cls, params) -> GearRule:
+        """The rule a parameter set asks for: ``transmission.shift_engine_speed`` (rule 3) and
+        ``transmission.shift_point_engine_speed`` (rule 4, 0: none); the other settings the defaults."""
+        tr = params.transmission
+        point = tr.shift_point_engine_speed
+        return cls(min_engine_speed=tr.shift_engine_speed, upshift_engine_speed=point if point > 0 else None)
+
 
 def interval_demand(cycle: Cycle, ratio, params):
     """Mean speed, acceleration, engine speed and crank torque on each interval for total ratio(s) ``ratio``.
@@ -124,7 +132,8 @@ def interval_demand(cycle: Cycle, ratio, params):
 
 
 def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | None = None) -> GearSchedule:
-    """Derive the gear schedule of ``cycle`` once, by the documented rule (module docstring).
+    """Derive the gear schedule of ``cycle`` once, by the documented rule (module docstring): ``rule``, or
+    the one ``params`` sets (:meth:`GearRule.of`: the preset's is the documented 200 rad/s).
 
     The rule looks at every interval's demand; a coarse or gappy trace is first subdivided to 1 s steps
     (its piecewise-linear speed unchanged), so its schedule is the one of the same trace sampled at 1 Hz.
@@ -135,7 +144,7 @@ def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | Non
     t_fine, v_fine, original = subdivide(cycle.time_s, cycle.speed_mps, RULE_STEP_S)
     if original is not None:
         cycle = Cycle(cycle.name, t_fine, v_fine, source=cycle.source)
-    rule = rule or GearRule()
+    rule = rule or GearRule.of(params)
     ratios = np.asarray(params.transmission.ratios)
     n_g = len(ratios)
     _, a, w_e, _, t_cr, _ = interval_demand(cycle, ratios[:, None], params)  # shape (gears, intervals)

@@ -77,6 +77,11 @@ class Transmission:
     # interval from a geometric grid over the range whose neighbours differ by at most this fraction
     # (gearbox_steps); 0: a stepped gearbox, gearbox_ratios are its gears
     cvt_ratio_step: float = 0.0
+    # the gear rule (vpsim.gears.default_schedule) of a schedule not given: shift up once the next gear keeps
+    # the engine at or above this speed (rad/s; rule 3) and, with a shift point > 0, while accelerating leave
+    # a gear only once the engine in it has reached that speed (rad/s; rule 4, a manual's driver)
+    shift_engine_speed: float = 200.0
+    shift_point_engine_speed: float = 0.0
 
     @property
     def is_cvt(self) -> bool:
@@ -251,6 +256,8 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "transmission.converter_coupling_speed_ratio": (0.5, 0.99, True),
     "transmission.lockup_min_speed": (0.0, 100.0, True),
     "transmission.cvt_ratio_step": (0.0, 0.2, True),
+    "transmission.shift_engine_speed": (20.0, 1000.0, True),
+    "transmission.shift_point_engine_speed": (0.0, 1000.0, True),
     "engine.bore": (0.02, 0.5, False),
     "engine.stroke": (0.02, 0.5, False),
     "engine.inertia": (0.0, 50.0, False),

@@ -136,6 +136,8 @@ FIELD_DIMENSIONS: dict[str, str] = {
     "transmission.gearbox_ratios": "dimensionless",
     "transmission.final_drive": "dimensionless",
     "transmission.cvt_ratio_step": "fraction",
+    "transmission.shift_engine_speed": "angular_speed",
+    "transmission.shift_point_engine_speed": "angular_speed",
     "engine.bore": "length",
     "engine.stroke": "length",
     "engine.cylinders": "count",

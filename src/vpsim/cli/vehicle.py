@@ -56,8 +56,15 @@ def from_epa(file, vehicle_id, config, out, technology):
     text = vehicle_toml(rec, params, source=Path(file).name, technology_note=note)
     Path(out).write_text(text)
     meas = ", ".join(f"{c} {v:.1f} mpg" for c, v in rec.measured_mpg.items())
+    tr = params.transmission
+    box = (
+        f"CVT {tr.gearbox_ratios[0]:.3g}-{tr.gearbox_ratios[1]:.3g} ({tr.n_gears} ratios, steps of "
+        f"{tr.cvt_ratio_step:.0%})"
+        if tr.is_cvt
+        else f"{rec.transmission_kind} {tr.n_gears} ratios"
+    )
+    engine = f"{rec.displacement_l:g} L {rec.cylinders} cyl. {'boosted' if rec.boosted else 'NA'}"
     click.echo(
-        f"wrote {out}: {rec.make} {rec.model} ({rec.key}), {rec.mass_kg:.0f} kg, {rec.displacement_l:g} L "
-        f"{rec.cylinders} cyl. {'boosted' if rec.boosted else 'NA'}, {rec.transmission_kind} "
-        f"{params.transmission.n_gears} ratios; measured {meas or 'nothing usable'}"
+        f"wrote {out}: {rec.make} {rec.model} ({rec.key}), {rec.mass_kg:.0f} kg, {engine}, {box}; "
+        f"measured {meas or 'nothing usable'}"
     )

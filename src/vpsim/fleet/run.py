@@ -8,7 +8,8 @@ Steps (:mod:`vpsim.fleet.calibrate` explains the calibration):
 1. read the list (:func:`vpsim.fleet.epa.read_test_car_list`); fold per vehicle;
 2. per vehicle and cycle: its parameters (road load folded over *that* cycle's speeds), its gear schedule
    (the documented rule of :func:`vpsim.gears.default_schedule` with an earlier upshift,
-   :data:`GEAR_RULE`, and for a manual a driver's shift point, :data:`MANUAL_GEAR_RULE`; derived once with
+   :data:`~vpsim.fleet.vehicle.GEAR_RULE`, and for a manual a driver's shift point,
+   :data:`~vpsim.fleet.vehicle.MANUAL_GEAR_RULE`, which the vehicle's parameters carry; derived once with
    the preset technology and then kept for every technology value, as a sweep keeps the shifts), and the
    backward method over the technology grid in one :func:`vpsim.batch.run_batch` call (extended mode:
    clutch, idle, brakes);
@@ -33,36 +34,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import VpsimError
-from ..gears import GearRule
 from . import calibrate as cal
 from .cycles import FLEET_CYCLES, fleet_cycle
 from .epa import TestCarList, VehicleRecord, mpg_from_l_per_100km, read_test_car_list
+from .vehicle import GEAR_RULE, MANUAL_GEAR_RULE, MANUAL_SHIFT_RPM, gear_rule  # noqa: F401 (the fleet's rules)
 
 METHODS = ("backward", "forward")
 MODE = "extended"
 CHUNK = 64  # vehicles per unit of work
-# The documented rule of vpsim.gears with an earlier upshift: modern automatics keep the engine near
-# 1200-1500 rpm on the FTP; the paper's 200 rad/s (1900 rpm) is a 1990s manual driven briskly. Out-of-fold
-# median |error| on the first 300 vehicles of the 2022 list (bag 2 / bag 3 / HWY): 200 rad/s
-# 10.0 / 8.1 / 6.3 %; 140 rad/s 9.3 / 7.3 / 4.7 %; 130 rad/s (1240 rpm, with the friction grid up to 2.9)
-# 10.1 / 6.7 / 4.4 %.
-GEAR_RULE = GearRule(min_engine_speed=130.0)
-# A manual is tested with the shift points the manufacturer recommends to the buyer (40 CFR 86.128-79: the
-# test follows the manufacturer's recommendations), a driver's shift points: owner's manuals list upshift
-# vehicle speeds "for acceleration" and allow earlier upshifts at steady speed. The record does not carry
-# them; the rule takes a shift point in engine speed, 2500 rpm, the middle of the 2000-3000 rpm band of
-# economical upshifts that driving guidance gives (the classic 15/25/40/45 mph table shifts a typical
-# 5-speed at 2800-3300 rpm). In cruise and deceleration the automatics' rule applies.
-MANUAL_SHIFT_RPM = 2500.0
-MANUAL_GEAR_RULE = GearRule(min_engine_speed=130.0, upshift_engine_speed=MANUAL_SHIFT_RPM * math.pi / 30.0)
-
-
-def gear_rule(rec: VehicleRecord) -> GearRule:
-    """The shift rule of a record's transmission type: a driver's shift points for a manual, else
-    :data:`GEAR_RULE` (automatics, automated manuals / DCTs and CVTs shift by their controller)."""
-    return MANUAL_GEAR_RULE if rec.transmission_kind == "manual" else GEAR_RULE
-
-
 FORWARD_DRIVER = "2"  # the stiffer preset PI driver (a = 1 s): the test driver follows the trace closely
 
 
@@ -133,7 +112,7 @@ def _grid_chunk(items: list[tuple[VehicleRecord, tuple[str, ...]]]) -> list[dict
             try:
                 cyc = fleet_cycle(name)
                 p = record_parameters(rec, [cyc])
-                sched = default_schedule(cyc, p, None, rule=gear_rule(rec))
+                sched = default_schedule(cyc, p, None)  # the vehicle's own rule (vehicle.gear_rule)
                 df = run_batch(cyc, variants, method="backward", params=p, mode=MODE, gears=sched)
                 fuel = df["fuel_l_per_100km"].to_numpy()
                 if not np.all(np.isfinite(fuel) & (fuel > 0)):
