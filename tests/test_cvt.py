@@ -139,3 +139,18 @@ def test_batch_on_a_cvt_equals_single_runs_and_refuses_to_vary_its_grid(cvt):
         with pytest.raises(ParameterError, match="ratio grid of a CVT"):
             run_batch(c, {name: [0.4, 0.5]}, method="backward", params=cvt)
     assert math.isfinite(df["fuel_kg"].sum())
+
+
+def test_results_show_a_cvts_ratio(cvt, params):
+    """Every method's series carry the gearbox ratio engaged; a CVT's plot shows it (its gear numbers are
+    grid points), a stepped gearbox's the gear."""
+    c = load_cycle("udds")
+    for method in ("backward", "forward", "inverse"):
+        df = vpsim.simulate(c, method, cvt).to_dataframe()
+        steps = np.asarray(cvt.transmission.gearbox_steps)
+        np.testing.assert_array_equal(df["gearbox_ratio"], steps[df["gear"] - 1])
+        assert df["gearbox_ratio"].between(0.4 - 1e-12, 2.6).all()
+    fig = vpsim.simulate(c, "backward", cvt).plot()
+    assert fig.axes[1].get_ylabel() == "gearbox ratio"
+    fig = vpsim.simulate(c, "backward", params).plot()
+    assert fig.axes[1].get_ylabel() == "gear"

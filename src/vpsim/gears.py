@@ -77,6 +77,12 @@ class GearSchedule:
         return self.time_s[1:][np.diff(self.gear) != 0]
 
 
+def gearbox_ratio_series(params, gear) -> np.ndarray:
+    """The gearbox ratio engaged for gear numbers ``gear`` (1-based; a CVT's grid point), for the series."""
+    steps = np.asarray(params.transmission.gearbox_steps, dtype=float)
+    return steps[np.clip(np.asarray(gear, dtype=np.int64), 1, steps.size) - 1]
+
+
 RULE_STEP_S = 1.0  # longest interval the gear rule looks at (longer ones are subdivided)
 FULL_LOAD_NODES = 2048  # speeds at which the rule evaluates the full-load line for a CVT's grid
 

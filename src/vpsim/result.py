@@ -21,6 +21,7 @@ SERIES = {
     "speed_mps": "m/s",
     "accel_mps2": "m/s^2",
     "gear": "-",
+    "gearbox_ratio": "-",
     "engine_speed_radps": "rad/s",
     "crank_torque_nm": "N m",
     "engine_torque_nm": "N m",
@@ -128,6 +129,7 @@ class TraceMiss:
 
 BAND_KMH = 2.0  # the regulations' speed tolerance (UN ECE R83 / EPA: +-2 km/h resp. +-2 mph)
 # the core columns every method's time series has (at the cycle's samples); methods add their own extras
+MAX_STEPPED_GEARS = 20  # gears of a stepped gearbox at most (the parameter check's limit)
 CORE_COLUMNS = tuple(SERIES) + ("torque_shortfall_nm", "clutch_engaged")
 
 
@@ -490,7 +492,10 @@ class Result:
         sel = np.ones(t.size, bool) if t_range is None else (t >= t_range[0]) & (t <= t_range[1])
         panels = [
             ("speed (km/h)", [("speed_mps", 3.6, self.method), ("reference_speed_mps", 3.6, "cycle")]),
-            ("gear", [("gear", 1, None)]),
+            # a CVT (more ratios than a stepped gearbox has gears): its ratio, not the grid point's number
+            ("gearbox ratio", [("gearbox_ratio", 1, None)])
+            if "gearbox_ratio" in df and df["gear"].nunique() > MAX_STEPPED_GEARS
+            else ("gear", [("gear", 1, None)]),
             ("engine speed (rad/s)", [("engine_speed_radps", 1, None)]),
             ("crank torque (N m)", [("crank_torque_nm", 1, None)]),
             ("intake pressure (kPa)", [("intake_pressure_pa", 1e-3, None)]),
@@ -523,7 +528,7 @@ class Result:
         for ax, (label, curves) in zip(axes, panels, strict=True):
             for key, scale, name in curves:
                 y = df[key].to_numpy(float)[sel] * scale
-                if key == "gear":
+                if key in ("gear", "gearbox_ratio"):
                     ax.plot(t[sel], y, lw=1, drawstyle="steps-post")
                 elif key == "reference_speed_mps":
                     ax.plot(t[sel], y, "k--", lw=0.8, label=name)

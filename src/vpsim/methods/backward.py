@@ -27,7 +27,7 @@ import time
 import numpy as np
 from numba import prange
 
-from ..gears import GearSchedule, default_schedule
+from ..gears import GearSchedule, default_schedule, gearbox_ratio_series
 from ..model import engine as en
 from ..model import rules
 from ..model import tables as tb
@@ -520,6 +520,7 @@ def _sample_series(cycle, params, rows, gear, generated) -> dict:
         "speed_mps": cycle.speed_mps,
         "accel_mps2": out[S_ACC],
         "gear": out[S_GEAR].astype(np.int64),
+        "gearbox_ratio": gearbox_ratio_series(params, out[S_GEAR]),
         "engine_speed_radps": out[S_W],
         "crank_torque_nm": out[S_TCR],
         "engine_torque_nm": out[S_TE],

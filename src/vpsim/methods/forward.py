@@ -72,7 +72,7 @@ from numba.extending import register_jitable
 
 from ..drivers.pi import PIDriver, pedal_split, pi_law
 from ..errors import VpsimError
-from ..gears import GearSchedule, default_schedule
+from ..gears import GearSchedule, default_schedule, gearbox_ratio_series
 from ..model import engine as en
 from ..model import rules
 from ..model import tables as tb
@@ -1983,12 +1983,14 @@ def run(
     series = {}
     if keep_series:
         x = out_aux
+        gear = schedule.on_cycle(cycle).copy() if on_samples else schedule.gear_at(out_t)
         series = {
             "time_s": out_t.copy(),
             "reference_speed_mps": v_ref,
             "speed_mps": v,
             "accel_mps2": x[:, _X_ACC],
-            "gear": schedule.on_cycle(cycle).copy() if on_samples else schedule.gear_at(out_t),
+            "gear": gear,
+            "gearbox_ratio": gearbox_ratio_series(params, gear),
             "engine_speed_radps": x[:, _X_W],
             "crank_torque_nm": x[:, _X_TCR],
             "engine_torque_nm": x[:, _X_TE],

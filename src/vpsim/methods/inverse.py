@@ -56,7 +56,7 @@ from ..cycles import Cycle
 from ..cycles.resample import subdivide
 from ..drivers.smoothing import SmoothingDriver, bump_kernel, bump_kernel_cdf, bump_kernel_moment
 from ..errors import VpsimError
-from ..gears import GearSchedule, default_schedule
+from ..gears import GearSchedule, default_schedule, gearbox_ratio_series
 from ..model import engine as en
 from ..model import rules
 from ..model import vehicle as vh
@@ -577,6 +577,7 @@ def run(
             "accel_mps2": dv[k],
             "jerk_mps3": ddv[k],
             "gear": gear_s,
+            "gearbox_ratio": gearbox_ratio_series(params, gear_s),
             "engine_speed_radps": rows[R_WENG, k],
             "crank_torque_nm": rows[R_TCR, k],
             "engine_torque_nm": extra[0],
