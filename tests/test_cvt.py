@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 import vpsim
 from vpsim.batch import run_batch
@@ -13,7 +15,7 @@ from vpsim.cycles import load_cycle
 from vpsim.gears import GearRule, default_schedule, interval_demand
 from vpsim.methods import backward
 from vpsim.model.maps import generate_engine_map, max_torque
-from vpsim.params import ParameterError, cvt_grid
+from vpsim.params import MAX_CVT_STEPS, ParameterError, cvt_grid
 
 RANGE = [2.6, 0.4]  # launch, overdrive (gearbox), spread 6.5
 
@@ -29,6 +31,29 @@ def test_grid_by_hand():
     assert len(g) == 96 and g[0] == 2.6 and g[-1] == pytest.approx(0.4, rel=1e-14)
     assert np.allclose(np.asarray(g[:-1]) / np.asarray(g[1:]), 1.0198991, rtol=1e-6)
     assert len(cvt_grid(2.0, 1.0, 0.5)) == 3  # 2, sqrt 2, 1: steps of 41 % <= 50 %
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    overdrive=st.floats(0.05, 5.0),
+    spread=st.floats(1.01, 20.0),
+    step=st.floats(0.005, 0.2),
+)
+def test_grid_properties(overdrive, spread, step):
+    """From launch to overdrive, falling, every step at most ``step`` and equal, and no point to spare: one
+    point fewer would need a larger step."""
+    launch = overdrive * spread
+    if math.log(spread) / math.log1p(step) + 1 > MAX_CVT_STEPS - 1:
+        with pytest.raises(ParameterError, match="more than 500"):
+            cvt_grid(launch, overdrive / 2, step)  # a range 2x wider: at least 3.8 points more
+        assume(False)
+    g = np.asarray(cvt_grid(launch, overdrive, step))
+    assert g[0] == launch and g[-1] == pytest.approx(overdrive, rel=1e-12)
+    r = g[:-1] / g[1:]
+    assert np.all(r > 1.0) and np.all(r <= 1.0 + step + 1e-12)
+    np.testing.assert_allclose(r, r[0], rtol=1e-9)
+    if g.size > 2:
+        assert spread ** (1.0 / (g.size - 2)) > 1.0 + step - 1e-9
 
 
 def test_total_ratios_and_gear_numbers(cvt):

@@ -116,7 +116,11 @@ def cvt_grid(launch: float, overdrive: float, step: float) -> tuple[float, ...]:
     if not (launch > overdrive > 0.0 and step > 0.0):
         return (float(launch),)
     n = max(2, math.ceil(math.log(launch / overdrive) / math.log1p(step) - 1e-9) + 1)
-    n = min(n, MAX_CVT_STEPS)
+    if n > MAX_CVT_STEPS:
+        raise ParameterError(
+            f"a CVT range {launch:g} / {overdrive:g} at steps of {step:g} needs {n} ratios, more than "
+            f"{MAX_CVT_STEPS}; take a larger cvt_ratio_step"
+        )
     return tuple(launch * (overdrive / launch) ** (k / (n - 1)) for k in range(n))
 
 
