@@ -113,24 +113,25 @@ def test_rule_keeps_the_lowest_engine_speed_that_carries_the_load(cvt):
 
 @pytest.mark.parametrize("cycle", ["udds", "hwfet"])
 def test_three_methods_agree_on_a_cvt(cvt, cycle):
-    """Backward, inverse and forward on one CVT car and its schedule: fuel within 1 % of each other, the
-    forward energy balance closed, the trace followed."""
+    """Backward, inverse and forward on one CVT car and its schedule: fuel within 0.5 % of each other
+    (measured: forward +0.22 / +0.09 %, inverse -0.34 / -0.13 % on UDDS / HWFET), both energy balances
+    closed to rounding (3e-15 measured), the trace followed (largest error 0.33 m/s on UDDS)."""
     c = load_cycle(cycle)
     sched = default_schedule(c, cvt)
     b = vpsim.simulate(c, "backward", cvt, gears=sched)
     f = vpsim.simulate(c, "forward", cvt, gears=sched)
     i = vpsim.simulate(c, "inverse", cvt, gears=sched)
     assert b.trace_miss.seconds == 0
-    assert f.fuel_kg == pytest.approx(b.fuel_kg, rel=0.01)
-    assert i.fuel_kg == pytest.approx(b.fuel_kg, rel=0.01)
-    assert f.energy.relative_residual < 1e-9
-    assert b.energy.relative_residual < 5e-3
-    assert f.trace_miss.max_speed_error_mps < 1.0
+    assert f.fuel_kg == pytest.approx(b.fuel_kg, rel=0.005)
+    assert i.fuel_kg == pytest.approx(b.fuel_kg, rel=0.005)
+    assert f.energy.relative_residual < 1e-12
+    assert b.energy.relative_residual < 1e-12
+    assert f.trace_miss.max_speed_error_mps < 0.5
 
 
 def test_a_cvt_beats_its_eight_ratio_twin_in_town(cvt):
     """The grid's finer ratios run the engine nearer the speed kept: less fuel on UDDS than 8 ratios over
-    the same range with the stepped rule's hold, by a margin physics makes plausible (0.5-10 %)."""
+    the same range with the stepped rule's hold: 6.5 % measured, asserted within 4-9 %."""
     c = load_cycle("udds")
     eight = cvt.with_changes(
         transmission={"gearbox_ratios": list(2.6 * 6.5 ** (-np.arange(8) / 7)), "cvt_ratio_step": 0.0}
@@ -138,7 +139,7 @@ def test_a_cvt_beats_its_eight_ratio_twin_in_town(cvt):
     rule = GearRule(min_engine_speed=130.0)
     f_cvt = vpsim.simulate(c, "backward", cvt, gears=default_schedule(c, cvt, rule=rule)).fuel_kg
     f_8 = vpsim.simulate(c, "backward", eight, gears=default_schedule(c, eight, rule=rule)).fuel_kg
-    assert 0.005 < 1 - f_cvt / f_8 < 0.10
+    assert 0.04 < 1 - f_cvt / f_8 < 0.09
 
 
 def test_batch_on_a_cvt_equals_single_runs_and_refuses_to_vary_its_grid(cvt):
@@ -172,8 +173,8 @@ def test_results_show_a_cvts_ratio(cvt, params):
     c = load_cycle("udds")
     for method in ("backward", "forward", "inverse"):
         df = vpsim.simulate(c, method, cvt).to_dataframe()
-        steps = np.asarray(cvt.transmission.gearbox_steps)
-        np.testing.assert_array_equal(df["gearbox_ratio"], steps[df["gear"] - 1])
+        by_hand = 2.6 * (0.4 / 2.6) ** ((df["gear"] - 1) / 95)  # the grid's formula, 96 points
+        np.testing.assert_allclose(df["gearbox_ratio"], by_hand, rtol=1e-13)
         assert df["gearbox_ratio"].between(0.4 - 1e-12, 2.6).all()
     fig = vpsim.simulate(c, "backward", cvt).plot()
     assert fig.axes[1].get_ylabel() == "gearbox ratio"
