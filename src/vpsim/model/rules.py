@@ -251,18 +251,14 @@ def converter_engine(p_i, w_e, w_t, share, fired, c):
     value): the switching value is w_e - idle above idle, else :func:`converter_margin_at_idle` (positive:
     the engine speeds up from idle)."""
     idle = c.idle_speed
-    if w_e > idle:
-        w = w_e
-        sw = w_e - idle
-    else:
-        w = idle
-        sw = converter_margin_at_idle(p_i, w_t, share, fired, c)
+    w = w_e if w_e > idle else idle
     t_p = share * vh.converter_pump_torque(w, w_t, c)
     t_t = vh.converter_torque_ratio(w_t / w, c) * t_p
+    net = en.fired_crank_torque(p_i, w, fired, c) - en.accessory_torque(w, c) - t_p
+    sw = w_e - idle if w_e > idle else net  # at idle: converter_margin_at_idle, the same terms
     if sw <= 0.0:
         return w, t_p, t_t, 0.0, True, sw
-    t_cr = en.fired_crank_torque(p_i, w, fired, c)
-    return w, t_p, t_t, (t_cr - en.accessory_torque(w, c) - t_p) / c.inertia, False, sw
+    return w, t_p, t_t, net / c.inertia, False, sw
 
 
 @inline
