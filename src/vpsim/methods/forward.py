@@ -1034,7 +1034,7 @@ def _locate(k, t, h, ga, gb, y, ynew, f0, f1, ytmp, G, c, D, tab_t, tab_v):
     return t + b * h, n
 
 
-@kernel(_nrt=False)  # nogil: vpsim.batch runs variants on threads
+@kernel(_nrt=False, fastmath={"contract"})  # nogil: vpsim.batch runs variants on threads
 def _integrate_ros(
     seg_t,
     seg_ratio,
