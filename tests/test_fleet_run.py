@@ -13,7 +13,8 @@ from vpsim.cli.main import main
 from vpsim.fleet import calibrate as cal
 from vpsim.fleet.report import CSV_COLUMNS, FIGURES, STAT_KEYS, SUMMARY_KEYS
 from vpsim.fleet.run import run_fleet
-from vpsim.fleet.vehicle import read_record_block
+from vpsim.fleet.vehicle import ACCESSORY_POWER_W, read_record_block
+from vpsim.params import load_parameters
 
 
 def test_folds_are_deterministic_and_balanced():
@@ -39,6 +40,35 @@ def test_fit_recovers_the_technology_of_a_synthetic_fleet():
     assert -np.log(params[cal.TECH_PARAMS[0]]) + 0.2 * params[cal.TECH_PARAMS[1]] == pytest.approx(
         -np.log(0.42) + 0.14, abs=2e-3
     )
+
+
+def test_fit_recovers_the_accessory_power_of_a_synthetic_fleet():
+    """Fuel = (work + xi friction + (P - P_grid) duration / LHV) / eta: the fit finds P, eta and xi."""
+    from vpsim.fleet.vehicle import ACCESSORY_POWER_W as P0
+
+    # by hand: s / (J/kg x kg/L) per 100 km
+    assert cal.fuel_per_watt(866, 6211) == pytest.approx(866 / (42.9e6 * 0.743) / 0.06211, rel=1e-12)
+    rng = np.random.default_rng(3)
+    n = 60
+    work = rng.uniform(1.0, 6.0, n)[:, None, None]  # L/100 km at eta = 1, each vehicle and cycle its own
+    friction = rng.uniform(0.1, 1.0, n)[:, None, None]  # L/100 km per unit of xi at eta = 1
+    # FTP bag 2 (866 s, 6.2 km) or HWY (765 s, 16.5 km) rows
+    per_watt = np.where(rng.random(n) < 0.5, cal.fuel_per_watt(866, 6211), cal.fuel_per_watt(765, 16507))
+
+    def fuel(eta, xi, power):
+        return (work + friction * xi + (power - P0) * per_watt[:, None, None]) / eta
+
+    e, f = np.meshgrid(cal.GRID[0], cal.GRID[1], indexing="ij")
+    grid = np.log(fuel(e[None], f[None], P0))
+    meas = np.log(fuel(0.42, 0.7, 900.0))[:, 0, 0]
+    params, loss = cal.fit(grid, meas, per_watt)
+    assert params[cal.TECH_PARAMS[2]] == pytest.approx(900.0, abs=25.0)
+    assert params[cal.TECH_PARAMS[0]] == pytest.approx(0.42, abs=0.01)
+    assert params[cal.TECH_PARAMS[1]] == pytest.approx(0.7, abs=0.1)
+    assert loss < 5e-3  # the interpolation between the nodes: here ln fuel is not linear in xi
+    # without per_watt the accessories stay at the grid's power, and the fit is worse
+    params0, loss0 = cal.fit(grid, meas)
+    assert params0[cal.TECH_PARAMS[2]] == P0 and loss0 > 3 * loss
 
 
 def _rows(df):
@@ -138,6 +168,34 @@ def test_fleet_cli_on_a_made_up_list(tmp_path, capsys):
     assert s["cycles"]["us06"]["n"] == 5 and s["cycles"]["ftp_bag2"]["n"] == 12
     assert (df["status"] != "failed").all()
     assert np.isfinite(df["error_pct"]).all()
+    # the fitted technology, accessories included, goes into a vehicle file; an older technology.json
+    # without the accessories keeps the default; a file that is none gives one line
+    tech = json.loads((out / "technology.json").read_text())
+    fit = tech["all_vehicles"]["boosted"]
+    car = tmp_path / "car.toml"
+    args = ["vehicle", "from-epa", str(lst), "--id", "T004", "--out", str(car)]
+    assert main([*args, "--technology", str(out / "technology.json")]) == 0
+    p = load_parameters(car)
+    assert p.engine.accessory_power == fit["engine.accessory_power"]
+    assert p.engine.thermal_efficiency == pytest.approx(fit["engine.thermal_efficiency"], rel=1e-9)
+    assert {f"engine.{c}" for c in ("thermal_efficiency", "friction_coefficient", "accessory_power")} == set(
+        cal.TECH_PARAMS
+    )
+    assert df["accessory_power_w"].between(cal.ACCESSORY_AXIS[0], cal.ACCESSORY_AXIS[-1]).all()
+    old = {
+        "all_vehicles": {
+            c: {k: v for k, v in t.items() if k != "engine.accessory_power"}
+            for c, t in tech["all_vehicles"].items()
+        }
+    }
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    assert main([*args, "--technology", str(tmp_path / "old.json")]) == 0
+    assert load_parameters(car).engine.accessory_power == ACCESSORY_POWER_W
+    (tmp_path / "bad.json").write_text("{}")
+    capsys.readouterr()
+    assert main([*args, "--technology", str(tmp_path / "bad.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a technology.json" in err
 
 
 def test_fleet_cli_bad_options_are_one_line(tmp_path, capsys):

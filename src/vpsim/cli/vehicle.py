@@ -36,7 +36,7 @@ def vehicle():
 )
 def from_epa(file, vehicle_id, config, out, technology):
     """Write the parameters of test vehicle --id of the EPA test car list FILE as an editable TOML."""
-    from ..fleet.calibrate import vehicle_class
+    from ..fleet.calibrate import TECH_PARAMS, vehicle_class
     from ..fleet.epa import read_test_car_list
     from ..fleet.vehicle import record_parameters, vehicle_toml
 
@@ -48,7 +48,8 @@ def from_epa(file, vehicle_id, config, out, technology):
             data = json.loads(Path(technology).read_text())
             cls = vehicle_class(rec)
             fit = data["all_vehicles"][cls]
-            tech = {k: float(fit[k]) for k in ("engine.thermal_efficiency", "engine.friction_coefficient")}
+            # (a technology.json written before the accessories were fitted has no accessory power)
+            tech = {k: float(fit[k]) for k in TECH_PARAMS if k in fit or k != "engine.accessory_power"}
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise VpsimError(f"{technology}: not a technology.json of vpsim fleet ({exc})") from None
         note = f"fleet fit ({cls} class, all vehicles) from {Path(technology).name}"

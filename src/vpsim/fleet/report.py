@@ -90,7 +90,7 @@ def run_info(run) -> dict:
         "method": run.method,
         "mode": "extended",
         "folds": run.folds,
-        "technology_parameters": ["engine.thermal_efficiency", "engine.friction_coefficient"],
+        "technology_parameters": list(cal.TECH_PARAMS),
         "technology_classes": list(cal.CLASSES),
         "input": str(run.cars.path),
         "n_test_rows": run.cars.n_rows,
@@ -556,7 +556,8 @@ def markdown(run, s, info, df, w, command: str) -> str:
         "# Fleet: predicted against measured fuel economy",
         "",
         f"Input: `{Path(run.cars.path).name}` ({info['n_test_rows']} test rows). Method: **{run.method}**, "
-        "extended mode; technology (`engine.thermal_efficiency`, `engine.friction_coefficient` per class: "
+        "extended mode; technology (`engine.thermal_efficiency`, `engine.friction_coefficient`, "
+        "`engine.accessory_power` per class: "
         f"aspirated, boosted, high-output above {cal.HIGH_OUTPUT_KW_PER_L:g} kW/L) "
         f"fitted by {run.folds}-fold cross-validation by vehicle: **every error below is out of fold**.",
     ]
@@ -622,13 +623,13 @@ def markdown(run, s, info, df, w, command: str) -> str:
         "",
         "## Technology fitted (out of fold)",
         "",
-        "| fold.class | thermal efficiency | friction coefficient | training rows | basis |",
-        "|---|---|---|---|---|",
+        "| fold.class | thermal efficiency | friction coefficient | accessories, W | training rows | basis |",
+        "|---|---|---|---|---|---|",
     ]
     for k, t in run.technology.items():
         L.append(
             f"| {k} | {t['engine.thermal_efficiency']:.3f} | {t['engine.friction_coefficient']:.3f} | "
-            f"{t['n_train']} | {t['basis']} |"
+            f"{t['engine.accessory_power']:.0f} | {t['n_train']} | {t['basis']} |"
         )
     L += [
         "",

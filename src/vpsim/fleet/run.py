@@ -308,8 +308,9 @@ def run_fleet(
         meas = np.array([_log_l100(by_key[r["key"]].measured_mpg[r["cycle"]]) for r in ok])
         vfold = np.array([fold_of[r["key"]] for r in ok])
         vclass = np.array([_vehicle_class(by_key[r["key"]]) for r in ok])
-        tech = cal.cross_validate(lg, meas, vfold, vclass, folds)
-        tech_all = cal.fit_all(lg, meas, vclass)
+        per_watt = np.array([_fuel_per_watt(r["cycle"]) for r in ok])
+        tech = cal.cross_validate(lg, meas, vfold, vclass, folds, per_watt)
+        tech_all = cal.fit_all(lg, meas, vclass, per_watt)
         # 4. predictions at each vehicle's out-of-fold technology
         t0 = time.perf_counter()
         failed_grid = {(r["key"], r["cycle"]): r["error"] for r in grid_rows if r["log_fuel"] is None}
@@ -375,6 +376,14 @@ def run_fleet(
     )
 
 
+def _fuel_per_watt(name: str) -> float:
+    """:func:`vpsim.fleet.calibrate.fuel_per_watt` of fleet cycle ``name``."""
+    cyc = fleet_cycle(name)
+    t, v = cyc.time_s, cyc.speed_mps
+    distance = float(np.sum(np.diff(t) * 0.5 * (v[1:] + v[:-1])))
+    return cal.fuel_per_watt(float(t[-1] - t[0]), distance)
+
+
 def _log_l100(mpg: float) -> float:
     return math.log(mpg_from_l_per_100km(mpg))  # the same conversion both ways: L/100 km = 235.2 / mpg
 
@@ -406,6 +415,7 @@ def _row(
         "technology_class": _vehicle_class(v),
         "thermal_efficiency": t[cal.TECH_PARAMS[0]],
         "friction_coefficient": t[cal.TECH_PARAMS[1]],
+        "accessory_power_w": t[cal.TECH_PARAMS[2]],
         "trace_miss_s": math.nan,
         "detail": "",
     }

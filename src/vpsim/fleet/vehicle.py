@@ -9,7 +9,8 @@ Mapping (record units -> SI; every default below is a module constant, documente
   m g c_r + 1/2 rho C_d A_f). c_r and C_d are still written (the curve folded by least squares over the
   cycles' speeds, with the nominal :data:`FRONTAL_AREA_M2` and :data:`AIR_DENSITY`): they are what the peer
   (FASTSim, which knows only that form) runs with.
-* **accessories**: :data:`ACCESSORY_POWER_W` on the crank while the engine runs (``engine.accessory_power``).
+* **accessories**: :data:`ACCESSORY_POWER_W` on the crank while the engine runs (``engine.accessory_power``)
+  before calibration; the fleet calibration fits it per technology class (below).
 * **fuel cut-off in overrun** above :data:`FUEL_CUTOFF_SPEED_RADPS` (``simulation.fuel_cutoff_speed``).
 * **engine**: displacement V_d and cylinders z give bore and stroke with the stroke/bore ratio
   :data:`STROKE_BORE_RATIO`: B = (4 V_d / (pi z k))^(1/3), S = k B; the rest of the engine is the preset
@@ -28,10 +29,10 @@ Mapping (record units -> SI; every default below is a module constant, documente
   without a minimum hold), and its lock-up clutch closes by speed alone.
 * **fuel**: the gasoline certification fuel, density :data:`FUEL_DENSITY_KG_PER_L`, lower heating value
   :data:`FUEL_LHV_J_PER_KG`.
-* **technology** (global, not per vehicle): ``engine.thermal_efficiency`` and
-  ``engine.friction_coefficient`` come from the fleet calibration (:mod:`vpsim.fleet.calibrate`) per
+* **technology** (global, not per vehicle): ``engine.thermal_efficiency``, ``engine.friction_coefficient``
+  and ``engine.accessory_power`` come from the fleet calibration (:mod:`vpsim.fleet.calibrate`) per
   technology class (aspirated, boosted, high-output: :func:`vpsim.fleet.calibrate.vehicle_class`), or the
-  preset's values.
+  preset's values (the accessories: :data:`ACCESSORY_POWER_W`).
 """
 
 from __future__ import annotations
@@ -396,7 +397,6 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         "vehicle.road_load_a": "record: target coast-down A (N)",
         "vehicle.road_load_b": "record: target coast-down B (N per m/s)",
         "vehicle.road_load_c": "record: target coast-down C (N per (m/s)^2)",
-        "engine.accessory_power": "default: alternator base load (W)",
         "engine.boost_pressure": "boosted: the boost of the rated power at 5500 rpm (Pa); 0: aspirated",
         "engine.rated_power": "record: rated power (W), caps the full-load line",
         "engine.boost_enrichment": "boosted: extra fuel at full boost (lambda 0.87); 0: aspirated",
@@ -422,6 +422,7 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         "engine.bore": f"record: {rec.displacement_l:g} L, {rec.cylinders} cyl., S/B {STROKE_BORE_RATIO}",
         "engine.thermal_efficiency": technology_note or "preset",
         "engine.friction_coefficient": technology_note or "preset",
+        "engine.accessory_power": technology_note or "default: alternator base load (W)",
         "simulation.idle_fuel_flow": f"default: {IDLE_FUEL_L_PER_H_PER_L:.4g} L/h per litre, warm idle "
         "without load (Argonne), plus the accessories' share (kg/s)",
         "simulation.fuel_density": "Tier 2 certification gasoline",
