@@ -308,7 +308,8 @@ def run_fleet(
         meas = np.array([_log_l100(by_key[r["key"]].measured_mpg[r["cycle"]]) for r in ok])
         vfold = np.array([fold_of[r["key"]] for r in ok])
         vclass = np.array([_vehicle_class(by_key[r["key"]]) for r in ok])
-        per_watt = np.array([_fuel_per_watt(r["cycle"]) for r in ok])
+        fpw = {c: cal.fuel_per_watt(fleet_cycle(c).duration_s, fleet_cycle(c).distance_m) for c in cycles}
+        per_watt = np.array([fpw[r["cycle"]] for r in ok])
         tech = cal.cross_validate(lg, meas, vfold, vclass, folds, per_watt)
         tech_all = cal.fit_all(lg, meas, vclass, per_watt)
         # 4. predictions at each vehicle's out-of-fold technology
@@ -374,14 +375,6 @@ def run_fleet(
     return FleetRun(
         rows, cars, cycles, folds, method, technology, tech_all, timings, executor.name, peer_state
     )
-
-
-def _fuel_per_watt(name: str) -> float:
-    """:func:`vpsim.fleet.calibrate.fuel_per_watt` of fleet cycle ``name``."""
-    cyc = fleet_cycle(name)
-    t, v = cyc.time_s, cyc.speed_mps
-    distance = float(np.sum(np.diff(t) * 0.5 * (v[1:] + v[:-1])))
-    return cal.fuel_per_watt(float(t[-1] - t[0]), distance)
 
 
 def _log_l100(mpg: float) -> float:
