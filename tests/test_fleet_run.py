@@ -326,6 +326,37 @@ def test_automatics_and_cvts_get_a_converter_manuals_and_dcts_none(tmp_path):
         assert converter_fields(replace(auto, transmission_kind=kind)) == {}
 
 
+def test_between_manufacturers_by_hand():
+    """Errors that are exactly one offset per manufacturer: the correction in sample removes them all; out
+    of fold it removes those of a manufacturer with vehicles in another fold, and leaves the one whose
+    vehicles are all in one fold (no correction from the other folds)."""
+    from vpsim.fleet.report import between_manufacturers
+
+    maker = ["A", "A", "A", "B", "B", "C"]
+    fold = [0, 1, 2, 0, 1, 0]
+    off = {"A": 10.0, "B": -20.0, "C": 30.0}
+    df = pd.DataFrame(
+        {
+            "manufacturer": maker,
+            "fold": fold,
+            "cycle": "hwy",
+            "error_pct": [off[m] for m in maker],
+        }
+    )
+    r = between_manufacturers(df)["hwy"]
+    assert r["manufacturers"] == 3
+    assert r["in_sample"]["p90_abs_error_pct"] == pytest.approx(0.0, abs=1e-9)
+    # out of fold: A and B corrected exactly, C (fold 0 only) keeps its +30 %
+    assert r["out_of_fold"]["median_abs_error_pct"] == pytest.approx(0.0, abs=1e-9)
+    assert r["out_of_fold"]["p90_abs_error_pct"] == pytest.approx(0.5 * 30.0, abs=1e-9)  # 5 zeros, one 30
+    # ratios, not differences: +10 % and +21 % on two vehicles of one maker; their median ratio is the
+    # geometric mean sqrt(1.1 x 1.21) = 1.15369, which leaves 1.1 / 1.15369 - 1 = -4.654 % and
+    # 1.21 / 1.15369 - 1 = +4.881 %: median |error| 4.767 %
+    two = pd.DataFrame({"manufacturer": "A", "fold": [0, 1], "cycle": "hwy", "error_pct": [10.0, 21.0]})
+    left = between_manufacturers(two)["hwy"]["in_sample"]
+    assert left["median_abs_error_pct"] == pytest.approx(4.767, abs=1e-3)
+
+
 def test_repeatability_of_twins_by_hand():
     """Two groups of vehicles equal in every model input, one vehicle alone: the best single prediction per
     group is its geometric mean (sqrt(20.8 x 12.9) = 16.38; (30 x 31 x 36)^(1/3) = 32.23 mpg)."""
@@ -404,6 +435,10 @@ def test_fleet_reports_twins_the_record_cannot_tell_apart(tmp_path, capsys):
     assert rep["ftp_bag2"]["widest_group"]["spread_pct"] == pytest.approx(30.0, abs=0.2)
     report = (out / "report.md").read_text()
     assert "## How repeatable the record is" in report
+    bm = json.loads((out / "run.json").read_text())["between_manufacturers"]
+    assert set(bm) == {"ftp_bag2", "hwy"} and bm["hwy"]["manufacturers"] >= 1
+    assert all(bm["hwy"][k]["p90_abs_error_pct"] >= 0.0 for k in ("in_sample", "out_of_fold"))
+    assert "## How much of the error lies between manufacturers" in report
     # 13 vehicles, all among the 20 worst: each named against the other, 1.3 - 1 = +30 %, 1 / 1.3 - 1 = -23 %
     assert "measured 30 % above a twin with the same record inputs" in report
     assert "measured 23 % below a twin with the same record inputs" in report

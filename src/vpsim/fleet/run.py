@@ -390,6 +390,7 @@ def _row(
         "configuration": v.configuration,
         "make": v.make,
         "model": v.model,
+        "manufacturer": v.manufacturer,
         "cycle": cycle,
         "measured_mpg": round(v.measured_mpg[cycle], 4),
         "predicted_mpg": math.nan,
