@@ -39,6 +39,16 @@ def test_simulate_json_backward(capsys):
     assert d["steps"] == 1180 and d["trace_miss_s"] == 0
 
 
+def test_simulate_runs_an_ftp_bag_by_name(capsys):
+    """The fleet's cycles are cycles of `vpsim simulate` too: bag 2 of FTP-75 is UDDS 505-1369 s, 3.86 mi
+    (EPA's FTP description: 7.45 mi in all, bag 1 3.59 mi), and its fuel is what the bag's samples give."""
+    code, out, err = run(capsys, "simulate", "--cycle", "ftp_bag2", "--method", "backward", "--json")
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["cycle"] == "ftp_bag2" and d["steps"] == 864
+    assert d["distance_km"] == pytest.approx(3.86 * 1.609344, abs=0.01)
+
+
 def test_simulate_text_and_out(capsys, tmp_path):
     code, out, _ = run(capsys, "simulate", "--cycle", "ftp75", "--out", str(tmp_path / "o"))
     assert code == 0

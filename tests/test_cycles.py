@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vpsim.cycles import STANDARD_CYCLES, Cycle, load_cycle
+from vpsim.cycles import PHASES, STANDARD_CYCLES, Cycle, load_cycle
 from vpsim.errors import CycleError
 
 REPO = Path(__file__).resolve().parents[1]
@@ -31,6 +31,31 @@ REFERENCE = {
     "us06": ("us06.csv", 601, 129.23, 1e-5),
     "wltc3b": ("wltc_class3b.csv", 1801, 131.30, 1e-5),
 }
+
+
+def test_ftp_bags_by_name_are_udds_phases():
+    """FTP-75's bags by name, against EPA's description of the test: UDDS 0-505 s is 3.59 mi (bags 1 and 3),
+    505-1369 s 3.86 mi (bag 2), 7.45 mi in all; times re-based to 0, the samples UDDS's own."""
+    udds = load_cycle("udds")
+    bag2, bag3 = load_cycle("ftp_bag2"), load_cycle(" FTP_Bag3 ")
+    assert set(PHASES) == {"ftp_bag2", "ftp_bag3"} and (bag2.name, bag3.name) == ("ftp_bag2", "ftp_bag3")
+    assert bag2.distance_m == pytest.approx(3.86 * 1609.344, abs=10.0)
+    assert bag3.distance_m == pytest.approx(3.59 * 1609.344, abs=10.0)
+    assert bag2.distance_m + bag3.distance_m == pytest.approx(udds.distance_m, rel=1e-12)
+    assert bag2.time_s[0] == 0.0 and bag2.duration_s == 864.0 and bag3.duration_s == 505.0
+    assert np.array_equal(bag2.speed_mps, udds.speed_mps[505:])
+    assert np.array_equal(bag3.speed_mps, udds.speed_mps[:506])
+    with pytest.raises(CycleError, match="ftp_bag2, ftp_bag3"):
+        load_cycle("ftp_bag1")
+
+
+def test_window_interpolates_off_grid_ends_and_refuses_outside():
+    cyc = Cycle("ramp", np.array([0.0, 10.0, 20.0]), np.array([0.0, 10.0, 0.0]))
+    w = cyc.window(5.0, 12.0)
+    assert w.name == "ramp[5:12]" and list(w.time_s) == [0.0, 5.0, 7.0]
+    assert list(w.speed_mps) == [5.0, 10.0, 8.0]
+    with pytest.raises(CycleError, match=r"window \[5, 30\] s is not inside the cycle \[0, 20\] s"):
+        cyc.window(5.0, 30.0)
 
 
 def _read_reference(path: Path) -> tuple[np.ndarray, np.ndarray]:

@@ -36,7 +36,8 @@ def _out_dir(out: str) -> Path:
     "cycle",
     default="nedc",
     show_default=True,
-    help="Standard cycle (nedc, ftp75, udds, hwfet, us06, wltc3b) or a CSV file (time_s + speed column).",
+    help="Standard cycle (nedc, ftp75, udds, hwfet, us06, wltc3b), an FTP-75 bag (ftp_bag2, ftp_bag3) or a "
+    "CSV file (time_s + speed column).",
 )
 @click.option(
     "--method", type=click.Choice(["backward", "forward", "inverse"]), default="backward", show_default=True

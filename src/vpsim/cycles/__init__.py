@@ -26,6 +26,11 @@ from ..errors import CycleError
 from ..textio import check_path, read_text
 
 STANDARD_CYCLES = ("nedc", "ftp75", "udds", "hwfet", "us06", "wltc3b")
+# phases of a standard cycle, by name: (cycle, start s, end s), time re-based to 0. FTP-75's bags as the
+# certification list reports them: bag 2 is UDDS 505-1369 s (hot stabilised), bag 3 the first 505 s again,
+# driven after a 10-minute soak (the model has no engine temperature: it runs hot, like bag 2; the cold
+# bag 1 is the same trace and is therefore not offered)
+PHASES = {"ftp_bag2": ("udds", 505.0, 1369.0), "ftp_bag3": ("udds", 0.0, 505.0)}
 _ALIASES = {"wltc": "wltc3b", "wltc_class3b": "wltc3b", "ftp": "ftp75", "ftp-75": "ftp75", "wltc3": "wltc3b"}
 
 _SPEED_UNITS = {"m/s": 1.0, "mps": 1.0, "km/h": 1.0 / 3.6, "kmh": 1.0 / 3.6, "kph": 1.0 / 3.6, "mph": 0.44704}
@@ -116,6 +121,24 @@ class Cycle:
             v.append(self.speed_mps[1:])
         return Cycle(f"{self.name}x{n}", np.concatenate(t), np.concatenate(v), self.source)
 
+    def window(self, start_s: float, end_s: float, name: str | None = None) -> Cycle:
+        """The part of the cycle on [start_s, end_s], time re-based to 0 (ends interpolated if off-grid)."""
+        t, v = self.time_s, self.speed_mps
+        if not (t[0] <= start_s < end_s <= t[-1]):
+            raise CycleError(
+                f"{self.name}: window [{start_s:g}, {end_s:g}] s is not inside the cycle "
+                f"[{t[0]:g}, {t[-1]:g}] s"
+            )
+        inner = (t > start_s) & (t < end_s)
+        tt = np.concatenate(([start_s], t[inner], [end_s]))
+        vv = np.concatenate(([np.interp(start_s, t, v)], v[inner], [np.interp(end_s, t, v)]))
+        return Cycle(
+            name or f"{self.name}[{start_s:g}:{end_s:g}]",
+            tt - start_s,
+            vv,
+            source=f"{self.name} from {start_s:g} s to {end_s:g} s",
+        )
+
     def __repr__(self) -> str:
         return (
             f"Cycle({self.name!r}: {len(self.time_s)} samples, {self.duration_s:g} s, "
@@ -150,7 +173,8 @@ def _normalise(name: str) -> str:
 
 
 def load_cycle(name_or_path: str | Path, *, speed_unit: str | None = None) -> Cycle:
-    """A standard cycle by name (``nedc``, ``ftp75``, ``udds``, ``hwfet``, ``us06``, ``wltc3b``) or a CSV.
+    """A standard cycle by name (``nedc``, ``ftp75``, ``udds``, ``hwfet``, ``us06``, ``wltc3b``), a phase of
+    one (:data:`PHASES`: ``ftp_bag2``, ``ftp_bag3``), or a CSV.
 
     A CSV file has a header with a time column (``time_s``) and a speed column whose name declares its unit
     (``speed_mps``, ``speed_kmh``, ``speed_mph``), or a plain ``speed`` column with ``speed_unit`` given
@@ -166,14 +190,16 @@ def load_cycle(name_or_path: str | Path, *, speed_unit: str | None = None) -> Cy
             cyc.speed_mps,
             source=f"vpsim standard cycle {name} (see cycles/data/SOURCES.md)",
         )
+    if isinstance(name_or_path, str) and _normalise(name_or_path) in PHASES:
+        name = _normalise(name_or_path)
+        base, start, end = PHASES[name]
+        return load_cycle(base).window(start, end, name)
+    names = ", ".join(STANDARD_CYCLES + tuple(PHASES))
     if not str(name_or_path).strip():
-        raise CycleError(f"empty cycle name; standard cycles: {', '.join(STANDARD_CYCLES)} (or a CSV file)")
+        raise CycleError(f"empty cycle name; standard cycles: {names} (or a CSV file)")
     path = check_path(name_or_path, CycleError, "cycle file")
     if not path.exists() and not path.is_symlink() and path.suffix == "":
-        raise CycleError(
-            f"unknown cycle {str(name_or_path)!r}; standard cycles: {', '.join(STANDARD_CYCLES)} "
-            "(or a CSV file)"
-        )
+        raise CycleError(f"unknown cycle {str(name_or_path)!r}; standard cycles: {names} (or a CSV file)")
     text = read_text(path, CycleError, limit=MAX_CYCLE_BYTES, what="cycle CSV file")
     return _read_csv(text, str(path), speed_unit=speed_unit, name=path.stem)
 
@@ -326,4 +352,4 @@ def _check_header(header: list[str], where: str, lineno: int) -> None:
             )
 
 
-__all__ = ["MIN_CONSUMPTION_DISTANCE_M", "STANDARD_CYCLES", "Cycle", "load_cycle"]
+__all__ = ["MIN_CONSUMPTION_DISTANCE_M", "PHASES", "STANDARD_CYCLES", "Cycle", "load_cycle"]

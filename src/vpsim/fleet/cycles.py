@@ -17,48 +17,28 @@ from __future__ import annotations
 
 from functools import cache
 
-import numpy as np
-
-from ..cycles import Cycle, load_cycle
+from ..cycles import PHASES, Cycle, load_cycle
 from ..errors import CycleError
 
 FLEET_CYCLES = ("ftp_bag2", "ftp_bag3", "hwy", "us06")
-_PIECES = {
-    "ftp_bag2": ("udds", 505.0, 1369.0),
-    "ftp_bag3": ("udds", 0.0, 505.0),
-    "hwy": ("hwfet", None, None),
-    "us06": ("us06", None, None),
-}
+_WHOLE = {"hwy": "hwfet", "us06": "us06"}  # the tests that drive a whole standard cycle, and which one
 
 
 def time_window(cycle: Cycle, start_s: float, end_s: float, name: str | None = None) -> Cycle:
-    """The part of ``cycle`` on [start_s, end_s], time re-based to 0 (the ends interpolated if off-grid)."""
-    t, v = cycle.time_s, cycle.speed_mps
-    if not (t[0] <= start_s < end_s <= t[-1]):
-        raise CycleError(
-            f"{cycle.name}: window [{start_s:g}, {end_s:g}] s is not inside the cycle [{t[0]:g}, {t[-1]:g}] s"
-        )
-    inner = (t > start_s) & (t < end_s)
-    tt = np.concatenate(([start_s], t[inner], [end_s]))
-    vv = np.concatenate(([np.interp(start_s, t, v)], v[inner], [np.interp(end_s, t, v)]))
-    return Cycle(
-        name or f"{cycle.name}[{start_s:g}:{end_s:g}]",
-        tt - start_s,
-        vv,
-        source=f"{cycle.name} from {start_s:g} s to {end_s:g} s",
-    )
+    """The part of ``cycle`` on [start_s, end_s], time re-based to 0: :meth:`vpsim.cycles.Cycle.window`."""
+    return cycle.window(start_s, end_s, name)
 
 
 @cache
 def fleet_cycle(name: str) -> Cycle:
-    """One of :data:`FLEET_CYCLES` as a :class:`~vpsim.cycles.Cycle`."""
-    if name not in _PIECES:
+    """One of :data:`FLEET_CYCLES` as a :class:`~vpsim.cycles.Cycle` (the bags: :data:`vpsim.cycles.PHASES`,
+    which ``vpsim simulate --cycle`` knows by the same names)."""
+    if name not in FLEET_CYCLES:
         raise CycleError(f"unknown fleet cycle {name!r}; expected one of {', '.join(FLEET_CYCLES)}")
-    base, start, end = _PIECES[name]
-    cyc = load_cycle(base)
-    if start is None:
-        return Cycle(name, cyc.time_s, cyc.speed_mps, source=cyc.source)
-    return time_window(cyc, start, end, name)
+    if name in PHASES:
+        return load_cycle(name)
+    cyc = load_cycle(_WHOLE[name])
+    return Cycle(name, cyc.time_s, cyc.speed_mps, source=cyc.source)
 
 
 __all__ = ["FLEET_CYCLES", "fleet_cycle", "time_window"]
