@@ -47,6 +47,7 @@ def test_ftp_bags_by_name_are_udds_phases():
     assert np.array_equal(bag3.speed_mps, udds.speed_mps[:506])
     with pytest.raises(CycleError, match="ftp_bag2, ftp_bag3"):
         load_cycle("ftp_bag1")
+    assert load_cycle("hwy") == load_cycle("hwfet")  # the highway test by the list's name too
 
 
 def test_window_interpolates_off_grid_ends_and_refuses_outside():

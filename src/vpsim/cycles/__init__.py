@@ -31,7 +31,15 @@ STANDARD_CYCLES = ("nedc", "ftp75", "udds", "hwfet", "us06", "wltc3b")
 # driven after a 10-minute soak (the model has no engine temperature: it runs hot, like bag 2; the cold
 # bag 1 is the same trace and is therefore not offered)
 PHASES = {"ftp_bag2": ("udds", 505.0, 1369.0), "ftp_bag3": ("udds", 0.0, 505.0)}
-_ALIASES = {"wltc": "wltc3b", "wltc_class3b": "wltc3b", "ftp": "ftp75", "ftp-75": "ftp75", "wltc3": "wltc3b"}
+_ALIASES = {
+    "wltc": "wltc3b",
+    "wltc_class3b": "wltc3b",
+    "ftp": "ftp75",
+    "ftp-75": "ftp75",
+    "wltc3": "wltc3b",
+    "hwy": "hwfet",  # the name of the highway test in a certification list (and vpsim fleet)
+    "hfet": "hwfet",
+}
 
 _SPEED_UNITS = {"m/s": 1.0, "mps": 1.0, "km/h": 1.0 / 3.6, "kmh": 1.0 / 3.6, "kph": 1.0 / 3.6, "mph": 0.44704}
 _TIME_COLUMNS = ("time_s", "time", "t", "t_s")
