@@ -37,6 +37,9 @@ def test_simulate_json_backward(capsys):
     assert d["method"] == "backward" and d["cycle"] == "nedc" and d["driver"] is None
     assert 8 < d["fuel_l_per_100km"] < 10
     assert d["steps"] == 1180 and d["trace_miss_s"] == 0
+    # US mpg: 100 km / 3.785411784 L per 1.609344 km = 235.2145833 / (L/100 km); a preset has no measurement
+    assert d["fuel_economy_mpg"] == pytest.approx(235.2145833 / d["fuel_l_per_100km"], rel=1e-9)
+    assert d["measured_mpg"] is None and d["measured_error_pct"] is None
 
 
 def test_simulate_runs_an_ftp_bag_by_name(capsys):

@@ -103,6 +103,17 @@ def test_from_epa_writes_a_toml_that_simulate_runs(tmp_path, capsys):
     res = json.loads(capsys.readouterr().out)
     assert 3.0 < res["fuel_l_per_100km"] < 20.0
     block = read_record_block(car)
+    # on a cycle the record measured, simulate sets the prediction against the measurement (hwy is hwfet)
+    for cycle, test in (("ftp_bag2", "ftp_bag2"), ("hwy", "hwy")):
+        assert main(["simulate", "--vehicle", str(car), "--cycle", cycle, "--json"]) == 0
+        res = json.loads(capsys.readouterr().out)
+        assert res["measured_mpg"] == block["record"]["measured_mpg"][test]
+        assert res["measured_error_pct"] == pytest.approx(
+            100.0 * (res["fuel_economy_mpg"] / res["measured_mpg"] - 1.0), rel=1e-12
+        )
+    assert main(["simulate", "--vehicle", str(car), "--cycle", "ftp_bag2"]) == 0
+    text = capsys.readouterr().out
+    assert f"{block['record']['measured_mpg']['ftp_bag2']:8.2f} mpg (the record's test on this cycle)" in text
     assert block["road_load"]["a_lbf"] == 30.0
     assert block["road_load"]["a_n"] == pytest.approx(30 * 4.4482216152605, rel=1e-5)
     assert block["record"]["vehicle_id"] == "T004"

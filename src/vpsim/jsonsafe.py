@@ -14,6 +14,9 @@ from typing import Any
 
 _REASONS = {
     "fuel_l_per_100km": "the cycle drives no distance (less than 1 m), so fuel per distance is undefined",
+    "fuel_economy_mpg": "the cycle drives no distance (less than 1 m) or burns no fuel, so miles per gallon "
+    "are undefined",
+    "measured_error_pct": "no measurement of this vehicle on this cycle to compare with",
     "energy_relative_residual": "no indicated work, so a residual relative to it is undefined",
     "diff_vs_bqm_pct": "the backward method's figure it is compared with is undefined",
     "std_error": "the fit ended at a bound of this parameter, so it has no standard error",

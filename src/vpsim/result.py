@@ -381,6 +381,15 @@ class Result:
         return self.fuel_kg / self.fuel_density_kg_per_l / (self.distance_m / 1e5)
 
     @property
+    def fuel_economy_mpg(self) -> float:
+        """Fuel economy in US miles per gallon (what a U.S. certification list reports); NaN where the
+        consumption is undefined."""
+        from .units import mpg_from_l_per_100km
+
+        lp100 = self.fuel_l_per_100km
+        return mpg_from_l_per_100km(lp100) if lp100 > 0 else float("nan")
+
+    @property
     def distance_km(self) -> float:
         return self.distance_m / 1e3
 
@@ -403,6 +412,7 @@ class Result:
             "mode": self.mode,
             "vehicle": self.vehicle,
             "fuel_l_per_100km": float(self.fuel_l_per_100km),
+            "fuel_economy_mpg": float(self.fuel_economy_mpg),
             "fuel_kg": float(self.fuel_kg),
             "distance_km": float(self.distance_km),
             "cpu_time_s": float(self.cpu_time_s),

@@ -18,6 +18,16 @@ from __future__ import annotations
 
 import re
 
+# US miles per gallon <-> L/100 km (each the constant over the other): 100 km / 3.785411784 L per 1.609344 km
+L_PER_100KM_MPG = 235.2145833
+
+
+def mpg_from_l_per_100km(l_per_100km):
+    """US miles per gallon of a consumption in L/100 km (and the other way round: the map is its own
+    inverse)."""
+    return L_PER_100KM_MPG / l_per_100km
+
+
 # dimension -> {unit: (factor, offset)}: SI value = factor * value + offset
 UNITS: dict[str, dict[str, tuple[float, float]]] = {
     "dimensionless": {"-": (1.0, 0.0), "": (1.0, 0.0), "1": (1.0, 0.0)},

@@ -223,6 +223,7 @@ def test_json_is_always_valid(capsys, tmp_path, method, cycle):
     s = check_json(out)
     if cycle == "still":
         assert s["fuel_l_per_100km"] is None and s["fuel_l_per_100km_undefined"]
+        assert s["fuel_economy_mpg"] is None and "no distance" in s["fuel_economy_mpg_undefined"]
     code, out, _ = run_cli(
         capsys, "simulate", "--cycle", p, "--method", method, "--mode", "extended", "--out", tmp_path / "o"
     )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import click
@@ -116,6 +117,12 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
     summary = result.summary()
     if not cyc.distance_m >= MIN_CONSUMPTION_DISTANCE_M:  # a method's creep is no basis for L/100 km
         summary["fuel_l_per_100km"] = float("nan")
+        summary["fuel_economy_mpg"] = float("nan")
+    measured = _measured_mpg(vehicle, result.cycle)
+    summary["measured_mpg"] = measured
+    summary["measured_error_pct"] = (
+        100.0 * (summary["fuel_economy_mpg"] / measured - 1.0) if measured is not None else float("nan")
+    )
     written = []
     if out:
         # an undefined sample (intake pressure with the engine decoupled, say) is an empty cell, never nan/inf
@@ -140,6 +147,14 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
     )
     lp100 = number(summary["fuel_l_per_100km"], "8.3f", "fuel_l_per_100km")
     click.echo(f"  fuel consumption  {lp100}{' L/100 km' if _ok(lp100) else ''}")
+    mpg = number(summary["fuel_economy_mpg"], "8.2f", "fuel_economy_mpg")
+    click.echo(f"  fuel economy      {mpg}{' mpg (US)' if _ok(mpg) else ''}")
+    if measured is not None:
+        err = number(summary["measured_error_pct"], "+.1f", "measured_error_pct")
+        click.echo(
+            f"  measured          {measured:8.2f} mpg (the record's test on this cycle); "
+            f"predicted {err}{' %' if _ok(err) else ''}"
+        )
     click.echo(f"  fuel              {number(result.fuel_kg * 1e3, '8.1f', 'fuel_kg')} g")
     click.echo(f"  distance          {number(result.distance_km, '8.3f', 'distance_km')} km")
     click.echo(f"  CPU time          {result.cpu_time_s * 1e3:8.2f} ms ({result.steps} steps)")
@@ -163,6 +178,26 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         click.echo(f"  note: {note}")
     for p in written:
         click.echo(f"  wrote {p}")
+
+
+def _measured_mpg(vehicle: str, cycle: str) -> float | None:
+    """The fuel economy the certification record measured on ``cycle``, from the record block a vehicle file
+    of ``vpsim vehicle from-epa`` carries (its test names: ftp_bag2, ftp_bag3, hwy for hwfet, us06); None
+    for a preset, another file, or a cycle the record has no test on."""
+    from ..cycles import _normalise
+
+    path = Path(vehicle)
+    if path.suffix.lower() != ".toml" or not path.is_file():
+        return None
+    from ..fleet.vehicle import read_record_block
+
+    tests = read_record_block(path).get("record", {}).get("measured_mpg", {})
+    if not isinstance(tests, dict):
+        return None
+    for name, mpg in tests.items():
+        if _normalise(str(name)) == cycle and isinstance(mpg, int | float) and not isinstance(mpg, bool):
+            return float(mpg) if mpg > 0 and math.isfinite(mpg) else None
+    return None
 
 
 def _seconds(x) -> str:

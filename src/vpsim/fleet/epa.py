@@ -54,13 +54,13 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from ..errors import VpsimError
+from ..units import mpg_from_l_per_100km
 
 # --- unit conversions (exact definitions) -------------------------------------------------------------------
 LB_TO_KG = 0.45359237
 LBF_TO_N = 4.4482216152605  # lbf = lb x standard gravity 9.80665 m/s^2
 MPH_TO_MPS = 0.44704
 HP_TO_KW = 0.745699871582270  # mechanical horsepower (550 ft lbf/s)
-L_PER_100KM_MPG = 235.2145833  # mpg = L_PER_100KM_MPG / (L/100 km): 100 km / 3.785411784 L per 1.609344 km
 
 
 def lbf_per_mph_to_si(b: float) -> float:
@@ -71,10 +71,6 @@ def lbf_per_mph_to_si(b: float) -> float:
 def lbf_per_mph2_to_si(c: float) -> float:
     """lbf/mph^2 -> N/(m/s)^2."""
     return c * LBF_TO_N / MPH_TO_MPS**2
-
-
-def mpg_from_l_per_100km(l_per_100km):
-    return L_PER_100KM_MPG / l_per_100km
 
 
 # --- columns ------------------------------------------------------------------------------------------------
