@@ -94,3 +94,23 @@ def test_forward_steps_per_cycle_second_counted_in_both_modes():
     met = {t["figure"]: t["met"] for t in _targets(report)}
     assert met["forward_udds_steps_per_cycle_s_paper"] is True
     assert met["forward_udds_steps_per_cycle_s_realistic"] is None
+
+
+def test_vpsim_is_timed_in_fresh_processes_as_the_peer_is():
+    """The rule held against the targets is the same for both tools: vpsim's runs also get fresh processes of
+    their own (as many as FASTSim's), after the same warm-up; the child times what the in-process row times
+    (the steps and fuel are the row's), and the report says which processes it took."""
+    from dataclasses import replace
+
+    from vpsim.bench import PROFILES, _vpsim_fresh
+    from vpsim.simulation import simulate
+
+    settings = replace(PROFILES["tiny"], peer_processes=2, peer_warm_up_s=0.05)
+    fresh = _vpsim_fresh(settings, lambda line: None)
+    entry = fresh["backward/-/udds"]
+    per = entry["median_ms_per_process"]
+    assert len(per) == 2 and entry["best_ms"] == min(per) and all(0 < m < 1e3 for m in per)
+    r = simulate("udds", "backward")
+    assert entry["steps"] == r.steps and entry["fuel_kg"] == pytest.approx(r.fuel_kg, rel=1e-12)
+    assert list(fresh) == ["backward/-/udds"]  # only the methods the profile runs
+    assert _vpsim_fresh(PROFILES["tiny"], lambda line: None) == {}  # no peer processes, none of vpsim
