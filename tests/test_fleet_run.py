@@ -114,6 +114,12 @@ def test_from_epa_writes_a_toml_that_simulate_runs(tmp_path, capsys):
     assert main(["simulate", "--vehicle", str(car), "--cycle", "ftp_bag2"]) == 0
     text = capsys.readouterr().out
     assert f"{block['record']['measured_mpg']['ftp_bag2']:8.2f} mpg (the record's test on this cycle)" in text
+    # a record block broken by an edit: the run stands, the comparison is left out with a one-line note
+    broken = tmp_path / "broken.toml"
+    broken.write_text(car.read_text().replace("# [record.measured_mpg]", "# [record.measured_mpg"))
+    assert main(["simulate", "--vehicle", str(broken), "--cycle", "ftp_bag2", "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["measured_mpg"] is None and "no measurement to compare with" in err
     assert block["road_load"]["a_lbf"] == 30.0
     assert block["road_load"]["a_n"] == pytest.approx(30 * 4.4482216152605, rel=1e-5)
     assert block["record"]["vehicle_id"] == "T004"
