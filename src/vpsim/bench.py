@@ -425,24 +425,32 @@ def _peer_fresh(settings: Settings, progress) -> dict:
     """
     out: dict = {}
     for name in settings.peer_cycles:
-        meds = []
-        for _ in range(settings.peer_processes):
-            progress(f"{PEER} on {name} in a fresh process")
-            code = _PEER_CODE.format(
-                vehicle=PEER_VEHICLE,
-                cycle=PEER_CYCLES[name],
-                warm=settings.peer_warm_up_s,
-                measure=settings.min_time_s,
-            )
-            try:
-                _, d = _subprocess(code)
-            except Exception as exc:
-                out[name] = {"error": _one_line(exc)}
-                break
-            meds.append(d["median_ms"])
-        if meds:
-            out[name] = {"median_ms_per_process": meds, "best_ms": min(meds)}
+        code = _PEER_CODE.format(
+            vehicle=PEER_VEHICLE,
+            cycle=PEER_CYCLES[name],
+            warm=settings.peer_warm_up_s,
+            measure=settings.min_time_s,
+        )
+        entry = _in_fresh_processes(code, settings.peer_processes, f"{PEER} on {name}", progress)
+        if entry:
+            out[name] = entry
     return out
+
+
+def _in_fresh_processes(code: str, n: int, label: str, progress) -> dict:
+    """Run ``code`` (it prints one JSON object with ``median_ms``) in ``n`` fresh processes: its medians,
+    the best of them and the last process's other figures; {"error": ...} if one fails; {} for n = 0."""
+    meds: list[float] = []
+    last: dict = {}
+    for _ in range(n):
+        progress(f"{label} in a fresh process")
+        try:
+            _, last = _subprocess(code)
+        except Exception as exc:
+            return {"error": _one_line(exc)}
+        meds.append(last.pop("median_ms"))
+        last.pop("runs", None)
+    return {"median_ms_per_process": meds, "best_ms": min(meds), **last} if meds else {}
 
 
 # the vpsim runs held against the targets, timed in fresh processes too (the rule FASTSim gets)
@@ -488,25 +496,15 @@ def _vpsim_fresh(settings: Settings, progress) -> dict:
         for method, driver in _FRESH_SIDES:
             if (method, driver) not in settings.methods:
                 continue
-            key = f"{method}/{driver or '-'}/{cycle}"
-            meds = []
-            for _ in range(settings.peer_processes):
-                label = method if driver is None else f"{method} driver {driver}"
-                progress(f"vpsim {label} on {cycle} in a fresh process")
-                code = (
-                    "from vpsim.bench import _vpsim_fresh_child; "
-                    f"_vpsim_fresh_child({method!r}, {driver!r}, {cycle!r}, {settings.peer_warm_up_s!r}, "
-                    f"{json.dumps(plain)!r})"
-                )
-                try:
-                    _, d = _subprocess(code)
-                except Exception as exc:
-                    out[key] = {"error": _one_line(exc)}
-                    break
-                meds.append(d["median_ms"])
-                run = {"steps": d["steps"], "fuel_kg": d["fuel_kg"]}
-            if meds:
-                out[key] = {"median_ms_per_process": meds, "best_ms": min(meds), **run}
+            code = (
+                "from vpsim.bench import _vpsim_fresh_child; "
+                f"_vpsim_fresh_child({method!r}, {driver!r}, {cycle!r}, {settings.peer_warm_up_s!r}, "
+                f"{json.dumps(plain)!r})"
+            )
+            label = method if driver is None else f"{method} driver {driver}"
+            entry = _in_fresh_processes(code, settings.peer_processes, f"vpsim {label} on {cycle}", progress)
+            if entry:
+                out[f"{method}/{driver or '-'}/{cycle}"] = entry
     return out
 
 
