@@ -40,7 +40,7 @@ import tempfile
 import time
 import tracemalloc
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -457,18 +457,17 @@ def _in_fresh_processes(code: str, n: int, label: str, progress) -> dict:
 _FRESH_SIDES = (("forward", "1"), ("backward", None), ("inverse", "1"))
 
 
-def _vpsim_fresh_child(
-    method: str, driver: str | None, cycle: str, warm_s: float, settings_json: str
-) -> None:
-    """In a fresh process: one vpsim row as :func:`_vpsim_rows` times it, after ``warm_s`` of untimed runs
-    (FASTSim's warm-up in its own processes); prints {"median_ms", "runs", "steps", "fuel_kg"}."""
+def _vpsim_fresh_child(method: str, driver: str | None, cycle: str, warm_s: float, timing: dict) -> None:
+    """In a fresh process: one vpsim row as :func:`_vpsim_rows` times it (``timing``: the profile's
+    min_time_s, min_repeats, max_repeats), after ``warm_s`` of untimed runs (FASTSim's warm-up in its own
+    processes); prints {"median_ms", "runs", "steps", "fuel_kg"}."""
     from .cycles import load_cycle
     from .gears import default_schedule
     from .model.maps import cached_engine_map
     from .params import load_parameters
     from .simulation import simulate
 
-    settings = Settings(**{**json.loads(settings_json), "methods": (), "linearity_methods": ()})
+    settings = replace(PROFILES["tiny"], **timing)
     params = load_parameters("hofman2011")
     cyc = load_cycle(cycle)
     schedule = default_schedule(cyc, params, cached_engine_map(params.engine))
@@ -489,7 +488,7 @@ def _vpsim_fresh(settings: Settings, progress) -> dict:
     """The runs of :data:`_FRESH_SIDES` in fresh processes of their own (nothing of FASTSim loaded), as many
     as FASTSim gets (``peer_processes``): {"method/driver/cycle": {"median_ms_per_process", "best_ms"}}."""
     out: dict = {}
-    plain = {k: v for k, v in asdict(settings).items() if k not in ("methods", "linearity_methods")}
+    timing = {k: getattr(settings, k) for k in ("min_time_s", "min_repeats", "max_repeats")}
     for cycle in settings.peer_cycles:
         if cycle not in settings.cycles:
             continue
@@ -499,7 +498,7 @@ def _vpsim_fresh(settings: Settings, progress) -> dict:
             code = (
                 "from vpsim.bench import _vpsim_fresh_child; "
                 f"_vpsim_fresh_child({method!r}, {driver!r}, {cycle!r}, {settings.peer_warm_up_s!r}, "
-                f"{json.dumps(plain)!r})"
+                f"{timing!r})"
             )
             label = method if driver is None else f"{method} driver {driver}"
             entry = _in_fresh_processes(code, settings.peer_processes, f"vpsim {label} on {cycle}", progress)
