@@ -94,14 +94,14 @@ def fleet(file, out, cycles, folds, method, local_cluster, scheduler, workers, n
             "rows the record cannot tell apart (identical inputs), and of them beyond 12 % whatever the "
             "model: " + ", ".join(f"{c} {r['rows']}, {r[beyond]}" for c, r in rep.items()) + " (report.md)"
         )
-    bm = info.get("between_manufacturers", {})
-    if bm:
+    left = {c: b["out_of_fold"] for c, b in info.get("between_manufacturers", {}).items()}
+    if left:
+        figures = [
+            f"{c} {o['median_abs_error_pct']:.1f} / {o['p90_abs_error_pct']:.1f} %" for c, o in left.items()
+        ]
         click.echo(
             "left by a correction per manufacturer (out of fold; median / p90 |error|): "
-            + "; ".join(
-                f"{c} {o['median_abs_error_pct']:.1f} / {o['p90_abs_error_pct']:.1f} %"
-                for c, o in ((c, b["out_of_fold"]) for c, b in bm.items())
-            )
+            + "; ".join(figures)
             + " (report.md)"
         )
     rt = info["runtime_s"]
