@@ -43,8 +43,8 @@ def test_simulate_json_backward(capsys):
 
 
 def test_simulate_runs_an_ftp_bag_by_name(capsys):
-    """The fleet's cycles are cycles of `vpsim simulate` too: bag 2 of FTP-75 is UDDS 505-1369 s, 3.86 mi
-    (EPA's FTP description: 7.45 mi in all, bag 1 3.59 mi), and its fuel is what the bag's samples give."""
+    """The fleet's cycles are cycles of `vpsim simulate` too: bag 2 of FTP-75 is UDDS 505-1369 s (864
+    intervals), 3.86 mi (EPA's FTP description: 7.45 mi in all, bag 1 3.59 mi)."""
     code, out, err = run(capsys, "simulate", "--cycle", "ftp_bag2", "--method", "backward", "--json")
     assert code == 0, err
     d = json.loads(out)
