@@ -167,3 +167,53 @@ def test_manual_shift_point_holds_each_gear_to_the_shift_speed_while_acceleratin
     np.testing.assert_array_equal(g_man[cruise], g_auto[cruise])
     with pytest.raises(vpsim.CycleError, match="upshift_engine_speed"):
         GearRule(upshift_engine_speed=-1.0)
+
+
+def test_manual_shift_speeds_hold_each_gear_to_its_vehicle_speed_while_accelerating(params):
+    """A driver's shift speeds (rule 4, an owner's manual's table): while accelerating, gear g only at vehicle
+    speeds of at least upshift_speed + (g - 2) upshift_speed_step; cruising keeps the automatic's gear. The
+    table is hand-written (15, 25, 35, 45 mph for gears 2-5)."""
+    from vpsim.gears import GearRule, default_schedule, interval_demand
+
+    c = load_cycle("ftp75")
+    base = GearRule(min_engine_speed=130.0, min_hold_s=0.0)
+    manual = GearRule(min_engine_speed=130.0, min_hold_s=0.0, upshift_speed=6.7056, upshift_speed_step=4.4704)
+    np.testing.assert_allclose(manual.upshift_speeds(5), [6.7056, 11.176, 15.6464, 20.1168])
+    g_auto = default_schedule(c, params, rule=base).gear[:-1]
+    g_man = default_schedule(c, params, rule=manual).gear[:-1]
+    ratios = np.asarray(params.transmission.ratios)
+    v, a, _, _, _, _ = interval_demand(c, ratios[:, None], params)
+    accel = a > manual.cruise_acceleration
+    lowest = np.array([6.7056, 11.176, 15.6464, 20.1168])  # from which gears 2..5 may be used
+    up = accel & (g_man >= 2)
+    assert up.sum() > 100
+    assert np.all(v[up] >= lowest[g_man[up] - 2])
+    assert np.mean(g_man[accel] < g_auto[accel]) > 0.2  # the table keeps lower gears
+    cruise = (a >= 0) & ~accel
+    np.testing.assert_array_equal(g_man[cruise], g_auto[cruise])
+    with pytest.raises(vpsim.CycleError, match="upshift_speed"):
+        GearRule(upshift_speed=-1.0)
+    with pytest.raises(vpsim.CycleError, match="upshift_speed_step"):
+        GearRule(upshift_speed=5.0, upshift_speed_step=float("nan"))
+
+
+def test_shift_speeds_come_from_the_parameter_set_in_any_speed_unit(tmp_path):
+    """``transmission.shift_point_speed`` / ``_step`` (m/s, or with a unit) set rule 4's table; a CVT refuses
+    it in one line."""
+    from vpsim.gears import GearRule
+    from vpsim.params import load_parameters
+
+    path = tmp_path / "car.toml"
+    path.write_text(
+        'base = "hofman2011"\n[transmission]\n'
+        'shift_point_speed = { value = 15, unit = "mph" }\n'
+        'shift_point_speed_step = { value = 16.09344, unit = "km/h" }\n'
+    )
+    rule = GearRule.of(load_parameters(path))
+    np.testing.assert_allclose(rule.upshift_speeds(3), [6.7056, 11.176])
+    path.write_text(
+        'base = "hofman2011"\n[transmission]\ngearbox_ratios = [2.5, 0.5]\ncvt_ratio_step = 0.02\n'
+        "shift_point_speed = 6.7\n"
+    )
+    with pytest.raises(vpsim.ParameterError, match="shift_point_speed = 6.7 m/s .* a CVT"):
+        load_parameters(path)

@@ -257,14 +257,15 @@ def test_fleet_on_the_real_list(shared_dir, tmp_path, capsys):
 
 
 def test_a_manual_gets_the_drivers_shift_point(tmp_path):
-    """A manual shifts at MANUAL_SHIFT_RPM while accelerating (lower gears in town, more fuel); the other
-    transmission types keep the controller's rule."""
+    """A manual shifts at the owner's manual's vehicle speeds while accelerating (15 mph to gear 2, 10 mph
+    more per gear: lower gears in town, more fuel); the other transmission types keep the controller's
+    rule."""
     from dataclasses import replace
 
     from vpsim.batch import run_batch
     from vpsim.fleet.cycles import fleet_cycle
     from vpsim.fleet.epa import read_test_car_list
-    from vpsim.fleet.run import GEAR_RULE, MANUAL_GEAR_RULE, MANUAL_SHIFT_RPM, gear_rule
+    from vpsim.fleet.run import GEAR_RULE, MANUAL_GEAR_RULE, gear_rule
     from vpsim.fleet.vehicle import record_parameters
     from vpsim.gears import default_schedule
 
@@ -273,7 +274,9 @@ def test_a_manual_gets_the_drivers_shift_point(tmp_path):
     manual = replace(auto, transmission_kind="manual", transmission_code="M")
     assert gear_rule(auto) is GEAR_RULE
     assert gear_rule(manual) is MANUAL_GEAR_RULE
-    assert MANUAL_GEAR_RULE.upshift_engine_speed == pytest.approx(MANUAL_SHIFT_RPM * np.pi / 30)
+    mph = 0.44704
+    np.testing.assert_allclose(MANUAL_GEAR_RULE.upshift_speeds(6), np.array([15, 25, 35, 45, 55]) * mph)
+    assert MANUAL_GEAR_RULE.upshift_engine_speed is None
     cyc = fleet_cycle("ftp_bag2")
     p = record_parameters(manual, [cyc])
     s_auto = default_schedule(cyc, p, rule=gear_rule(auto))
@@ -311,6 +314,7 @@ def test_the_vehicle_file_carries_the_fleets_gear_rule(tmp_path):
         assert rule.min_engine_speed == fleet_rule.min_engine_speed
         point = fleet_rule.upshift_engine_speed or 0.0
         assert (rule.upshift_engine_speed or 0.0) == pytest.approx(point, rel=1e-5)
+        np.testing.assert_allclose(rule.upshift_speeds(6), fleet_rule.upshift_speeds(6), rtol=1e-5)
         fleet = default_schedule(cyc, p, None, rule=gear_rule(rec))
         np.testing.assert_array_equal(default_schedule(cyc, q, None).gear, fleet.gear)
         r = vpsim.simulate(cyc, "backward", q)  # the default schedule: the file's rule

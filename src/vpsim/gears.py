@@ -13,11 +13,13 @@ The default rule (documented in docs/methods.md):
    times that gear's maximum torque.
 3. The chosen gear is the highest admissible gear whose engine speed is at least ``min_engine_speed``;
    if none reaches it, the lowest admissible gear (gear 1 at standstill and crawling).
-4. With ``upshift_engine_speed`` (a driver's shift point, as a manual is driven): while the vehicle
-   accelerates (more than ``cruise_acceleration``), gear k + 1 is used only once the engine in gear k has
-   reached that speed; in cruise and deceleration rule 3 alone applies (owner's manuals give shift speeds
-   "for acceleration" and allow earlier upshifts at steady speed). The gear is then the highest admissible
-   gear within that limit (the lowest admissible gear if none).
+4. With a driver's shift points (as a manual is driven): while the vehicle accelerates (more than
+   ``cruise_acceleration``), gear k + 1 is used only once the engine in gear k has reached
+   ``upshift_engine_speed``, and/or only at vehicle speeds of at least ``upshift_speed`` + (k - 1)
+   ``upshift_speed_step`` (an owner's manual's table of upshift speeds); in cruise and deceleration rule 3
+   alone applies (owner's manuals give shift speeds "for acceleration" and allow earlier upshifts at steady
+   speed). The gear is then the highest admissible gear within that limit (the lowest admissible gear if
+   none).
 5. While decelerating, the engine does not upshift (a driver holds or downshifts when braking).
 6. Short engagements (< ``min_hold_s``) are merged into the preceding gear where that gear is admissible.
 
@@ -101,20 +103,44 @@ class GearRule:
     # a driver's shift point (rule 4): while accelerating, leave gear k only once the engine in it reaches
     # this speed; None: no shift point (an automatic's schedule)
     upshift_engine_speed: float | None = None
+    # a driver's shift speeds (rule 4): while accelerating, gear k + 1 only at vehicle speeds of at least
+    # upshift_speed + (k - 1) upshift_speed_step (m/s); None: none
+    upshift_speed: float | None = None
+    upshift_speed_step: float = 0.0
     cruise_acceleration: float = 0.1  # m/s^2: at or below this the vehicle cruises or decelerates (rule 4)
 
     def __post_init__(self):
         w = self.upshift_engine_speed
         if w is not None and not (math.isfinite(w) and w > 0):
             raise CycleError(f"gear rule: upshift_engine_speed must be a positive speed in rad/s, got {w!r}")
+        v = self.upshift_speed
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise CycleError(f"gear rule: upshift_speed must be a positive vehicle speed in m/s, got {v!r}")
+        dv = self.upshift_speed_step
+        if not (math.isfinite(dv) and dv >= 0):
+            raise CycleError(f"gear rule: upshift_speed_step must be a speed >= 0 in m/s, got {dv!r}")
+
+    def upshift_speeds(self, n_gears: int) -> np.ndarray:
+        """Vehicle speeds (m/s) from which gears 2..n_gears may be used while accelerating (rule 4; empty
+        without shift speeds)."""
+        if self.upshift_speed is None:
+            return np.zeros(0)
+        return self.upshift_speed + self.upshift_speed_step * np.arange(max(n_gears - 1, 0))
 
     @classmethod
     def of(cls, params) -> GearRule:
-        """The rule a parameter set asks for: ``transmission.shift_engine_speed`` (rule 3) and
-        ``transmission.shift_point_engine_speed`` (rule 4, 0: none); the other settings the defaults."""
+        """The rule a parameter set asks for: ``transmission.shift_engine_speed`` (rule 3),
+        ``transmission.shift_point_engine_speed`` and ``transmission.shift_point_speed`` /
+        ``shift_point_speed_step`` (rule 4, 0: none); the other settings the defaults."""
         tr = params.transmission
         point = tr.shift_point_engine_speed
-        return cls(min_engine_speed=tr.shift_engine_speed, upshift_engine_speed=point if point > 0 else None)
+        first = tr.shift_point_speed
+        return cls(
+            min_engine_speed=tr.shift_engine_speed,
+            upshift_engine_speed=point if point > 0 else None,
+            upshift_speed=first if first > 0 else None,
+            upshift_speed_step=tr.shift_point_speed_step,
+        )
 
 
 def interval_demand(cycle: Cycle, ratio, params):
@@ -153,7 +179,7 @@ def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | Non
     rule = rule or GearRule.of(params)
     ratios = np.asarray(params.transmission.ratios)
     n_g = len(ratios)
-    _, a, w_e, _, t_cr, _ = interval_demand(cycle, ratios[:, None], params)  # shape (gears, intervals)
+    v, a, w_e, _, t_cr, _ = interval_demand(cycle, ratios[:, None], params)  # shape (gears, intervals)
     if engine_map is not None:
         t_max = engine_map.max_torque(w_e)
     elif params.transmission.is_cvt and w_e.size > 4 * FULL_LOAD_NODES:
@@ -182,10 +208,15 @@ def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | Non
     best_high = np.where(high_enough, gears, 0).max(axis=0)
     lowest_adm = np.where(admissible, gears, n_g + 1).min(axis=0)
     gear = np.where(best_high > 0, best_high, lowest_adm)
-    if rule.upshift_engine_speed is not None:
+    if rule.upshift_engine_speed is not None or rule.upshift_speed is not None:
         # gear g is reached once the engine in gear g - 1 has reached the shift point (w_e falls with the
-        # gear, so the gears reached are 1..cap)
-        cap = 1 + np.sum(w_e[:-1] >= rule.upshift_engine_speed, axis=0)
+        # gear, so the gears reached are 1..cap), and at the vehicle speed from which the table allows it
+        cap = np.full(a.shape, n_g)
+        if rule.upshift_engine_speed is not None:
+            cap = 1 + np.sum(w_e[:-1] >= rule.upshift_engine_speed, axis=0)
+        if rule.upshift_speed is not None:
+            v_up = rule.upshift_speeds(n_g)
+            cap = np.minimum(cap, 1 + np.sum(v[None, :] >= v_up[:, None], axis=0))
         cap = np.where(a > rule.cruise_acceleration, cap, n_g)
         capped = np.where(admissible & (gears <= cap[None, :]), gears, 0).max(axis=0)
         gear = np.where(capped > 0, np.minimum(gear, capped), lowest_adm)

@@ -79,9 +79,13 @@ class Transmission:
     cvt_ratio_step: float = 0.0
     # the gear rule (vpsim.gears.default_schedule) of a schedule not given: shift up once the next gear keeps
     # the engine at or above this speed (rad/s; rule 3) and, with a shift point > 0, while accelerating leave
-    # a gear only once the engine in it has reached that speed (rad/s; rule 4, a manual's driver)
+    # a gear only once the engine in it has reached that speed (rad/s; rule 4, a manual's driver); with a
+    # shift speed > 0, while accelerating gear k + 1 only from the vehicle speed shift_point_speed + (k - 1)
+    # shift_point_speed_step (m/s; rule 4, an owner's manual's table of upshift speeds)
     shift_engine_speed: float = 200.0
     shift_point_engine_speed: float = 0.0
+    shift_point_speed: float = 0.0
+    shift_point_speed_step: float = 0.0
 
     @property
     def is_cvt(self) -> bool:
@@ -262,6 +266,8 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "transmission.cvt_ratio_step": (0.0, 0.2, True),
     "transmission.shift_engine_speed": (20.0, 1000.0, True),
     "transmission.shift_point_engine_speed": (0.0, 1000.0, True),
+    "transmission.shift_point_speed": (0.0, 100.0, True),
+    "transmission.shift_point_speed_step": (0.0, 100.0, True),
     "engine.bore": (0.02, 0.5, False),
     "engine.stroke": (0.02, 0.5, False),
     "engine.inertia": (0.0, 50.0, False),
@@ -458,6 +464,11 @@ def validate(p: Parameters, where: str = "parameters") -> None:
         if not 0.0 < g <= 20.0:
             raise ParameterError(f"{where}: transmission.gearbox_ratios[{i}] = {g:g} is outside (0, 20]")
     tr = p.transmission
+    if tr.is_cvt and tr.shift_point_speed > 0.0:
+        raise ParameterError(
+            f"{where}: transmission.shift_point_speed = {tr.shift_point_speed:g} m/s is a stepped gearbox's "
+            "table of upshift speeds; a CVT (cvt_ratio_step set) chooses its ratio: set it to 0"
+        )
     if tr.is_cvt:
         r = tr.gearbox_ratios
         if len(r) != 2 or not r[0] > r[1]:

@@ -95,6 +95,7 @@ UNITS: dict[str, dict[str, tuple[float, float]]] = {
         "lb/gal": (0.45359237 / 3.785411784, 0.0),
     },
     "acceleration": {"m/s^2": (1.0, 0.0), "ft/s^2": (0.3048, 0.0)},
+    "speed": {"m/s": (1.0, 0.0), "km/h": (1.0 / 3.6, 0.0), "mph": (0.44704, 0.0)},
     "inertia": {
         "kg m^2": (1.0, 0.0),
         "g cm^2": (1e-7, 0.0),
@@ -148,6 +149,8 @@ FIELD_DIMENSIONS: dict[str, str] = {
     "transmission.cvt_ratio_step": "fraction",
     "transmission.shift_engine_speed": "angular_speed",
     "transmission.shift_point_engine_speed": "angular_speed",
+    "transmission.shift_point_speed": "speed",
+    "transmission.shift_point_speed_step": "speed",
     "engine.bore": "length",
     "engine.stroke": "length",
     "engine.cylinders": "count",

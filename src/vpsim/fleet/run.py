@@ -37,7 +37,7 @@ from ..errors import VpsimError
 from . import calibrate as cal
 from .cycles import FLEET_CYCLES, fleet_cycle
 from .epa import TestCarList, VehicleRecord, mpg_from_l_per_100km, read_test_car_list
-from .vehicle import GEAR_RULE, MANUAL_GEAR_RULE, MANUAL_SHIFT_RPM, gear_rule  # noqa: F401 (the fleet's rules)
+from .vehicle import GEAR_RULE, MANUAL_GEAR_RULE, gear_rule  # noqa: F401 (the fleet's rules)
 
 METHODS = ("backward", "forward")
 MODE = "extended"
