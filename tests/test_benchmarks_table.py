@@ -2,18 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
-
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "readme_table.py"
-
-
-def _module():
-    spec = importlib.util.spec_from_file_location("readme_table", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def _report(backward_ms, batch, first_compile=None, load=(1.0, 1.5)):
@@ -42,14 +31,14 @@ def _report(backward_ms, batch, first_compile=None, load=(1.0, 1.5)):
     }
 
 
-def test_table_gives_each_figure_as_its_range_over_the_runs(tmp_path, capsys):
+def test_table_gives_each_figure_as_its_range_over_the_runs(tmp_path, capsys, benchmark_script):
     files = []
     for k, rep in enumerate(
         (_report(0.08, 111000.0), _report(0.10, 47000.0, first_compile=46.2, load=(4, 5)))
     ):
         files.append(tmp_path / f"r{k}.json")
         files[-1].write_text(json.dumps(rep))
-    _module().main([str(f) for f in files])
+    benchmark_script("readme_table").main([str(f) for f in files])
     out = capsys.readouterr().out
     assert "2 runs of `vpsim bench` (full, quick)" in out and "load average 1.0–5.0" in out
     assert "| backward, one UDDS run | 0.08 – 0.10 ms |" in out

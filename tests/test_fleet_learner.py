@@ -2,25 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
 import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "fleet_learner.py"
 
-
-def _module():
-    spec = importlib.util.spec_from_file_location("fleet_learner", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def test_group_folds_keep_a_group_together_and_deal_the_groups_evenly():
-    mod = _module()
+def test_group_folds_keep_a_group_together_and_deal_the_groups_evenly(benchmark_script):
+    mod = benchmark_script("fleet_learner")
     keys = pd.Series([f"maker{i % 7}" for i in range(70)])
     folds = mod.group_folds(keys, k=5)
     for key in keys.unique():
@@ -30,8 +19,8 @@ def test_group_folds_keep_a_group_together_and_deal_the_groups_evenly():
     np.testing.assert_array_equal(folds, mod.group_folds(keys, k=5))  # seeded: the same folds every run
 
 
-def test_without_scikit_learn_it_says_so_in_one_line(tmp_path, monkeypatch, capsys):
-    mod = _module()
+def test_without_scikit_learn_it_says_so_in_one_line(tmp_path, monkeypatch, capsys, benchmark_script):
+    mod = benchmark_script("fleet_learner")
     monkeypatch.setitem(sys.modules, "sklearn", None)  # import sklearn raises ImportError
     assert mod.main([str(tmp_path), str(tmp_path / "list.csv")]) == 2
     err = capsys.readouterr().err.strip()
