@@ -438,6 +438,9 @@ def test_repeatability_of_twins_by_hand():
     tracked = missed.assign(max_speed_error_mps=0.7)
     assert "trace miss 0.024 s (the PI driver outside" in mechanisms(tracked)[("C1", 0)]
     assert "trace miss" not in mechanisms(tracked)[("A1", 0)]
+    # a manual names the shift speeds the model gives it
+    manual = df.assign(transmission=np.where(df["vehicle_id"] == "C1", "manual", "automatic"))
+    assert "manual (model: upshifts at 15/25/35/45/55 mph while accelerating" in mechanisms(manual)[("C1", 0)]
 
 
 def test_fleet_reports_twins_the_record_cannot_tell_apart(tmp_path, capsys):

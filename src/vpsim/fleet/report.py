@@ -292,6 +292,13 @@ def twin_differences(df, inputs: dict[str, tuple]) -> dict:
     }
 
 
+def _manual_table() -> str:
+    """The fleet's upshift speeds of a manual (mph, gears 1-2 to 5-6), as the report names them."""
+    from .vehicle import MANUAL_UPSHIFT_MPH, MANUAL_UPSHIFT_STEP_MPH
+
+    return "/".join(f"{MANUAL_UPSHIFT_MPH + k * MANUAL_UPSHIFT_STEP_MPH:g}" for k in range(5))
+
+
 def mechanisms(df, inputs: dict[str, tuple] | None = None):
     """A data-derived mechanism per vehicle (a string): what sets it apart from the fleet, in order of the
     model gaps it points at. ``df``: the rows of :func:`FleetRun.frame`; with ``inputs`` (as
@@ -339,7 +346,8 @@ def mechanisms(df, inputs: dict[str, tuple] | None = None):
         elif r["transmission"] == "automatic":
             parts.append("automatic (model: default converter and lock-up, one shift rule)")
         elif r["transmission"] == "manual":
-            parts.append("manual (model: 2500 rpm shift point while accelerating; tested schedule unknown)")
+            table = _manual_table()
+            parts.append(f"manual (model: upshifts at {table} mph while accelerating; its own unknown)")
         if r["boosted"]:
             parts.append("boosted (model: the boost of its rated power)")
         if r["mass"] >= m90:
