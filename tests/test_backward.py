@@ -200,7 +200,7 @@ def test_manual_shift_speeds_hold_each_gear_to_its_vehicle_speed_while_accelerat
 def test_shift_speeds_come_from_the_parameter_set_in_any_speed_unit(tmp_path):
     """``transmission.shift_point_speed`` / ``_step`` (m/s, or with a unit) set rule 4's table; a CVT refuses
     it in one line."""
-    from vpsim.gears import GearRule
+    from vpsim.gears import GearRule, default_schedule
     from vpsim.params import load_parameters
 
     path = tmp_path / "car.toml"
@@ -217,3 +217,9 @@ def test_shift_speeds_come_from_the_parameter_set_in_any_speed_unit(tmp_path):
     )
     with pytest.raises(vpsim.ParameterError, match="shift_point_speed = 6.7 m/s .* a CVT"):
         load_parameters(path)
+    path.write_text(
+        'base = "hofman2011"\n[transmission]\ngearbox_ratios = [2.5, 0.5]\ncvt_ratio_step = 0.02\n'
+    )
+    cvt = load_parameters(path)
+    with pytest.raises(vpsim.CycleError, match="a CVT chooses its ratio"):  # the rule given directly
+        default_schedule(load_cycle("udds"), cvt, rule=GearRule(upshift_speed=6.7))

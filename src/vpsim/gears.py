@@ -177,6 +177,10 @@ def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | Non
     if original is not None:
         cycle = Cycle(cycle.name, t_fine, v_fine, source=cycle.source)
     rule = rule or GearRule.of(params)
+    if rule.upshift_speed is not None and params.transmission.is_cvt:
+        raise CycleError(
+            "gear rule: upshift_speed is a stepped gearbox's table of shift speeds; a CVT chooses its ratio"
+        )
     ratios = np.asarray(params.transmission.ratios)
     n_g = len(ratios)
     v, a, w_e, _, t_cr, _ = interval_demand(cycle, ratios[:, None], params)  # shape (gears, intervals)
