@@ -48,12 +48,11 @@ SEED = 0
 
 
 def group_folds(keys: pd.Series, k: int = 5, seed: int = SEED) -> np.ndarray:
-    """Fold (0..k-1) of each row such that rows with equal ``keys`` share a fold (groups shuffled with
-    ``seed``, then dealt round-robin)."""
-    groups = np.array(sorted(keys.unique()))
-    order = np.random.default_rng(seed).permutation(groups.size)
-    fold_of = {g: i % k for i, g in zip(order, groups, strict=True)}
-    return keys.map(fold_of).to_numpy()
+    """Fold (0..k-1) of each row such that rows with equal ``keys`` share a fold: the fleet's own rule
+    (:func:`vpsim.fleet.calibrate.assign_folds`) dealing groups instead of vehicles."""
+    from vpsim.fleet.calibrate import assign_folds
+
+    return keys.map(assign_folds(list(keys.unique()), k, seed)).to_numpy()
 
 
 def frame(fleet_dir: Path, record_csv: Path) -> pd.DataFrame:

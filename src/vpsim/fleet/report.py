@@ -294,9 +294,10 @@ def twin_differences(df, inputs: dict[str, tuple]) -> dict:
 
 def _manual_table() -> str:
     """The fleet's upshift speeds of a manual (mph, gears 1-2 to 5-6), as the report names them."""
-    from .vehicle import MANUAL_UPSHIFT_MPH, MANUAL_UPSHIFT_STEP_MPH
+    from .epa import MPH_TO_MPS
+    from .vehicle import MANUAL_GEAR_RULE
 
-    return "/".join(f"{MANUAL_UPSHIFT_MPH + k * MANUAL_UPSHIFT_STEP_MPH:g}" for k in range(5))
+    return "/".join(f"{v / MPH_TO_MPS:.0f}" for v in MANUAL_GEAR_RULE.upshift_speeds(6))
 
 
 def mechanisms(df, inputs: dict[str, tuple] | None = None):

@@ -422,10 +422,11 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         "transmission.shift_engine_speed": "the fleet's rule: shift up once the next gear keeps this (rad/s)",
         "transmission.shift_point_engine_speed": "none (0): no shift point in engine speed",
         "transmission.shift_point_speed": "a manual's driver: gear 2 from this speed while accelerating "
-        "(m/s; 15 mph)"
+        f"(m/s; {MANUAL_UPSHIFT_MPH:g} mph)"
         if rec.transmission_kind == "manual"
         else "none (0): an automatic shifts by the engine speed above alone",
-        "transmission.shift_point_speed_step": "... and each further gear this much faster (m/s; 10 mph)"
+        "transmission.shift_point_speed_step": "... and each further gear this much faster "
+        f"(m/s; {MANUAL_UPSHIFT_STEP_MPH:g} mph)"
         if rec.transmission_kind == "manual"
         else "none (0)",
         "transmission.final_drive": "record: axle ratio"
