@@ -229,10 +229,10 @@ def test_a_change_in_one_place_shows_up_in_every_method(tmp_path):
     base = _probe(tmp_path / "src", cache)
     engine_py = pkg / "model" / "engine.py"
     text = engine_py.read_text()
-    old = "    return bmep_from_pressure(p_i, w_e, c) * c.mep_to_torque\n"
+    old = "    return bmep_from_pressure(p_i, w_e, c, cm18) * c.mep_to_torque\n"
     assert text.count(old) == 1
     engine_py.write_text(
-        text.replace(old, "    return bmep_from_pressure(p_i, w_e, c) * c.mep_to_torque - 5.0\n")
+        text.replace(old, "    return bmep_from_pressure(p_i, w_e, c, cm18) * c.mep_to_torque - 5.0\n")
     )
     changed = _probe(tmp_path / "src", cache)
     for key in ("backward", "forward", "inverse", "batch", "map_fuel"):
@@ -652,6 +652,20 @@ def test_forward_batch_runs_converters_as_single_runs(params):
         r = forward.run(c, d, schedule=s, mode="realistic", driver="2", keep_series=False)
         assert df["fuel_kg"][k] == pytest.approx(r.fuel_kg, rel=1e-12)
     assert df["fuel_kg"][0] != df["fuel_kg"][1] != df["fuel_kg"][2]
+
+
+def test_friction_power_of_the_speed_passed_or_computed(params):
+    """speed_power is c_m^1.8, c_m = S |w_e| / pi (by exp and log here); the equations handed it (``cm18``, as
+    the forward method's right side and Jacobian hand it on) give what they give computing it themselves."""
+    c = record(params)
+    for w in (-50.0, 30.0, 200.0, 600.0):
+        cm18 = en.speed_power(w, c)
+        assert cm18 == pytest.approx(math.exp(1.8 * math.log(c.stroke * abs(w) / math.pi)), rel=1e-14)
+        for fired in (1.0, 0.4):
+            assert en.fired_crank_torque(5e4, w, fired, c, cm18) == en.fired_crank_torque(5e4, w, fired, c)
+        assert en.crank_torque_dw(w, c, cm18) == en.crank_torque_dw(w, c)
+        assert en.fmep_at_bmep(3e5, w, c, cm18) == en.fmep_at_bmep(3e5, w, c)
+    assert en.speed_power(0.0, c) == 0.0
 
 
 def test_jacobian_helpers_agree_with_the_equations_they_differentiate(params):

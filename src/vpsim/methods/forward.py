@@ -157,9 +157,10 @@ SWITCHES = (
     "lockup",
     "converter",
 )
-# the engine's inputs at the point (the Rosenbrock step's analytic Jacobian column in p_i reads them)
-_X_AENG, _X_FIRED, _X_TACC = _X_SW + N_SW, _X_SW + N_SW + 1, _X_SW + N_SW + 2
-N_AUX = _X_SW + N_SW + 3
+# the engine's inputs at the point and its friction's power of the speed, c_m^1.8 (the Rosenbrock step's
+# analytic Jacobian reads them)
+_X_AENG, _X_FIRED, _X_TACC, _X_CM18 = range(_X_SW + N_SW, _X_SW + N_SW + 4)
+N_AUX = _X_SW + N_SW + 4
 
 # --- Dormand-Prince 5(4) tableau -------------------------------------------------------------------------
 _C2, _C3, _C4, _C5 = 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0
@@ -240,11 +241,12 @@ def _switch_value(k, v, w_wheel, t_slip, raw, cmd, conv, g_conv, G, c, D):
 
 
 @register_jitable
-def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
+def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux, full=True):
     """Right side of model + driver + quadratures at (t, y) with gear constants G; fills ``dy`` and ``aux``.
 
     The table (tab_t, tab_v) is the cycle speed for the PI driver or, with D[_OPEN] = 1, the throttle area
-    fed open loop (not clipped).
+    fed open loop (not clipped). ``full=False`` (the Rosenbrock step's inner stages, whose auxiliary values
+    nothing reads): ``dy`` alone, ``aux`` left as it was.
     """
     v = y[_V]
     p = y[_P]
@@ -261,7 +263,9 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
         v_ref = tb.interp_at(t, tab_t, tab_v, D[_TAB_INV])
         cmd, dz = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], D[_ULO], D[_UHI], D[_AWG])
         throttle, brake = pedal_split(cmd, D[_AMIN], D[_KB])
-        raw, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], -math.inf, math.inf, D[_AWG])  # unclipped
+        raw = 0.0
+        if full:
+            raw, _ = pi_law(v_ref - vv, y[_Z], D[_KP], D[_KI], -math.inf, math.inf, D[_AWG])  # unclipped
     # driveline kinematics: stiff, or slipping clutch with the engine held at idle (realistic mode), or an
     # unlocked torque converter (rules.converter_engine: the engine speed w_e a state, at least idle), its
     # drive engaged progressively over the pedal's floor band, as a neutral-idle clutch does when the brake
@@ -293,13 +297,15 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     fired = 1.0
     if (coupled or conv) and ext and D[_OPEN] == 0.0:
         fired = rules.fired_fraction_of_command(cmd, D[_AMIN], w, c)
-    t_cr = en.fired_crank_torque(p, w, fired, c)
+    cm18 = en.speed_power(w, c)  # (5)'s power of the speed, once: the torque and the friction power take it
+    t_cr = en.fired_crank_torque(p, w, fired, c, cm18)
     dp = en.manifold_pressure_rate(p, a_eng, w, c)
     mdot_f = fired * en.fuel_flow(p, w, c)
     # vehicle (18) with the engine inertia (1),(14)-(17)
     t_acc = rules.accessories_torque(w, ext, c)
     if conv:  # the converter passes the turbine's torque; the engine's inertia is on the pump's side
         w, t_e, t_turbine, dw, held, g_conv = rules.converter_engine(p, y[_W], w_wheel, passed, fired, c)
+        cm18 = en.speed_power(w, c)  # (at the converter's engine speed)
         acc = vh.acceleration(vh.engine_to_wheel_force(t_turbine, ratio, c), v, brake, c.mass, c)
         clutch = rules.CLUTCH_CONVERTER
     elif coupled:
@@ -327,7 +333,7 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     used = rules.fuel_used(mdot_f, fired, c)
     dy[_FUEL] = used
     dy[_DIST] = vv
-    pw = rules.powers(p, w, dw, t_cr, 0.0, w_wheel, vv, acc, brake, clutch, fired, t_acc, passed, c)
+    pw = rules.powers(p, w, dw, t_cr, 0.0, w_wheel, vv, acc, brake, clutch, fired, t_acc, passed, c, cm18)
     dy[_E_IND] = pw[0]
     dy[_E_FRIC] = pw[1]
     dy[_E_PUMP] = pw[2]
@@ -342,6 +348,8 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     err = v_ref - vv
     dy[_ERR2] = err * err
     dy[_OUTSIDE] = 1.0 if abs(err) > D[_BAND] else 0.0
+    if not full:
+        return
     aux[_X_THR] = en.throttle_upstream(a_eng, w, c)[0]  # the throttle's area (a boosted engine: <= A_max)
     aux[_X_W] = w
     aux[_X_TCR] = t_cr
@@ -359,9 +367,10 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux):
     aux[_X_AENG] = a_eng
     aux[_X_FIRED] = fired
     aux[_X_TACC] = t_acc
+    aux[_X_CM18] = cm18
 
 
-@register_jitable
+@register_jitable(inline="always")  # one call site, the Rosenbrock step: no call of ten arrays
 def _jacobian(y, aux, G, c, D, jac, col_v, col_p, col_z, col_w):
     """The right side's derivatives in v, p_i and z at (t, y) (``aux`` from :func:`_rhs` there): the 3 x 3
     Jacobian ``jac`` (row-major) and the full columns col_v, col_p, col_z (the quadratures' rows): the
@@ -462,7 +471,7 @@ def _jacobian(y, aux, G, c, D, jac, col_v, col_p, col_z, col_w):
             d_tcr += en.partly_fired_torque_dp(fired, c) * d_p
             d_mf += fired * en.fuel_flow_dp(p, w, c) * d_p
         if d_w != 0.0:
-            d_tcr += en.crank_torque_dw(w, c) * d_w
+            d_tcr += en.crank_torque_dw(w, c, aux[_X_CM18]) * d_w
             d_mf += fired * en.fuel_flow_dw(p, c) * d_w
         # vehicle (18) with the engine inertia (1),(14)-(17)
         d_clutch = d_tcr - d_tacc if passes else 0.0
@@ -497,6 +506,7 @@ def _jacobian(y, aux, G, c, D, jac, col_v, col_p, col_z, col_w):
             d_fired,
             d_tacc,
             c,
+            aux[_X_CM18],
         )
         col[_E_IND] = pw[0]
         col[_E_FRIC] = pw[1]
@@ -843,6 +853,10 @@ _WG1, _WG2 = 0.5, 1.5  # gamma_i = sum_j gamma_ij (0 for stages 3, 4); alpha = (
 ROS_ORDER = 3  # the step-size controller uses the embedded order 2: h ~ err^(-1/3) (cbrt); the error: u_4
 _FD_STEP = 1.4901161193847656e-08  # sqrt(eps): forward-difference increment relative to the state's scale
 EVENT_TOLERANCE_S = 1e-6  # events are located to this width (plus rounding of t)
+# the step-size factor 0.9 err^(-1/3) is bounded to [0.2, 5]: beyond these errors (a hair inside the bound)
+# the bound applies, and the cube root is not taken
+_ERR_AT_FAC_MAX = (0.9 / 5.0) ** 3 * (1.0 - 1e-9)
+_ERR_AT_FAC_MIN = (0.9 / 0.2) ** 3 * (1.0 + 1e-9)
 
 
 @register_jitable
@@ -898,32 +912,53 @@ def _solve3(r, winv, u, nd):
 
 
 @register_jitable(inline="always")
-def _quadrature_stages(i, h, ih, hg, y, ynew, f0, k3, k4, ft, u1, u2, u3, u4, e, g0, g1, g2, g3, err, nd):
-    """The four stages of quadrature state i (its column of J is zero, its row G_i = (g0, g1, g2, g3)[i] in
-    v, p_i, z, w_e): u_j = hg (f_j + sum_k c_jk u_k / h + gamma_j h df/dt + G_i u_j[v, p_i, z, w_e]); sets
-    ynew[i] and err[i], the filtered error estimate u_4 + hg G_i e (e: the filtered estimate of v, p_i, z,
-    w_e over hg; ``nd`` = 3: v, p_i, z alone). ``ih`` = 1/h: products, where the quotients cost 45 divisions
-    per step."""
-    a, b, cc = g0[i], g1[i], g2[i]
-    if nd < N_DYN:
-        q1 = hg * (f0[i] + (_WG1 * h) * ft[i] + a * u1[0] + b * u1[1] + cc * u1[2])
-        q2 = hg * (f0[i] + (_WC21 * ih) * q1 + (_WG2 * h) * ft[i] + a * u2[0] + b * u2[1] + cc * u2[2])
-        q3 = hg * (k3[i] + (_WC31 * q1 + _WC32 * q2) * ih + a * u3[0] + b * u3[1] + cc * u3[2])
-        q4 = hg * (k4[i] + (_WC41 * q1 + _WC42 * q2 + _WC43 * q3) * ih + a * u4[0] + b * u4[1] + cc * u4[2])
-        ynew[i] = y[i] + _WM1 * q1 + _WM3 * q3 + _WM4 * q4
-        err[i] = q4 + hg * (a * e[0] + b * e[1] + cc * e[2])
-        return
-    dd = g3[i]
-    q1 = hg * (f0[i] + (_WG1 * h) * ft[i] + a * u1[0] + b * u1[1] + cc * u1[2] + dd * u1[3])
-    q2 = hg * (
-        f0[i] + (_WC21 * ih) * q1 + (_WG2 * h) * ft[i] + a * u2[0] + b * u2[1] + cc * u2[2] + dd * u2[3]
+def _quadrature_weights(h, ih, hg, u1, u2, u3, u4, e, nd):
+    """The weights of a step for the quadrature states (their columns of J are zero; row G_i in v, p_i, z,
+    w_e): RODAS3's stages u_j = hg (f_j + sum_k c_jk u_k / h + gamma_j h df/dt + G_i U_j), U_j the stages
+    of v, p_i, z (w_e), are linear in (f0, df/dt, k3, k4, G_i U_j), so q_j = sum_k L_jk (inputs of stage k)
+    with L lower triangular in hg and h, and the step sum_j m_j q_j and the error estimate q_4 + hg G_i e
+    (e: the filtered estimate of v, p_i, z, w_e over hg) are fixed combinations. Returns the step's weights
+    of f0, df/dt, k3, k4 and of G_i's four entries (sum_j W_j U_j), then the error's: once per step, so
+    that each quadrature costs 8 multiply-adds for its step and 8 for its error (instead of its four
+    stages)."""
+    l21 = hg * hg * _WC21 * ih
+    l31 = hg * ih * (_WC31 * hg + _WC32 * l21)
+    l32 = hg * ih * _WC32 * hg
+    l41 = hg * ih * (_WC41 * hg + _WC42 * l21 + _WC43 * l31)
+    l42 = hg * ih * (_WC42 * hg + _WC43 * l32)
+    l43 = hg * ih * _WC43 * hg
+    w1 = _WM1 * hg + _WM3 * l31 + _WM4 * l41  # y_new = y + m1 q1 + m3 q3 + m4 q4 (m2 = 0)
+    w2 = _WM3 * l32 + _WM4 * l42
+    w3 = _WM3 * hg + _WM4 * l43
+    w4 = _WM4 * hg
+    s0 = w1 * u1[0] + w2 * u2[0] + w3 * u3[0] + w4 * u4[0]
+    s1 = w1 * u1[1] + w2 * u2[1] + w3 * u3[1] + w4 * u4[1]
+    s2 = w1 * u1[2] + w2 * u2[2] + w3 * u3[2] + w4 * u4[2]
+    e0 = l41 * u1[0] + l42 * u2[0] + l43 * u3[0] + hg * (u4[0] + e[0])
+    e1 = l41 * u1[1] + l42 * u2[1] + l43 * u3[1] + hg * (u4[1] + e[1])
+    e2 = l41 * u1[2] + l42 * u2[2] + l43 * u3[2] + hg * (u4[2] + e[2])
+    s3 = e3 = 0.0  # (no converter: w_e is no state of the step)
+    if nd == N_DYN:
+        s3 = w1 * u1[3] + w2 * u2[3] + w3 * u3[3] + w4 * u4[3]
+        e3 = l41 * u1[3] + l42 * u2[3] + l43 * u3[3] + hg * (u4[3] + e[3])
+    step = (w1 + w2, h * (_WG1 * w1 + _WG2 * w2), w3, w4, s0, s1, s2, s3)  # (stages 1 and 2 take f0)
+    error = (l41 + l42, h * (_WG1 * l41 + _WG2 * l42), l43, hg, e0, e1, e2, e3)
+    return step, error
+
+
+@register_jitable(inline="always")
+def _quadrature_sum(i, f0, ft, k3, k4, g0, g1, g2, g3, w):
+    """Quadrature i's step or error estimate from weights ``w`` of :func:`_quadrature_weights`."""
+    return (
+        w[0] * f0[i]
+        + w[1] * ft[i]
+        + w[2] * k3[i]
+        + w[3] * k4[i]
+        + w[4] * g0[i]
+        + w[5] * g1[i]
+        + w[6] * g2[i]
+        + w[7] * g3[i]
     )
-    q3 = hg * (k3[i] + (_WC31 * q1 + _WC32 * q2) * ih + a * u3[0] + b * u3[1] + cc * u3[2] + dd * u3[3])
-    q4 = hg * (
-        k4[i] + (_WC41 * q1 + _WC42 * q2 + _WC43 * q3) * ih + a * u4[0] + b * u4[1] + cc * u4[2] + dd * u4[3]
-    )
-    ynew[i] = y[i] + _WM1 * q1 + _WM3 * q3 + _WM4 * q4
-    err[i] = q4 + hg * (a * e[0] + b * e[1] + cc * e[2] + dd * e[3])
 
 
 @register_jitable
@@ -1243,7 +1278,7 @@ def _integrate_ros(
                         tgt_f = f1
                         tgt_a = aux1
                     ts = tnew
-                _rhs_stage(ts, ytmp, G, c, D, tab_t, tab_v, tgt_f, tgt_a)
+                _rhs_stage(ts, ytmp, G, c, D, tab_t, tab_v, tgt_f, tgt_a, task == N_DYN + 3)
                 nfev += 1
                 if task == N_DYN:
                     for i in range(ny):
@@ -1266,32 +1301,15 @@ def _integrate_ros(
                     _solve3(u4, winv, ytmp, nd)
                     for i in range(nd):
                         ytmp[i] = ytmp[i] / hg
-                    # the quadratures' stages, explicit (their columns of J are zero): for the fuel and the
-                    # distance now (their errors are in the norm), for the others once the step is accepted
+                    # the quadratures (their columns of J are zero): each stage is linear in f0, df/dt, k3,
+                    # k4 and the quadrature's row of J times the stages of v, p_i, z (w_e), so the step and
+                    # the error estimate are one combination of these with weights of the step
+                    # (_quadrature_weights): for the fuel and the distance now (their errors are in the
+                    # norm), for the others once the step is accepted
+                    qs, qe = _quadrature_weights(h, ih, hg, u1, u2, u3, u4, ytmp, nd)
                     for i in (_FUEL, _DIST):
-                        _quadrature_stages(
-                            i,
-                            h,
-                            ih,
-                            hg,
-                            y,
-                            ynew,
-                            f0,
-                            k3,
-                            k4,
-                            ft,
-                            u1,
-                            u2,
-                            u3,
-                            u4,
-                            ytmp,
-                            gq0,
-                            gq1,
-                            gq2,
-                            gq3,
-                            r,
-                            nd,
-                        )
+                        ynew[i] = y[i] + _quadrature_sum(i, f0, ft, k3, k4, gq0, gq1, gq2, gq3, qs)
+                        r[i] = _quadrature_sum(i, f0, ft, k3, k4, gq0, gq1, gq2, gq3, qe)
                     # the RMS norm over v, p_i, z (ode45's scales) and the fuel and distance (relative to
                     # their increment over the step plus a rate scale times h)
                     # (w_e too while a converter is unlocked)
@@ -1323,30 +1341,7 @@ def _integrate_ros(
                     if not errn <= 1.0:  # also NaN: rejected, no evaluation at the end
                         break
                     for i in range(N_DYN, ny):
-                        if i != _FUEL and i != _DIST:
-                            _quadrature_stages(
-                                i,
-                                h,
-                                ih,
-                                hg,
-                                y,
-                                ynew,
-                                f0,
-                                k3,
-                                k4,
-                                ft,
-                                u1,
-                                u2,
-                                u3,
-                                u4,
-                                ytmp,
-                                gq0,
-                                gq1,
-                                gq2,
-                                gq3,
-                                r,
-                                nd,
-                            )
+                        ynew[i] = y[i] + _quadrature_sum(i, f0, ft, k3, k4, gq0, gq1, gq2, gq3, qs)
                     if ynew[_V] < 0.0:  # keep v >= 0 (the car does not roll backwards)
                         ynew[_V] = 0.0
                 task += 1
@@ -1362,9 +1357,10 @@ def _integrate_ros(
                     return
                 fac = 0.2
                 if errn == errn and nofailed:
-                    fac = 0.9 / np.cbrt(errn)  # errn^(-1/ROS_ORDER): a cube root costs less than a power
-                    if fac < 0.2:
-                        fac = 0.2
+                    if errn < _ERR_AT_FAC_MIN:  # (the cube root only where the bound does not apply)
+                        fac = 0.9 / np.cbrt(errn)  # errn^(-1/ROS_ORDER): a cube root costs less than a power
+                        if fac < 0.2:
+                            fac = 0.2
                 elif errn == errn:
                     fac = 0.5
                 h_tried = h
@@ -1496,7 +1492,7 @@ def _integrate_ros(
             # next step: the controller's proposal (no growth right after a rejection), or the step wanted
             # before it was cut to a stop or an event
             fac = 5.0
-            if errn > 0.0:
+            if errn > _ERR_AT_FAC_MAX:  # (below it the bound applies: no cube root)
                 fac = 0.9 / np.cbrt(errn)  # errn^(-1/ROS_ORDER)
                 if fac > 5.0:
                     fac = 5.0

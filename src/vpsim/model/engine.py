@@ -166,26 +166,36 @@ def pmep(p_i, c):
 
 
 @equation
-def speed_friction(w_e, c):
-    """The speed-dependent part of FMEP (5): k_f (0.464 + 0.0072 c_m^1.8) pi_bl 1e5, c_m = S |w_e| / pi."""
-    c_m = abs(c.stroke * w_e / math.pi)
-    return c.friction_factor * (0.464 + 0.0072 * c_m**1.8) * c.boost_layout * 1e5
+def speed_power(w_e, c):
+    """c_m^1.8 of (5), c_m = S |w_e| / pi: the one power of the speed in Soltic's law. The equations below
+    that need it take it as ``cm18`` where a compiled caller has it already at this speed (one power per
+    evaluation of the forward method's right side instead of three); left out, they compute it."""
+    return abs(c.stroke * w_e / math.pi) ** 1.8
 
 
 @equation
-def speed_friction_dw(w_e, c):
+def speed_friction(w_e, c, cm18=None):
+    """The speed-dependent part of FMEP (5): k_f (0.464 + 0.0072 c_m^1.8) pi_bl 1e5, c_m = S |w_e| / pi."""
+    if cm18 is None:
+        cm18 = speed_power(w_e, c)
+    return c.friction_factor * (0.464 + 0.0072 * cm18) * c.boost_layout * 1e5
+
+
+@equation
+def speed_friction_dw(w_e, c, cm18=None):
     """d/dw_e of :func:`speed_friction`: k_f 0.0072 x 1.8 c_m^1.8 / w_e pi_bl 1e5 (c_m^0.8 S / pi = c_m^1.8 /
-    |w_e|: the same power as the friction's own, which a compiled caller of both computes once)."""
+    |w_e|: the friction's own power, :func:`speed_power`)."""
     if w_e == 0.0:
         return 0.0
-    c_m = abs(c.stroke * w_e / math.pi)
-    return c.friction_factor * 0.0072 * 1.8 * c_m**1.8 / w_e * c.boost_layout * 1e5
+    if cm18 is None:
+        cm18 = speed_power(w_e, c)
+    return c.friction_factor * 0.0072 * 1.8 * cm18 / w_e * c.boost_layout * 1e5
 
 
 @equation
-def bmep_from_pressure(p_i, w_e, c):
+def bmep_from_pressure(p_i, w_e, c, cm18=None):
     """BMEP from (2)-(6): IMEP - FMEP - PMEP with FMEP = speed part + 0.0215 k_f BMEP."""
-    return (imep(p_i, c) - speed_friction(w_e, c) - pmep(p_i, c)) / c.one_plus_kf
+    return (imep(p_i, c) - speed_friction(w_e, c, cm18) - pmep(p_i, c)) / c.one_plus_kf
 
 
 @equation
@@ -195,9 +205,9 @@ def fmep_per_bmep(c):
 
 
 @equation
-def fmep_at_bmep(bmep, w_e, c):
+def fmep_at_bmep(bmep, w_e, c, cm18=None):
     """Friction mean effective pressure FMEP (5) at a given BMEP: Soltic's law with the factor xi_aux."""
-    return speed_friction(w_e, c) + fmep_per_bmep(c) * bmep
+    return speed_friction(w_e, c, cm18) + fmep_per_bmep(c) * bmep
 
 
 @equation
@@ -207,31 +217,31 @@ def fmep(p_i, w_e, c):
 
 
 @equation
-def crank_torque(p_i, w_e, c):
+def crank_torque(p_i, w_e, c, cm18=None):
     """T_cr = BMEP V_d / (2 pi n_r)   (2),(3)."""
-    return bmep_from_pressure(p_i, w_e, c) * c.mep_to_torque
+    return bmep_from_pressure(p_i, w_e, c, cm18) * c.mep_to_torque
 
 
 @equation
-def motoring_torque(p_i, w_e, c):
+def motoring_torque(p_i, w_e, c, cm18=None):
     """Crank torque with the fuel cut (IMEP = 0): the engine turned by the wheels brakes with its friction
     and pumping, (2)-(6) without (4)."""
-    return crank_torque(p_i, w_e, c) - imep(p_i, c) / c.one_plus_kf * c.mep_to_torque
+    return crank_torque(p_i, w_e, c, cm18) - imep(p_i, c) / c.one_plus_kf * c.mep_to_torque
 
 
 @equation
-def partly_fired_torque(p_i, w_e, fired, c):
+def partly_fired_torque(p_i, w_e, fired, c, cm18=None):
     """Crank torque with the fraction ``fired`` of the cylinders fired (fuel cut-off in overrun): the
     motoring torque plus that fraction of what the fuel adds, (2)-(6) with IMEP (4) scaled."""
-    t_motor = motoring_torque(p_i, w_e, c)
-    return t_motor + fired * (crank_torque(p_i, w_e, c) - t_motor)
+    t_motor = motoring_torque(p_i, w_e, c, cm18)
+    return t_motor + fired * (crank_torque(p_i, w_e, c, cm18) - t_motor)
 
 
 @equation
-def fired_crank_torque(p_i, w_e, fired, c):
+def fired_crank_torque(p_i, w_e, fired, c, cm18=None):
     """Crank torque with ``fired`` of the cylinders fired: :func:`crank_torque` when all fire, else
     :func:`partly_fired_torque`."""
-    return partly_fired_torque(p_i, w_e, fired, c) if fired < 1.0 else crank_torque(p_i, w_e, c)
+    return partly_fired_torque(p_i, w_e, fired, c, cm18) if fired < 1.0 else crank_torque(p_i, w_e, c, cm18)
 
 
 @equation
@@ -276,10 +286,10 @@ def fuel_flow_dw(p_i, c):
 
 
 @equation
-def crank_torque_dw(w_e, c):
+def crank_torque_dw(w_e, c, cm18=None):
     """dT_cr/dw_e at fixed p_i, fired or not (:func:`partly_fired_torque`): FMEP's speed part (5) through
     the BMEP divisor."""
-    return -speed_friction_dw(w_e, c) / c.one_plus_kf * c.mep_to_torque
+    return -speed_friction_dw(w_e, c, cm18) / c.one_plus_kf * c.mep_to_torque
 
 
 @equation

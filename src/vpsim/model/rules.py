@@ -327,7 +327,7 @@ N_TERMS = len(ENERGY_TERMS)
 
 
 @inline
-def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired, t_acc, passed, c):
+def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired, t_acc, passed, c, cm18=None):
     """Power (W) of every energy term at one instant, in the order of :data:`ENERGY_TERMS`.
 
     ``t_cr`` is the crank torque the engine makes and ``t_missing`` what the demand asked beyond it (trace
@@ -341,7 +341,8 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
     the balance. ``fired``: the fraction of the cylinders fired (0: fuel cut, no indicated work).
     ``t_acc``: the accessories' torque (:func:`accessories_torque`). ``passed``: the share of the unlocked
     converter's torque that loads the engine and reaches the gearbox (the forward method's neutral-idle
-    clutch, :func:`converter_engine`; 1 otherwise).
+    clutch, :func:`converter_engine`; 1 otherwise). ``cm18``: the friction's power of the speed at w_e
+    (:func:`.engine.speed_power`) where the caller has it; computed if left out.
     """
     vv = v if v > 0.0 else 0.0
     road = (c.mass * vv * a, vh.aero_force(vv, c) * vv, vh.rolling_force(vv, c) * vv, brake * vv)
@@ -350,7 +351,7 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
     cyc = en.cycles_per_second(w_e, c) * c.displacement  # MEP x this = power
     indicated = fired * en.burned_fuel_flow(p_i, w_e, c) * c.fuel_heating_value * c.thermal_efficiency
     friction = (
-        en.fmep_at_bmep(t_cr / c.mep_to_torque, w_e, c) * cyc
+        en.fmep_at_bmep(t_cr / c.mep_to_torque, w_e, c, cm18) * cyc
     )  # (5) at the engine's BMEP (fired or not)
     pumping = en.pmep(p_i, c) * cyc
     t_asked = t_cr + t_missing - t_acc
@@ -412,6 +413,7 @@ def powers_tangent(
     d_fired,
     d_tacc,
     c,
+    cm18=None,
 ):
     """Directional derivative of :func:`powers` (``t_missing`` = 0) along a change d_x of each of its
     arguments x (p_i, w_e, dw_e/dt, T_cr, w_wheel, v, a, brake force, fired fraction, accessories' torque):
@@ -435,8 +437,8 @@ def powers_tangent(
     if d_w != 0.0:  # (the speed's terms, with their powers, only where the speed moves)
         d_cyc = en.cycles_per_second(d_w, c) * c.displacement
         d_flow += en.burned_fuel_flow_dw(p_i, c) * d_w
-        d_fmep += en.speed_friction_dw(w_e, c) * d_w
-        friction = en.fmep_at_bmep(t_cr / c.mep_to_torque, w_e, c) * d_cyc
+        d_fmep += en.speed_friction_dw(w_e, c, cm18) * d_w
+        friction = en.fmep_at_bmep(t_cr / c.mep_to_torque, w_e, c, cm18) * d_cyc
         pumping += en.pmep(p_i, c) * d_cyc
     friction += d_fmep * cyc  # (5)
     indicated = fired * d_flow
