@@ -78,7 +78,7 @@ from ..model import rules
 from ..model import tables as tb
 from ..model import vehicle as vh
 from ..model._compile import kernel
-from ..model.record import memo, record
+from ..model.record import kernel_records, memo, record
 from ..result import EnergyBalance, Result, TraceMiss, limits_of
 
 BAND_KMH = 2.0  # the regulation's speed tolerance (UN ECE R83 / EPA: +-2 km/h resp. +-2 mph)
@@ -1549,7 +1549,9 @@ def initial_state(cycle, params, ratio: float, pi: PIDriver, mode: str) -> np.nd
     """
     y = np.zeros(NY)
     v0, a0 = _cycle_start(cycle.time_s, cycle.speed_mps)
-    _start_state(v0, a0, ratio, rules.canonical_mode(mode) == "paper", pi.u_lo, pi.u_hi, record(params), y)
+    paper = rules.canonical_mode(mode) == "paper"
+    recs = kernel_records(params)
+    _start_state_kernel(float(v0), float(a0), float(ratio), paper, pi.u_lo, pi.u_hi, recs, y)
     return y
 
 
@@ -1561,8 +1563,8 @@ def _cycle_start(t, v):
 
 @register_jitable
 def _start_state(v0, a0, ratio, paper, u_lo, u_hi, c, y):
-    """Fill ``y`` (zeros) with :func:`initial_state`'s state (``paper``: the paper mode); plain Python for one
-    run, compiled into :func:`_variants` for the batch."""
+    """Fill ``y`` (zeros) with :func:`initial_state`'s state (``paper``: the paper mode); compiled for one
+    run (:func:`_start_state_kernel`) and into :func:`_variants` for the batch."""
     y[_V] = v0
     y[_W] = c.idle_speed
     if v0 > 0.0:
@@ -1578,6 +1580,13 @@ def _start_state(v0, a0, ratio, paper, u_lo, u_hi, c, y):
     else:
         y[_P] = en.intake_pressure_for_torque(0.0, c.idle_speed, c)
         y[_Z] = 0.0
+
+
+@kernel
+def _start_state_kernel(v0, a0, ratio, paper, u_lo, u_hi, recs, y):
+    """One run's :func:`_start_state`, compiled (the model's steady-state solves in plain Python took 20 us
+    of a run; ``recs``: the record as an array, whose dispatch costs less than a record's)."""
+    _start_state(v0, a0, ratio, paper, u_lo, u_hi, recs[0], y)
 
 
 # v (m/s), p_i (Pa), z (m²): ode45's atol/rtol per state; w_e (rad/s, a car with a converter): the idle speed
@@ -1719,11 +1728,12 @@ def segments(cycle, schedule: GearSchedule, ratios) -> tuple[np.ndarray, np.ndar
 
 def warm_up() -> None:
     """Load (or compile) the kernels of both solvers, so that run times measure the simulation only."""
-    if _integrate.overloads and _integrate_ros.overloads:
+    if _integrate.overloads and _integrate_ros.overloads and _start_state_kernel.overloads:
         return
     from ..params import load_parameters
 
     p = load_parameters("hofman2011")
+    _start_state_kernel(0.0, 0.0, 10.0, True, 0.0, 1.0, kernel_records(p), np.zeros(NY))
     for solver in SOLVERS:
         integrate(
             np.array([0.0, 1.0]),
@@ -1908,7 +1918,11 @@ def run(
             forward_ki=d.forward_ki if ki is None else float(ki),
         )
         params = replace(params, drivers={**params.drivers, driver: d})
-    pi = PIDriver.from_params(params, driver, mode, tracking_time_s)
+    pi = memo(  # (frozen, like the parameter set it is derived from)
+        params,
+        f"forward_pi_driver:{driver}:{mode}:{tracking_time_s!r}",
+        lambda p: PIDriver.from_params(p, driver, mode, tracking_time_s),
+    )
     if schedule is None:
         from ..model.maps import cached_engine_map
 
