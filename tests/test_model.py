@@ -655,8 +655,9 @@ def test_forward_batch_runs_converters_as_single_runs(params):
 
 
 def test_friction_power_of_the_speed_passed_or_computed(params):
-    """speed_power is c_m^1.8, c_m = S |w_e| / pi (by exp and log here); the equations handed it (``cm18``, as
-    the forward method's right side and Jacobian hand it on) give what they give computing it themselves."""
+    """speed_power is c_m^1.8, c_m = S |w_e| / pi (by exp and log here), and the record keeps it at the idle
+    speed; the equations handed it (``cm18``, as the forward method's right side and Jacobian hand it on) give
+    what they give computing it themselves."""
     c = record(params)
     for w in (-50.0, 30.0, 200.0, 600.0):
         cm18 = en.speed_power(w, c)
@@ -666,6 +667,8 @@ def test_friction_power_of_the_speed_passed_or_computed(params):
         assert en.crank_torque_dw(w, c, cm18) == en.crank_torque_dw(w, c)
         assert en.fmep_at_bmep(3e5, w, c, cm18) == en.fmep_at_bmep(3e5, w, c)
     assert en.speed_power(0.0, c) == 0.0
+    # the record's value at the idle speed (the forward method's engine held at idle reads it)
+    assert c.idle_speed_power == pytest.approx(math.exp(1.8 * math.log(c.stroke * c.idle_speed / math.pi)))
 
 
 def test_jacobian_helpers_agree_with_the_equations_they_differentiate(params):

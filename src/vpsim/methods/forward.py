@@ -297,7 +297,8 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux, full=True):
     fired = 1.0
     if (coupled or conv) and ext and D[_OPEN] == 0.0:
         fired = rules.fired_fraction_of_command(cmd, D[_AMIN], w, c)
-    cm18 = en.speed_power(w, c)  # (5)'s power of the speed, once: the torque and the friction power take it
+    # (5)'s power of the speed, once: the torque and the friction power take it (at idle, the record's)
+    cm18 = c.idle_speed_power if w == c.idle_speed else en.speed_power(w, c)
     t_cr = en.fired_crank_torque(p, w, fired, c, cm18)
     dp = en.manifold_pressure_rate(p, a_eng, w, c)
     mdot_f = fired * en.fuel_flow(p, w, c)
@@ -305,7 +306,7 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux, full=True):
     t_acc = rules.accessories_torque(w, ext, c)
     if conv:  # the converter passes the turbine's torque; the engine's inertia is on the pump's side
         w, t_e, t_turbine, dw, held, g_conv = rules.converter_engine(p, y[_W], w_wheel, passed, fired, c)
-        cm18 = en.speed_power(w, c)  # (at the converter's engine speed)
+        cm18 = c.idle_speed_power if w == c.idle_speed else en.speed_power(w, c)  # (the converter's speed)
         acc = vh.acceleration(vh.engine_to_wheel_force(t_turbine, ratio, c), v, brake, c.mass, c)
         clutch = rules.CLUTCH_CONVERTER
     elif coupled:
@@ -986,7 +987,8 @@ def _switch(k, t, y, G, c, D, tab_t, tab_v):
     t_slip = raw = cmd = g_conv = 0.0
     conv = D[_EXT] != 0.0 and not vh.converter_locked(G[_G_GEAR], vv, c)
     if k == _SW_SLIP_TORQUE:
-        t_slip = en.crank_torque(y[_P], c.idle_speed, c)  # the slipping engine at idle, all cylinders fired
+        # the slipping engine at idle, all cylinders fired
+        t_slip = en.crank_torque(y[_P], c.idle_speed, c, c.idle_speed_power)
     elif k == _SW_CONVERTER:
         if conv:
             if D[_OPEN] != 0.0:

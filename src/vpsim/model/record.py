@@ -91,6 +91,7 @@ DERIVED_FIELDS = (
     "aero_coefficient",  # 1/2 c_d rho A of (18), or the coast-down C
     "torque_slope",  # dT_cr/dp_i (engine.torque_slope)
     "enrichment_slope",  # d(enrichment)/dp_i above ambient (engine.enrichment_slope)
+    "idle_speed_power",  # c_m^1.8 of (5) at the idle speed (engine.speed_power): the engine held at idle
 )
 FIELDS = tuple(f for fs in _PARAMETER_FIELDS.values() for f in fs) + (
     "map_speed_low",
@@ -142,6 +143,7 @@ def _fill(rec, vehicle, transmission, engine, simulation, n: int) -> None:
     r.torque_slope = 1.0  # a placeholder crank_torque does not read; the slope follows from it
     r.torque_slope = eq_engine.torque_slope(r)
     r.enrichment_slope = eq_engine.enrichment_slope(r)
+    r.idle_speed_power = eq_engine.speed_power(r.idle_speed, r)
     if n == 1:
         rec[0] = tuple(_scalar(getattr(r, name)) for name in FIELDS)
     else:
