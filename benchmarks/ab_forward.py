@@ -96,11 +96,16 @@ def main(argv=None) -> int:
         ap.error(f"--runs {a.runs}: expected at least 1")
     _install(a.old_src, "vpsim_a", a.scratch)
     _install(a.new_src, "vpsim_b", a.scratch)
+    for name in [m for m in sys.modules if m.split(".")[0] in ("vpsim_a", "vpsim_b")]:
+        del sys.modules[name]  # (a second call in one process imports the copies it made, not the first's)
     sys.path.insert(0, str(a.scratch))
     print(f"A = {_package_dir(a.old_src)}\nB = {_package_dir(a.new_src)}", flush=True)
     for cycle in a.cycles.split(","):
-        run_a, res_a = _prepared("vpsim_a", cycle)
-        run_b, res_b = _prepared("vpsim_b", cycle)
+        try:
+            run_a, res_a = _prepared("vpsim_a", cycle)
+            run_b, res_b = _prepared("vpsim_b", cycle)
+        except Exception as exc:  # a version's own error (an unknown cycle, ...): its one line, no traceback
+            raise SystemExit(f"ab_forward: {cycle}: {exc}") from None
         for _ in range(20):
             run_a()
             run_b()

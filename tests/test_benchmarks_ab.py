@@ -29,3 +29,11 @@ def test_ab_forward_refuses_a_folder_without_vpsim(benchmark_script, tmp_path):
     ab = benchmark_script("ab_forward")
     with pytest.raises(SystemExit, match="no vpsim package here"):
         ab.main([str(tmp_path), str(SRC), "--scratch", str(tmp_path / "s")])
+
+
+def test_ab_forward_says_which_cycle_it_cannot_run(benchmark_script, tmp_path):
+    """An unknown cycle: one line naming it (the package's own message), no traceback."""
+    ab = benchmark_script("ab_forward")
+    args = [str(SRC), str(SRC), "--cycles", "no_such_cycle", "--runs", "1", "--scratch", str(tmp_path)]
+    with pytest.raises(SystemExit, match="ab_forward: no_such_cycle: .*no_such_cycle"):
+        ab.main(args)
