@@ -29,6 +29,8 @@ def mpg_from_l_per_100km(l_per_100km):
 
 
 # dimension -> {unit: (factor, offset)}: SI value = factor * value + offset
+MPH_TO_MPS = 0.44704  # exact: 1609.344 m per mile, 3600 s per hour
+
 UNITS: dict[str, dict[str, tuple[float, float]]] = {
     "dimensionless": {"-": (1.0, 0.0), "": (1.0, 0.0), "1": (1.0, 0.0)},
     "fraction": {"-": (1.0, 0.0), "": (1.0, 0.0), "1": (1.0, 0.0), "%": (0.01, 0.0)},
@@ -95,7 +97,7 @@ UNITS: dict[str, dict[str, tuple[float, float]]] = {
         "lb/gal": (0.45359237 / 3.785411784, 0.0),
     },
     "acceleration": {"m/s^2": (1.0, 0.0), "ft/s^2": (0.3048, 0.0)},
-    "speed": {"m/s": (1.0, 0.0), "km/h": (1.0 / 3.6, 0.0), "mph": (0.44704, 0.0)},
+    "speed": {"m/s": (1.0, 0.0), "km/h": (1.0 / 3.6, 0.0), "mph": (MPH_TO_MPS, 0.0)},
     "inertia": {
         "kg m^2": (1.0, 0.0),
         "g cm^2": (1e-7, 0.0),

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..errors import CycleError
 from ..textio import check_path, read_text
+from ..units import MPH_TO_MPS
 
 STANDARD_CYCLES = ("nedc", "ftp75", "udds", "hwfet", "us06", "wltc3b")
 # phases of a standard cycle, by name: (cycle, start s, end s), time re-based to 0. FTP-75's bags as the
@@ -41,7 +42,8 @@ _ALIASES = {
     "hfet": "hwfet",
 }
 
-_SPEED_UNITS = {"m/s": 1.0, "mps": 1.0, "km/h": 1.0 / 3.6, "kmh": 1.0 / 3.6, "kph": 1.0 / 3.6, "mph": 0.44704}
+_KMH = 1.0 / 3.6
+_SPEED_UNITS = {"m/s": 1.0, "mps": 1.0, "km/h": _KMH, "kmh": _KMH, "kph": _KMH, "mph": MPH_TO_MPS}
 _TIME_COLUMNS = ("time_s", "time", "t", "t_s")
 MAX_CYCLE_BYTES = 64 * 1024 * 1024  # a cycle CSV larger than this is refused (a month of 1 Hz samples fits)
 MAX_SPEED_MPS = 200.0  # 720 km/h: faster is a unit slip (speed in km/h declared as m/s) or a broken file

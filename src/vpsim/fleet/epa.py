@@ -54,12 +54,11 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from ..errors import VpsimError
-from ..units import mpg_from_l_per_100km
+from ..units import MPH_TO_MPS, mpg_from_l_per_100km
 
 # --- unit conversions (exact definitions) -------------------------------------------------------------------
 LB_TO_KG = 0.45359237
 LBF_TO_N = 4.4482216152605  # lbf = lb x standard gravity 9.80665 m/s^2
-MPH_TO_MPS = 0.44704
 HP_TO_KW = 0.745699871582270  # mechanical horsepower (550 ft lbf/s)
 
 

@@ -241,6 +241,13 @@ def _switch_value(k, v, w_wheel, t_slip, raw, cmd, conv, g_conv, G, c, D):
 
 
 @register_jitable
+def _speed_power(w, c):
+    """(5)'s power of the speed c_m^1.8 (:func:`.engine.speed_power`) at engine speed w: the record's at the
+    idle speed, where the slipping clutch's engine spends its time."""
+    return c.idle_speed_power if w == c.idle_speed else en.speed_power(w, c)
+
+
+@register_jitable
 def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux, full=True):
     """Right side of model + driver + quadratures at (t, y) with gear constants G; fills ``dy`` and ``aux``.
 
@@ -297,8 +304,7 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux, full=True):
     fired = 1.0
     if (coupled or conv) and ext and D[_OPEN] == 0.0:
         fired = rules.fired_fraction_of_command(cmd, D[_AMIN], w, c)
-    # (5)'s power of the speed, once: the torque and the friction power take it (at idle, the record's)
-    cm18 = c.idle_speed_power if w == c.idle_speed else en.speed_power(w, c)
+    cm18 = _speed_power(w, c)  # once: the torque and the friction power take it
     t_cr = en.fired_crank_torque(p, w, fired, c, cm18)
     dp = en.manifold_pressure_rate(p, a_eng, w, c)
     mdot_f = fired * en.fuel_flow(p, w, c)
@@ -306,7 +312,7 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux, full=True):
     t_acc = rules.accessories_torque(w, ext, c)
     if conv:  # the converter passes the turbine's torque; the engine's inertia is on the pump's side
         w, t_e, t_turbine, dw, held, g_conv = rules.converter_engine(p, y[_W], w_wheel, passed, fired, c)
-        cm18 = c.idle_speed_power if w == c.idle_speed else en.speed_power(w, c)  # (the converter's speed)
+        cm18 = _speed_power(w, c)  # (the converter's engine speed)
         acc = vh.acceleration(vh.engine_to_wheel_force(t_turbine, ratio, c), v, brake, c.mass, c)
         clutch = rules.CLUTCH_CONVERTER
     elif coupled:
