@@ -687,3 +687,15 @@ def test_jacobian_helpers_agree_with_the_equations_they_differentiate(params):
         fd = (en.speed_friction(w + h, c) - en.speed_friction(w - h, c)) / (2 * h)
         assert en.speed_friction_dw(w, c) == pytest.approx(fd, rel=1e-7)
     assert en.speed_friction_dw(0.0, c) == 0.0
+
+
+def test_wheel_force_rate_keeps_the_coast_down_b_term(params):
+    """d/dt (m a + A + B v + C v^2) = m jerk + (B + 2 C v) a, by hand, on a B-heavy road load."""
+    q = params.with_changes(vehicle={"road_load_a": 120.0, "road_load_b": 20.0, "road_load_c": 0.4})
+    c = record(q)
+    v, a, jerk = 10.0, 1.5, 0.5
+    assert vh.wheel_force_rate(v, a, jerk, c) == pytest.approx(c.mass * 0.5 + (20.0 + 2 * 0.4 * 10.0) * 1.5)
+    # and the derivative of the wheel force itself, numerically (central difference along v = v0 + a t)
+    h = 1e-4
+    f = [vh.wheel_force(v + a * s, a + jerk * s, c) for s in (-h, h)]
+    assert vh.wheel_force_rate(v, a, jerk, c) == pytest.approx((f[1] - f[0]) / (2 * h), rel=1e-7)

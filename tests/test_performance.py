@@ -116,3 +116,28 @@ def test_bad_arguments(params):
         acceleration_time(params, launch_speed=0.0)
     with pytest.raises(ValueError, match="shift_fraction"):
         acceleration_time(params, shift_fraction=1.5)
+
+
+def test_launch_meets_the_whole_coast_down_road_load(params):
+    """A B-heavy coast-down road load (F = A + B v + C v^2): at the target speed B v alone exceeds the largest
+    force any gear can put on the road there, so the target is out of reach. (A model that dropped B v, as
+    this one once did, got there.)"""
+    target_kmh = 100.0
+    v = target_kmh / 3.6
+    c = record(params)
+    forces = []
+    for i in params.transmission.ratios:  # total ratios, final drive included
+        w = i * v / c.wheel_radius  # the engine's speed at the target in this gear (14),(17)
+        if w <= 1.25 * params.engine.map_speed_range[1]:  # beyond any rev limit the model uses: unusable
+            forces.append(
+                float(max_torque(np.array([w]), params.engine)[0]) * i * c.efficiency / c.wheel_radius
+            )
+    b = 1.2 * max(forces) / v  # N per m/s
+    assert b < 1000.0  # (a plausible coefficient)
+    q = params.with_changes(vehicle={"road_load_a": 100.0, "road_load_b": b, "road_load_c": 0.3})
+    assert vh.road_load(v, record(q)) == pytest.approx(100.0 + b * v + 0.3 * v**2)
+    a = acceleration_time(q, target_kmh=target_kmh)
+    assert not a.reached and a.reason
+    # the same car with a fifth of that B gets there
+    easier = params.with_changes(vehicle={"road_load_a": 100.0, "road_load_b": b / 5, "road_load_c": 0.3})
+    assert acceleration_time(easier, target_kmh=target_kmh).reached

@@ -242,7 +242,7 @@ class _Designs:
         m_eff = np.where(slip, c.mass, vh.equivalent_mass(i, c))
         # launching forward: rolling resistance acts from the start (as static friction it holds a car whose
         # drive force is smaller: see the ``stuck`` check)
-        road = vh.aero_force(v, c) + c.rolling_force
+        road = vh.aero_force(v, c) + vh.rolling_force_in_motion(v, c)
         dv = (vh.engine_to_wheel_force(t_cr, i, c) - road) / m_eff
         dp, _ = en.manifold_pressure_rate_array(p, c.max_throttle_area, w_e, c)
         return dv, dp

@@ -16,14 +16,16 @@ import sys
 
 import click
 
-# which kernels a module's compiled functions are, and what their first compilation costs on a 2-core
-# machine with other load (measured with an empty cache; see benchmarks/README.md)
+# which kernels a module's compiled functions are, and what their compilation costs on a 2-core machine,
+# quiet to loaded (measured with an empty cache, 2026-12-03: benchmarks/first_run.py). ``pip install .``
+# compiles them all into the package (setup.py): these are heard only where that cache does not serve (an
+# editable install, another processor, a $NUMBA_CACHE_DIR of one's own, an edited source).
 KERNELS = {
-    "vpsim.model.engine": ("model's array views", "2-10 s"),
-    "vpsim.model.tables": ("model's table look-ups", "1-5 s"),
-    "vpsim.methods.backward": ("backward kernels", "5-20 s"),
-    "vpsim.methods.forward": ("forward integrator", "10-50 s"),
-    "vpsim.methods.inverse": ("inverse kernels", "10-55 s"),
+    "vpsim.model.engine": ("model's array views", "1-3 s"),
+    "vpsim.model.tables": ("model's table look-ups", "1-2 s"),
+    "vpsim.methods.backward": ("backward kernels", "15-30 s"),
+    "vpsim.methods.forward": ("forward integrator", "40-110 s"),
+    "vpsim.methods.inverse": ("inverse kernels", "10-20 s"),
 }
 _MODEL = ("vpsim.model.engine", "vpsim.model.tables", "vpsim.methods.backward")  # maps and gear rule too
 METHOD_MODULES = {
@@ -78,7 +80,8 @@ def announce_compilation(say=echo) -> bool:
             what, how_long = group
             self.said.add(what)
             say(
-                f"vpsim: compiling the {what} (one-time: cached on disk for later runs; typically {how_long})"
+                f"vpsim: compiling the {what} (one-time: cached on disk for later runs; {how_long} on "
+                "2 cores; `python -m vpsim.precompile` compiles all ahead)"
             )
 
         def on_end(self, ev):

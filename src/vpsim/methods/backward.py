@@ -34,7 +34,13 @@ from ..model import tables as tb
 from ..model import vehicle as vh
 from ..model._compile import kernel
 from ..model.engine import equation, inline
-from ..model.maps import EngineMap, GeneratedEngineMap, cached_engine_map
+from ..model.maps import (
+    LINE_SPEED_STEP,
+    MAX_SPEED_FACTOR,
+    EngineMap,
+    GeneratedEngineMap,
+    cached_engine_map,
+)
 from ..model.record import kernel_records
 from ..model.record import ratios as total_ratios
 from ..result import EnergyBalance, Result, TraceMiss, limits_of
@@ -93,7 +99,7 @@ def _point(
     a = (speed[k + 1] - speed[k]) / dt
     t_closed = 0.0
     if extended:
-        t_closed = tb.interp_at(i * v / c.wheel_radius, line_speed, line_min, inv_line)
+        t_closed = tb.interp_at(vh.engine_speed(v, i, c), line_speed, line_min, inv_line)
     w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(
         v, a, i, g + 1, t_closed, extended, c
     )
@@ -348,8 +354,8 @@ def _map_arrays(engine_map, params):
             engine_map.min_torque_values,
         )
     # any other map: its lines tabulated at 1 rad/s over its speed range, its fuel flow asked for directly
-    w_top = 1.25 * params.engine.map_speed_range[1]
-    w = np.linspace(0.0, w_top, int(round(w_top)) + 1)
+    w_top = MAX_SPEED_FACTOR * params.engine.map_speed_range[1]
+    w = np.linspace(0.0, w_top, int(round(w_top / LINE_SPEED_STEP)) + 1)
     none = np.zeros(2)
     return (
         FUEL_GIVEN,
@@ -568,48 +574,30 @@ N_BATCH_OUT = 4
 
 
 @equation
-def _line_node(j, n_line, w_end):
-    """Node j of numpy.linspace(0, w_end, n_line) (the last node is w_end exactly)."""
-    if j >= n_line - 1:
-        return w_end
-    return j * (w_end / (n_line - 1))
-
-
-@equation
-def _line_value(j, full, cache, n_line, w_end, c):
-    """The full-load line (``full``) or the closed-throttle line (the FQM at A_min) at node j, computed on
-    first use and cached."""
+def _line_value(j, full, line_w, cache, c):
+    """The full-load line (``full``) or the closed-throttle line (the FQM at A_min) at its node j (speed
+    ``line_w[j]``), computed on first use and cached in ``cache`` (NaN: not yet computed)."""
     val = cache[j]
-    if val != val:  # NaN: not yet computed
-        w = _line_node(j, n_line, w_end)
+    if val != val:
+        w = line_w[j]
         val = en.full_load_torque(w, c) if full else en.steady_torque(c.min_throttle_area, w, c)
         cache[j] = val
     return val
 
 
 @equation
-def _lazy_line(w, full, cache, n_line, w_end, c):
-    """numpy.interp(w, line speeds, line torques) with the line's nodes computed lazily."""
-    if w <= 0.0:
-        return _line_value(0, full, cache, n_line, w_end, c)
-    if w >= w_end:
-        return _line_value(n_line - 1, full, cache, n_line, w_end, c)
-    j = min(int(w / (w_end / (n_line - 1))), n_line - 2)
-    while j > 0 and _line_node(j, n_line, w_end) > w:
-        j -= 1
-    while _line_node(j + 1, n_line, w_end) <= w:
-        j += 1
-    x0 = _line_node(j, n_line, w_end)
-    f0 = _line_value(j, full, cache, n_line, w_end, c)
-    if x0 == w:
-        return f0
-    x1 = _line_node(j + 1, n_line, w_end)
-    f1 = _line_value(j + 1, full, cache, n_line, w_end, c)
-    return (f1 - f0) / (x1 - x0) * (w - x0) + f0
+def _lazy_line(w, full, line_w, inv, cache, c):
+    """The generated line at w (tables.interp_at on the line's nodes ``line_w``), evaluating only the nodes
+    the look-up reads."""
+    j, exact = tb.interval_at(w, line_w, inv)
+    _line_value(j, full, line_w, cache, c)
+    if not exact:
+        _line_value(j + 1, full, line_w, cache, c)
+    return tb.interp_at(w, line_w, cache, inv)
 
 
 @equation
-def _variant(c, rat, gear, dt, v, a, v_top_gear, extended, out):
+def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, out):
     """One variant: the operating points of :func:`run_kernel` with the exact BQM, each line of the
     variant's own engine evaluated lazily (a Newton solve per node actually needed).
 
@@ -618,14 +606,17 @@ def _variant(c, rat, gear, dt, v, a, v_top_gear, extended, out):
     the largest friction rise over two node intervals, no point can reach the (interpolated) line, so it is
     not evaluated there.
     """
-    w_end = 1.25 * c.map_speed_high  # as model.maps.generate_engine_map
+    # the lines' nodes as model.maps.generate_engine_map spaces them
+    w_end = MAX_SPEED_FACTOR * c.map_speed_high
     w_top = c.idle_speed if extended else 0.0
     for g in range(rat.size):
-        w_top = max(w_top, rat[g] * v_top_gear[g] / c.wheel_radius)
-    n_line = int(round(w_end / 1.0)) + 1
+        w_top = max(w_top, vh.engine_speed(v_top_gear[g], rat[g], c))
+    n_line = int(round(w_end / LINE_SPEED_STEP)) + 1
+    line_w = np.linspace(0.0, w_end, n_line)
+    inv = tb.inverse_spacing(line_w)
     step = w_end / (n_line - 1)
     j_s = min(int(math.ceil(w_top / step)) + 2, n_line - 1)
-    w_s = _line_node(j_s, n_line, w_end)
+    w_s = line_w[j_s]
     p_floor, _ = en.steady_pressure(c.max_throttle_area, w_s, c)
     # the rise of the demanded pressure over two node intervals (friction grows with speed)
     d_p = en.intake_pressure_for_torque(0.0, w_s, c) - en.intake_pressure_for_torque(
@@ -641,21 +632,27 @@ def _variant(c, rat, gear, dt, v, a, v_top_gear, extended, out):
     max_short = 0.0
     best = 0.0
     cur = 0.0
+    # c_m^1.8 of the friction law (5) at the wheel-side engine speed, i v / r: a factor per gear times the
+    # cycle's v^1.8 (shared by all variants), not a power per interval
+    gear_cm18 = np.empty(rat.size)
+    for g in range(rat.size):
+        gear_cm18[g] = en.speed_power(vh.engine_speed(1.0, rat[g], c), c)
     for k in range(gear.size):
         i = rat[gear[k]]
         t_closed = 0.0
         if extended:
-            t_closed = _lazy_line(i * v[k] / c.wheel_radius, False, cache_min, n_line, w_end, c)
+            t_closed = _lazy_line(vh.engine_speed(v[k], i, c), False, line_w, inv, cache_min, c)
         w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(
             v[k], a[k], i, gear[k] + 1, t_closed, extended, c
         )
-        p = en.intake_pressure_for_torque(t_req if fired >= 1.0 else t_closed, w, c)
+        cm18 = gear_cm18[gear[k]] * v18[k] if w == w_wheel else en.speed_power(w, c)
+        p = en.intake_pressure_for_torque(t_req if fired >= 1.0 else t_closed, w, c, cm18)
         short = 0.0
         if not (w <= w_end and p <= p_screen):
-            t_max = _lazy_line(w, True, cache_max, n_line, w_end, c)
+            t_max = _lazy_line(w, True, line_w, inv, cache_max, c)
             if t_req > t_max:
                 short = t_req - t_max
-                p = en.intake_pressure_for_torque(t_max, w, c)
+                p = en.intake_pressure_for_torque(t_max, w, c, cm18)
         if short > MISS_TOLERANCE_NM:
             miss_s += dt[k]
             max_short = max(max_short, short)
@@ -674,9 +671,10 @@ def _variant(c, rat, gear, dt, v, a, v_top_gear, extended, out):
 
 @kernel(parallel=True)
 def _variants(recs, ratios, schedule_of_variant, gears, v_top_gear, dt, v, a, extended, out):
+    v18 = np.abs(v) ** 1.8  # c_m^1.8 = (S i / (pi r))^1.8 v^1.8: the speed's part, once for all variants
     for m in prange(recs.size):
         s = schedule_of_variant[m]
-        _variant(recs[m], ratios[m], gears[s], dt, v, a, v_top_gear[s], extended, out[m])
+        _variant(recs[m], ratios[m], gears[s], dt, v, a, v18, v_top_gear[s], extended, out[m])
 
 
 def run_variants(cycle, recs, ratios, gears, schedule_of_variant, mode: str) -> np.ndarray:

@@ -1,62 +1,141 @@
-"""How vpsim compiles: one decorator for every kernel, and an on-disk cache that knows the whole model.
+"""How vpsim compiles: one decorator for every kernel, and an on-disk cache stamped with what each uses.
 
 Kernels are compiled by Numba on first use and cached on disk (``__pycache__`` beside the module, or
-``$NUMBA_CACHE_DIR``). Numba keys a kernel's cache on its own source file only, but vpsim's kernels inline
-the model's equations from other files (:mod:`vpsim.model.engine`, ...): an edited equation would leave a
-stale kernel on disk. The cache locator below therefore stamps every vpsim kernel with a hash of all the
-package's compiled sources (the model, the methods, the drivers, the batch), so a change anywhere in them
-recompiles every kernel. Installed packages never change, so this costs nothing there.
+``$NUMBA_CACHE_DIR``); ``pip install .`` builds that cache for the installed package (``setup.py``,
+:mod:`vpsim.precompile`), so a first run loads kernels instead of compiling them. Numba stamps a kernel's
+cache with its own file's modification time and size, but vpsim's kernels inline the model's equations
+from other files (:mod:`vpsim.model.engine`, ...), and an installed file's modification time is the
+install's. The cache locator below therefore stamps each kernel with a digest of the sources it uses: its
+own function and, transitively, every vpsim function, compiled dispatcher and module-level constant it
+reaches (:func:`kernel_digest`). An edited equation recompiles only the kernels that include it, a
+kernel built at install is valid wherever the package lands, and nothing depends on file times.
 """
 
 from __future__ import annotations
 
 import functools
 import hashlib
-from pathlib import Path
+import inspect
+import types
 
 import numba
+import numpy as np
 from numba.core import caching
 
-_PACKAGE = Path(__file__).resolve().parent.parent  # src/vpsim
-_COMPILED_SOURCES = ("model", "methods", "drivers", "batch.py")
+_PACKAGE_PREFIX = "vpsim."
+_PLAIN = (bool, int, float, complex, str, bytes, type(None))
 
 
-@functools.lru_cache(maxsize=1)
-def _sources_digest() -> bytes:
-    h = hashlib.sha256()
-    files: list[Path] = []
-    for name in _COMPILED_SOURCES:
-        p = _PACKAGE / name
-        files += sorted(p.rglob("*.py")) if p.is_dir() else [p]
-    for f in files:
-        try:
-            h.update(f.relative_to(_PACKAGE).as_posix().encode())
-            h.update(f.read_bytes())
-        except OSError:  # pragma: no cover - a file removed while running
-            continue
-    return h.digest()
+def _code_names(code: types.CodeType) -> set[str]:
+    names = set(code.co_names)
+    for k in code.co_consts:
+        if isinstance(k, types.CodeType):
+            names |= _code_names(k)
+    return names
 
 
-def _in_package(py_file: str) -> bool:
+def _source(fn) -> str:
     try:
-        Path(py_file).resolve().relative_to(_PACKAGE)
-    except (ValueError, OSError):
-        return False
-    return True
+        return inspect.getsource(fn)
+    except (OSError, TypeError):  # pragma: no cover - made without a source file
+        code = fn.__code__
+        return repr((code.co_code, code.co_consts, code.co_names))
+
+
+def _ours(obj) -> bool:
+    return (getattr(obj, "__module__", None) or "").startswith(_PACKAGE_PREFIX) or (
+        getattr(obj, "__module__", None) == "vpsim"
+    )
+
+
+def _value_token(value) -> str | None:
+    """A constant's contribution to a kernel's stamp (Numba freezes module-level constants into the code)."""
+    if isinstance(value, _PLAIN):
+        return repr(value)
+    if isinstance(value, tuple) and all(isinstance(v, _PLAIN) for v in value):
+        return repr(value)
+    if isinstance(value, np.ndarray):
+        return f"ndarray{value.dtype.str}{value.shape}:{hashlib.sha256(value.tobytes()).hexdigest()}"
+    if isinstance(value, np.dtype):
+        return repr(value)
+    return None
+
+
+def _python_function(obj):
+    """The Python function behind a compiled dispatcher or a plain function; None for anything else."""
+    py = getattr(obj, "py_func", None)
+    if isinstance(py, types.FunctionType):
+        return py
+    return obj if isinstance(obj, types.FunctionType) else None
+
+
+def _closure(fn) -> list[tuple[str, str]]:
+    """(what, token) of every vpsim function and constant ``fn`` reaches, ``fn`` included, transitively."""
+    seen: dict[int, None] = {}
+    parts: list[tuple[str, str]] = []
+    todo = [fn]
+    while todo:
+        f = todo.pop()
+        if id(f) in seen:
+            continue
+        seen[id(f)] = None
+        parts.append((f"{f.__module__}.{f.__qualname__}", _source(f)))
+        names = _code_names(f.__code__)
+        values = [(n, f.__globals__[n]) for n in sorted(names) if n in f.__globals__]
+        values += [(f"<default {i}>", d) for i, d in enumerate(f.__defaults__ or ())]
+        values += [(f"<cell {i}>", c.cell_contents) for i, c in enumerate(f.__closure__ or ())]
+        for name, value in values:
+            if isinstance(value, types.ModuleType):
+                if not (value.__name__ == "vpsim" or value.__name__.startswith(_PACKAGE_PREFIX)):
+                    continue
+                # an attribute of one of vpsim's modules (``en.idle_throttle``): its names in the code
+                for attr in sorted(names):
+                    if attr in vars(value):
+                        _visit(f"{value.__name__}.{attr}", vars(value)[attr], parts, todo)
+                continue
+            _visit(f"{f.__module__}:{name}", value, parts, todo)
+    return parts
+
+
+def _visit(name, value, parts, todo) -> None:
+    fn = _python_function(value)
+    if fn is not None:
+        if _ours(fn):
+            todo.append(fn)
+        return
+    token = _value_token(value)
+    if token is not None:
+        parts.append((name, token))
+
+
+@functools.cache
+def kernel_digest(py_func) -> bytes:
+    """The digest of everything ``py_func`` compiles from: its source, the sources of the vpsim functions and
+    kernels it calls (transitively) and the values of the module-level constants they read."""
+    h = hashlib.sha256()
+    for what, token in sorted(set(_closure(py_func))):
+        h.update(what.encode())
+        h.update(b"\0")
+        h.update(token.encode())
+        h.update(b"\1")
+    return h.digest()
 
 
 def _locator(base):
     class _VpsimLocator(base):
-        """``base`` for vpsim's files, with the whole model's sources in the cache stamp."""
+        """``base`` for vpsim's kernels, stamped with :func:`kernel_digest` instead of the file's time."""
 
         def get_source_stamp(self):
-            return (super().get_source_stamp(), _sources_digest())
+            return ("vpsim-kernel-digest", kernel_digest(self._vpsim_py_func))
 
         @classmethod
         def from_function(cls, py_func, py_file):
-            if not _in_package(py_file):
+            if not _ours(py_func):
                 return None
-            return super().from_function(py_func, py_file)
+            self = super().from_function(py_func, py_file)
+            if self is not None:
+                self._vpsim_py_func = py_func
+            return self
 
     _VpsimLocator.__name__ = f"Vpsim{base.__name__.lstrip('_')}"
     return _VpsimLocator
@@ -81,7 +160,7 @@ def _install() -> bool:
     return True
 
 
-WHOLE_SOURCE_STAMPS = _install()  # whether edits anywhere in the model recompile every kernel
+KERNEL_STAMPS = _install()  # whether each kernel's cache is stamped with the sources it uses (see above)
 
 _OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
 

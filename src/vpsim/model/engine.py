@@ -327,13 +327,13 @@ def torque_per_pressure(w_e, c):
 
 
 @equation
-def intake_pressure_for_torque(t_cr, w_e, c):
+def intake_pressure_for_torque(t_cr, w_e, c, cm18=None):
     """p_i with delta(p_i) = 0 for imposed (T_cr, w_e): the BQM's inversion of (2)-(8).
 
     delta(p_i) = T_cr(p_i, w_e) - T_cr is linear in p_i, so the root is closed-form (the paper iterates; both
-    agree): p_i = (T_cr - T_cr(0, w_e)) / (dT_cr/dp_i).
+    agree): p_i = (T_cr - T_cr(0, w_e)) / (dT_cr/dp_i). ``cm18``: :func:`speed_power` at w_e, if at hand.
     """
-    return (t_cr - crank_torque(0.0, w_e, c)) / torque_per_pressure(w_e, c)
+    return (t_cr - crank_torque(0.0, w_e, c, cm18)) / torque_per_pressure(w_e, c)
 
 
 @equation
@@ -661,10 +661,11 @@ def _flat(*arrays, recs):
     if recs.ndim == 0:
         recs = recs.reshape(1)
     shape = np.broadcast_shapes(*(np.shape(a) for a in arrays), recs.shape if recs.size > 1 else ())
-    flat = [np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype=float), shape)).ravel() for a in arrays]
+    # writable copies always: a read-only input would be another signature, compiled again
+    flat = [np.array(np.broadcast_to(np.asarray(a, dtype=float), shape)).ravel() for a in arrays]
     if recs.size > 1:
-        recs = np.ascontiguousarray(np.broadcast_to(recs, shape)).ravel()
-    return shape, flat, np.asarray(recs).view(np.ndarray)
+        recs = np.array(np.broadcast_to(recs, shape)).ravel()
+    return shape, flat, np.array(recs).view(np.ndarray)
 
 
 def psi_array(p_r, c):

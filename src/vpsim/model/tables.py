@@ -32,19 +32,27 @@ def _guess(xg, x, inv):
 
 
 @equation
-def interp_at(x, xp, fp, inv):
-    """numpy.interp(x, xp, fp) for one x: end values held outside, exact at the nodes."""
+def interval_at(x, xp, inv):
+    """The nodes numpy.interp(x, xp, fp) reads for one x: (j, exact), the value fp[j] if ``exact`` (at or
+    beyond an end, or on a node), else between fp[j] and fp[j + 1] (xp[j] < x < xp[j + 1])."""
     n = xp.size
     if x <= xp[0]:
-        return fp[0]
+        return 0, True
     if x >= xp[n - 1]:
-        return fp[n - 1]
+        return n - 1, True
     j = _guess(xp, x, inv)
     while j > 0 and xp[j] > x:
         j -= 1
     while xp[j + 1] <= x:
         j += 1
-    if xp[j] == x:
+    return j, xp[j] == x
+
+
+@equation
+def interp_at(x, xp, fp, inv):
+    """numpy.interp(x, xp, fp) for one x: end values held outside, exact at the nodes."""
+    j, exact = interval_at(x, xp, inv)
+    if exact:
         return fp[j]
     slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
     return slope * (x - xp[j]) + fp[j]
@@ -93,18 +101,16 @@ def _bilinear_loop(xg, yg, table, x, y, out):
 def interp(x, xp, fp):
     """:func:`interp_at` over an array ``x``."""
     x = np.asarray(x, dtype=float)
-    flat = np.ascontiguousarray(x).ravel()
+    flat = np.array(x).ravel()  # writable copies: a read-only input would be another signature to compile
     out = np.empty(flat.size)
-    _interp_loop(flat, np.asarray(xp, float), np.asarray(fp, float), out)
+    _interp_loop(flat, np.array(xp, float), np.array(fp, float), out)
     return out.reshape(x.shape) if x.ndim else float(out[0])
 
 
 def bilinear(xg, yg, table, x, y):
     """:func:`bilinear_at` over arrays ``x``, ``y`` (broadcast)."""
     x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
-    xs, ys = np.ascontiguousarray(x).ravel(), np.ascontiguousarray(y).ravel()
+    xs, ys = np.array(x).ravel(), np.array(y).ravel()  # writable copies: one signature (see interp)
     out = np.empty(xs.size)
-    _bilinear_loop(
-        np.asarray(xg, float), np.asarray(yg, float), np.ascontiguousarray(table, dtype=float), xs, ys, out
-    )
+    _bilinear_loop(np.array(xg, float), np.array(yg, float), np.array(table, dtype=float), xs, ys, out)
     return out.reshape(x.shape) if x.ndim else float(out[0])

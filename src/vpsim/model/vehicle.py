@@ -39,10 +39,17 @@ def aero_force(v, c):
 
 
 @equation
+def rolling_force_in_motion(v, c):
+    """m g c_r (with a coast-down road load A + B v): the rolling resistance of a car that moves or sets off
+    (a launch meets it from the first instant)."""
+    return c.rolling_force + c.road_load_b * v
+
+
+@equation
 def rolling_force(v, c):
-    """m g c_r while moving (v > 0) (with a coast-down road load A + B v); at rest rolling resistance is
-    static friction and pushes nothing."""
-    return (c.rolling_force + c.road_load_b * v) * (v > 0.0)
+    """:func:`rolling_force_in_motion` while moving (v > 0); at rest rolling resistance is static friction
+    and pushes nothing."""
+    return rolling_force_in_motion(v, c) * (v > 0.0)
 
 
 @equation
@@ -147,8 +154,8 @@ def acceleration_dforce(f_drive, v, brake, mass, c):
 
 @equation
 def wheel_force_rate(v, a, jerk, c):
-    """d/dt of the wheel force (18) along a trajectory (v, dv/dt, d2v/dt2): m jerk + d(drag)/dv a."""
-    return c.mass * jerk + 2.0 * c.aero_coefficient * abs(v) * a
+    """d/dt of the wheel force (18) along a trajectory (v, dv/dt, d2v/dt2): m jerk + d(road load)/dv a."""
+    return c.mass * jerk + road_load_dv(v, c) * a
 
 
 # --- torque converter (realistic mode) ------------------------------------------------------------------
