@@ -153,6 +153,53 @@ def test_equation_constants_appear_in_the_model_only():
     assert not offenders, offenders
 
 
+# the model's parameters that its equations combine: arithmetic on them is an equation, and belongs in model/
+EQUATION_PARAMETERS = frozenset(
+    """mass inertia wheel_radius aero_coefficient rolling_force road_load_a road_load_b road_load_c
+    drag_coefficient frontal_area air_density gravity efficiency final_drive torque_slope heat_factor
+    friction_factor friction_coefficient mep_to_torque fuel_heating_value thermal_efficiency
+    stoich_air_fuel_ratio gas_constant intake_manifold_volume air_charge_slope air_charge_intercept rt_intake
+    afr air_per_charge sqrt_rt_ambient one_plus_kf specific_heat_ratio boost_layout revolutions_per_cycle
+    rolling_resistance""".split()
+)
+# files outside model/ that may compute with them, and why
+EQUATION_PARAMETERS_ALLOWED = {
+    "scaling.py": "the paper's engine-scaling law (section 6): it makes parameter sets, not model equations",
+    "drivers/pi.py": "the PI driver's gain normalisation by the car's weight and throttle (a design rule)",
+    "cli/params.py": "displays values in other units",
+    "cli/scaling.py": "displays values in other units",
+}
+
+
+def test_no_model_equation_is_written_outside_the_model():
+    """Structural: no arithmetic on the model's parameters (``c.inertia * dw``, ``i * v / c.wheel_radius``,
+    ``a + b * v``-style road loads on a record's fields) outside ``src/vpsim/model/``: a method, driver,
+    batch or the fleet calls the model's functions instead. Whatever the name of the function it sits in."""
+    offenders = []
+    for f in sorted(SRC.rglob("*.py")):
+        rel = f.relative_to(SRC).as_posix()
+        if rel.startswith("model/") or rel in EQUATION_PARAMETERS_ALLOWED:
+            continue
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.BinOp):
+                sides = (node.left, node.right)
+                if any(isinstance(x, ast.Attribute) and x.attr in EQUATION_PARAMETERS for x in sides):
+                    offenders.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")
+    assert not offenders, "\n".join(offenders)
+
+
+def test_the_equation_guard_sees_a_restated_equation(tmp_path):
+    """The guard above flags an engine-torque equation written inline, whatever it is called."""
+    code = "def anything(c, t_cr, dw):\n    return t_cr - c.inertia * dw\n"
+    hits = [
+        n
+        for n in ast.walk(ast.parse(code))
+        if isinstance(n, ast.BinOp)
+        and any(isinstance(x, ast.Attribute) and x.attr in EQUATION_PARAMETERS for x in (n.left, n.right))
+    ]
+    assert hits
+
+
 def test_each_equation_is_defined_once():
     """Every equation of vpsim.model is defined by one module-level function of the package; a function of
     the same name elsewhere may only delegate to it (a view over arrays, or a map's engine argument)."""
@@ -699,3 +746,27 @@ def test_wheel_force_rate_keeps_the_coast_down_b_term(params):
     h = 1e-4
     f = [vh.wheel_force(v + a * s, a + jerk * s, c) for s in (-h, h)]
     assert vh.wheel_force_rate(v, a, jerk, c) == pytest.approx((f[1] - f[0]) / (2 * h), rel=1e-7)
+
+
+def test_each_kernel_is_stamped_with_what_it_compiles_from():
+    """The cache stamp of a kernel covers the model equations it reaches (through other modules, dispatchers
+    and module attributes) and the constants they read, and nothing it does not reach: an edited equation
+    recompiles only the kernels that include it."""
+    from vpsim.model import tables
+    from vpsim.model._compile import KERNEL_STAMPS, _closure, kernel_digest
+
+    assert KERNEL_STAMPS
+    ros = {what for what, _ in _closure(forward._integrate_ros.py_func)}
+    assert {
+        "vpsim.model.engine.crank_torque",
+        "vpsim.model.vehicle.road_load",
+        "vpsim.model.rules.powers",
+    } <= ros
+    assert any(w.endswith(":BAND_KMH") or w.endswith(":_EPS") for w in ros)  # constants frozen into the code
+    batch = {what for what, _ in _closure(forward._variants.py_func)}
+    assert "vpsim.methods.forward._integrate_ros" in batch  # a kernel calling a kernel includes its sources
+    uniform = {what for what, _ in _closure(inverse._is_uniform_compiled.py_func)}
+    assert not any(w.startswith("vpsim.model.engine.") for w in uniform)
+    interp = {what for what, _ in _closure(tables._interp_loop.py_func)}
+    assert "vpsim.model.tables.interp_at" in interp and "vpsim.model.engine.crank_torque" not in interp
+    assert kernel_digest(backward.run_kernel.py_func) != kernel_digest(backward.account.py_func)

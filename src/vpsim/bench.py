@@ -44,12 +44,13 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
+from .units import LITRES_PER_GALLON as LITRES_PER_GAL
+
 PEER = "fastsim"
 PEER_VERSION = "3.1.0"
 PEER_VEHICLE = "2012_Ford_Fusion.yaml"
 PEER_CYCLES = {"udds": "udds.csv", "hwfet": "hwfet.csv"}
 GASOLINE_KWH_PER_GAL = 33.7  # EPA's energy content of gasoline, to turn FASTSim's fuel energy into litres
-LITRES_PER_GAL = 3.785411784
 
 # target figures of the performance issue (ratios > 1: vpsim faster; inverse_vs_backward: a time ratio)
 TARGETS = {

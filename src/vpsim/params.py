@@ -103,7 +103,9 @@ class Transmission:
     @property
     def ratios(self) -> tuple[float, ...]:
         """Total ratios i = gearbox x final drive, one per gear (gear 1 first; a CVT's grid point)."""
-        return tuple(g * self.final_drive for g in self.gearbox_steps)
+        from .model.vehicle import total_ratio
+
+        return tuple(total_ratio(g, self.final_drive) for g in self.gearbox_steps)
 
     @property
     def n_gears(self) -> int:

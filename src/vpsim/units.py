@@ -28,8 +28,11 @@ def mpg_from_l_per_100km(l_per_100km):
     return L_PER_100KM_MPG / l_per_100km
 
 
+METRES_PER_MILE = 1609.344  # exact (international mile)
+LITRES_PER_GALLON = 3.785411784  # exact (US liquid gallon)
+MPH_TO_MPS = METRES_PER_MILE / 3600.0  # 0.44704 exactly
+
 # dimension -> {unit: (factor, offset)}: SI value = factor * value + offset
-MPH_TO_MPS = 0.44704  # exact: 1609.344 m per mile, 3600 s per hour
 
 UNITS: dict[str, dict[str, tuple[float, float]]] = {
     "dimensionless": {"-": (1.0, 0.0), "": (1.0, 0.0), "1": (1.0, 0.0)},

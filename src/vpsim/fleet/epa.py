@@ -54,7 +54,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from ..errors import VpsimError
-from ..units import MPH_TO_MPS, mpg_from_l_per_100km
+from ..model import vehicle as vh
+from ..units import LITRES_PER_GALLON, METRES_PER_MILE, MPH_TO_MPS, mpg_from_l_per_100km
 
 # --- unit conversions (exact definitions) -------------------------------------------------------------------
 LB_TO_KG = 0.45359237
@@ -162,10 +163,20 @@ HOT_TOWN_HYBRID_RATIO = 0.86
 # conventional cars reach at most 0.34 (Nissan Rogue, variable-compression turbo + CVT), the Hyundai Ioniq
 # hybrid 0.37 (its hot town bag is only 0.64 x highway, so the ratio rule misses it)
 HWY_EFFICIENCY_HYBRID = 0.35
-METRES_PER_MILE = 1609.344
-LITRES_PER_GALLON = 3.785411784
 CERT_FUEL_KG_PER_L = 0.743  # Tier 2 certification gasoline
 CERT_FUEL_LHV_J_PER_KG = 42.9e6
+
+
+def coastdown_record(a_n, b_n_per_mps, c_n_per_mps2, mass_kg=0.0):
+    """The fields the model's road load (:func:`vpsim.model.vehicle.road_load`, :func:`~.wheel_force`) reads,
+    for a coast-down road load F = A + B v + C v^2 in SI units (and a mass): its equations then evaluate a
+    record's road load, here and wherever the fleet needs it."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(
+        mass=mass_kg, rolling_force=a_n, road_load_b=b_n_per_mps, aero_coefficient=c_n_per_mps2
+    )
+
 
 # boosted or naturally aspirated: the list has no column for it
 BOOST_SPECIFIC_POWER_KW_PER_L = 75.0
@@ -408,7 +419,7 @@ def implied_hwy_efficiency(t: dict, hwy_mpg: float) -> float:
     dt = np.diff(cyc.time_s)
     acc = np.diff(cyc.speed_mps) / dt
     a, b, c = vals[0] * LBF_TO_N, lbf_per_mph_to_si(vals[1]), lbf_per_mph2_to_si(vals[2])
-    force = a + b * v + c * v * v + vals[3] * LB_TO_KG * acc
+    force = vh.wheel_force(v, acc, coastdown_record(a, b, c, vals[3] * LB_TO_KG))  # (18)
     work = float(np.sum(np.maximum(force, 0.0) * v * dt))
     distance = float(np.sum(v * dt))
     gallons = distance / METRES_PER_MILE / hwy_mpg

@@ -22,12 +22,12 @@ from __future__ import annotations
 
 import math
 
+from ..units import METRES_PER_MILE
 from .epa import VehicleRecord
 
 PEER_VERSION = "3.1.0"
 PEER_VEHICLE = "2012_Ford_Fusion.yaml"
 GASOLINE_J_PER_GAL = 33.7 * 3.6e6
-METRES_PER_MILE = 1609.344
 
 
 def status() -> dict:

@@ -45,8 +45,9 @@ import numpy as np
 
 from ..errors import VpsimError
 from ..gears import GearRule
+from ..model import vehicle as vh
 from ..params import Parameters, load_parameters
-from .epa import MPH_TO_MPS, VehicleRecord
+from .epa import CERT_FUEL_KG_PER_L, CERT_FUEL_LHV_J_PER_KG, MPH_TO_MPS, VehicleRecord, coastdown_record
 
 BASE_PRESET = "hofman2011"
 WHEEL_RADIUS_M = 0.33  # dynamic radius of a typical 2022 passenger-car tyre (e.g. 225/60 R17: 0.34 m)
@@ -72,8 +73,8 @@ CONVERTER_KINDS = ("automatic", "cvt")
 CONVERTER_STALL_RPM = 2400.0
 LOCKUP_MIN_GEAR = 2
 LOCKUP_MIN_SPEED_KMH = 25.0
-FUEL_DENSITY_KG_PER_L = 0.743  # Tier 2 certification gasoline
-FUEL_LHV_J_PER_KG = 42.9e6
+FUEL_DENSITY_KG_PER_L = CERT_FUEL_KG_PER_L  # Tier 2 certification gasoline (fleet.epa)
+FUEL_LHV_J_PER_KG = CERT_FUEL_LHV_J_PER_KG
 GRAVITY = 9.81
 # a certification test runs with the accessories off but the alternator's base load (engine electronics, fuel
 # pump, ignition): some 200-400 W of electrical power, about 300-500 W at the crank
@@ -145,7 +146,7 @@ def fold_road_load(rec: VehicleRecord, cycles) -> tuple[float, float, float]:
 
     a, b, c = rec.road_load_si
     v, w = speed_weights(cycles)
-    f = a + b * v + c * v * v
+    f = vh.road_load(v, coastdown_record(a, b, c))  # (18) with the record's coast-down coefficients
     sw = np.sqrt(w / w.sum())
     m = rec.mass_kg
     design = np.column_stack([np.full_like(v, m * GRAVITY), 0.5 * AIR_DENSITY * FRONTAL_AREA_M2 * v * v])

@@ -114,9 +114,7 @@ def _point(
         mdot = tb.bilinear_at(map_speed, map_torque, table, w, t_fired, inv_ms, inv_mt)
     else:
         mdot = math.nan
-    if clutch == rules.CLUTCH_OPEN:
-        mdot = c.idle_fuel_flow
-    mdot = fired * mdot  # fuel cut-off in overrun: the fired cylinders' part
+    mdot = rules.engine_fuel_flow(mdot, clutch, fired, c)  # idle with the clutch open; fuel cut-off
     return v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot
 
 
@@ -209,12 +207,19 @@ def _book(
     acc[8] += pw[8] * dt
     if short > acc[A_MAX_SHORT]:
         acc[A_MAX_SHORT] = short
-    if short > MISS_TOLERANCE_NM:  # the speed the engine could not give accumulates over the miss
+    cur = _deficit_after(short, dt, i, cur, c)
+    if short > MISS_TOLERANCE_NM:
         _kahan(acc, comp, A_MISS_S, dt)
-        cur += vh.engine_to_wheel_force(short, i, c) / vh.equivalent_mass(i, c) * dt
         if cur > acc[A_DEFICIT]:
             acc[A_DEFICIT] = cur
-        return cur
+    return cur
+
+
+@inline
+def _deficit_after(short, dt, i, cur, c):
+    """The speed the engine could not give, accumulated over a contiguous trace miss (0 once it ends)."""
+    if short > MISS_TOLERANCE_NM:
+        return cur + vh.acceleration_shortfall(short, i, c) * dt
     return 0.0
 
 
@@ -505,7 +510,7 @@ def sample_rows(rows, gear, recs, generated, out):
         out[S_GEAR, k] = gear[own]
         out[S_W, k] = w
         out[S_TCR, k] = t_cr
-        out[S_TE, k] = t_cr - c.inertia * dw  # (1)
+        out[S_TE, k] = vh.engine_torque(t_cr, dw, c)  # (1)
         ok = generated and engaged
         out[S_P, k] = 0.5 * (rows[R_P, lo] + rows[R_P, hi]) if ok else math.nan
         out[S_THR, k] = 0.5 * (rows[R_THR, lo] + rows[R_THR, hi]) if ok else math.nan
@@ -653,16 +658,13 @@ def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, out):
             if t_req > t_max:
                 short = t_req - t_max
                 p = en.intake_pressure_for_torque(t_max, w, c, cm18)
+        max_short = max(max_short, short)
+        cur = _deficit_after(short, dt[k], i, cur, c)
         if short > MISS_TOLERANCE_NM:
             miss_s += dt[k]
-            max_short = max(max_short, short)
-            cur += vh.engine_to_wheel_force(short, i, c) / vh.equivalent_mass(i, c) * dt[k]
             best = max(best, cur)
-        else:
-            max_short = max(max_short, short)
-            cur = 0.0
-        mdot = en.fuel_flow(p, w, c) if clutch != rules.CLUTCH_OPEN else c.idle_fuel_flow
-        fuel += rules.fuel_used(fired * mdot, fired, c) * dt[k]
+        mdot = rules.engine_fuel_flow(en.fuel_flow(p, w, c), clutch, fired, c)
+        fuel += rules.fuel_used(mdot, fired, c) * dt[k]
     out[B_FUEL] = fuel
     out[B_MISS_S] = miss_s
     out[B_MAX_SHORT] = max_short

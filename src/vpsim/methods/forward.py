@@ -320,7 +320,7 @@ def _rhs(t, y, G, c, D, tab_t, tab_v, dy, aux, full=True):
         acc = vh.acceleration(vh.engine_to_wheel_force(t_clutch, ratio, c), v, brake, 1.0 / G[_G_INV_MEQ], c)
         dw = G[_G_KIN] * acc
         clutch = rules.CLUTCH_ENGAGED
-        t_e = t_cr - t_acc - c.inertia * dw  # (1): T_e = T_cr - J_e dw_e/dt (less the accessories)
+        t_e = vh.engine_torque(t_cr - t_acc, dw, c)  # (1): T_e = T_cr - J_e dw_e/dt (less the accessories)
     else:
         t_clutch = rules.slipping_clutch_torque(t_cr - t_acc)
         acc = vh.acceleration(vh.engine_to_wheel_force(t_clutch, ratio, c), v, brake, c.mass, c)
@@ -1576,9 +1576,9 @@ def _start_state(v0, a0, ratio, paper, u_lo, u_hi, c, y):
     y[_V] = v0
     y[_W] = c.idle_speed
     if v0 > 0.0:
-        f = vh.equivalent_mass(ratio, c) * a0 + vh.road_load(v0, c)
         w = vh.engine_speed(v0, ratio, c)
-        p, u = en.steady_point(vh.wheel_to_engine_torque(f, ratio, c), w, c)
+        t_cr = vh.crank_torque_demand(vh.wheel_force(v0, a0, c), ratio, vh.engine_speed(a0, ratio, c), c)
+        p, u = en.steady_point(t_cr, w, c)
         y[_W] = w
         y[_P] = p
         y[_Z] = u_hi if u > u_hi else (u_lo if u < u_lo else u)

@@ -334,10 +334,7 @@ def _gear_coefficients(params) -> np.ndarray:
     r = total_ratios(params.transmission)
     coef = np.empty((r.size, 6))
     coef[:, :4] = np.column_stack(np.broadcast_arrays(*vh.statespace_coefficients(r, c)[:4]))
-    m_eq = vh.equivalent_mass(r, c)
-    coef[:, 4] = c.rolling_force / m_eq
-    # the part of the road load linear in v (a coast-down B), not in the paper's affine form (21)
-    coef[:, 5] = -(vh.rolling_force(1.0, c) - vh.rolling_force(1e-300, c)) / m_eq
+    coef[:, 4], coef[:, 5] = vh.rolling_coefficients(r, c)
     coef.flags.writeable = False
     return coef
 
@@ -469,7 +466,7 @@ def account(v, dv, vc, rows, left, right, dt, recs, realistic, band, weight, acc
             acc[_A_OUT] += wk
         if k < extra.shape[1]:
             if clutch == rules.CLUTCH_ENGAGED or clutch == rules.CLUTCH_CONVERTER:
-                extra[0, k] = t_cr - c.inertia * rows[R_DWENG, k]
+                extra[0, k] = vh.engine_torque(t_cr, rows[R_DWENG, k], c)
             else:
                 extra[0, k] = rules.slipping_clutch_torque(t_cr)
             extra[1, k] = min(max(u, c.min_throttle_area), c.max_throttle_area) if u == u else u  # the area

@@ -67,6 +67,30 @@ def heat_factor(c):
 
 
 @equation
+def intake_rt(c):
+    """R T_i: the intake air's pressure per density, (8)-(10)."""
+    return c.gas_constant * c.intake_temperature
+
+
+@equation
+def ambient_rt_sqrt(c):
+    """sqrt(R T_a): the throttle flow's (10) temperature factor."""
+    return np.sqrt(c.gas_constant * c.ambient_temperature)
+
+
+@equation
+def air_fuel_ratio(c):
+    """(A/F)_s lambda: air per fuel of the charge (7)."""
+    return c.stoich_air_fuel_ratio * c.lambda_
+
+
+@equation
+def air_per_charge_pressure(c):
+    """V_d / (R T_i): the cylinder air charge per unit of charge pressure (8)."""
+    return displacement(c) / intake_rt(c)
+
+
+@equation
 def mep_to_torque(mep, c):
     """Torque of a mean effective pressure: T = MEP V_d / (2 pi n_r)   (3)."""
     return mep * displacement(c) / (TWO_PI * c.revolutions_per_cycle)
@@ -356,10 +380,25 @@ def psi(p_r, c):
         return c.psi_choked
     if p_r >= 1.0:
         return 0.0
-    g = c.specific_heat_ratio
-    x = p_r ** (1.0 / g)  # one power: p_r^(2/g) = x^2, p_r^((g+1)/g) = p_r x
-    f = 2.0 * g / (g - 1.0) * (x * x - p_r * x)
+    _, f = _psi_squared(p_r, c)
     return math.sqrt(f) if f > 0.0 else 0.0
+
+
+@equation
+def _psi_squared(p_r, c):
+    """(x, Psi^2) of the subcritical flow (13), x = p_r^(1/gamma): one power, p_r^(2/g) = x^2 and
+    p_r^((g+1)/g) = p_r x."""
+    g = c.specific_heat_ratio
+    x = p_r ** (1.0 / g)
+    return x, 2.0 * g / (g - 1.0) * (x * x - p_r * x)
+
+
+@equation
+def _dpsi_from(p_r, x, f, c):
+    """dPsi/dp_r of the subcritical flow from :func:`_psi_squared`'s (x, Psi^2)."""
+    g = c.specific_heat_ratio
+    df = 2.0 * g / (g - 1.0) * ((2.0 / g) * x * x / p_r - ((g + 1.0) / g) * x)
+    return df / (2.0 * math.sqrt(f if f > 1e-300 else 1e-300))
 
 
 @equation
@@ -367,11 +406,8 @@ def dpsi_dpr(p_r, c):
     """dPsi/dp_r (0 in the choked region; -> -inf as p_r -> 1; 0 above 1, where Psi = 0)."""
     if p_r <= c.critical_ratio or p_r >= 1.0:
         return 0.0
-    g = c.specific_heat_ratio
-    x = p_r ** (1.0 / g)
-    f = 2.0 * g / (g - 1.0) * (x * x - p_r * x)
-    df = 2.0 * g / (g - 1.0) * ((2.0 / g) * x * x / p_r - ((g + 1.0) / g) * x)
-    return df / (2.0 * math.sqrt(f if f > 1e-300 else 1e-300))
+    x, f = _psi_squared(p_r, c)
+    return _dpsi_from(p_r, x, f, c)
 
 
 @equation
@@ -730,11 +766,8 @@ def psi_and_dpsi(p_r, c):
         return c.psi_choked, 0.0
     if p_r >= 1.0:
         return 0.0, 0.0
-    g = c.specific_heat_ratio
-    x = p_r ** (1.0 / g)
-    f = 2.0 * g / (g - 1.0) * (x * x - p_r * x)
-    df = 2.0 * g / (g - 1.0) * ((2.0 / g) * x * x / p_r - ((g + 1.0) / g) * x)
-    return (math.sqrt(f) if f > 0.0 else 0.0), df / (2.0 * math.sqrt(f if f > 1e-300 else 1e-300))
+    x, f = _psi_squared(p_r, c)
+    return (math.sqrt(f) if f > 0.0 else 0.0), _dpsi_from(p_r, x, f, c)
 
 
 @equation

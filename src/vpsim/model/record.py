@@ -130,12 +130,12 @@ def _fill(rec, vehicle, transmission, engine, simulation, n: int) -> None:
     r.displacement = eq_engine.displacement(r)
     r.friction_factor = eq_engine.friction_factor(r)
     r.one_plus_kf = eq_engine.bmep_divisor(r)
-    r.rt_intake = r.gas_constant * r.intake_temperature
-    r.afr = r.stoich_air_fuel_ratio * r.lambda_
+    r.rt_intake = eq_engine.intake_rt(r)
+    r.afr = eq_engine.air_fuel_ratio(r)
     r.heat_factor = eq_engine.heat_factor(r)
     r.mep_to_torque = eq_engine.mep_to_torque(1.0, r)
-    r.air_per_charge = r.displacement / r.rt_intake
-    r.sqrt_rt_ambient = np.sqrt(r.gas_constant * r.ambient_temperature)
+    r.air_per_charge = eq_engine.air_per_charge_pressure(r)
+    r.sqrt_rt_ambient = eq_engine.ambient_rt_sqrt(r)
     r.critical_ratio = eq_engine.critical_pressure_ratio(r.specific_heat_ratio)
     r.psi_choked = eq_engine.psi_choked(r.specific_heat_ratio)
     r.rolling_force = eq_vehicle.rolling_force_moving(r)

@@ -170,6 +170,13 @@ def fuel_used(mdot_f, fired, c):
 
 
 @equation
+def engine_fuel_flow(mdot_f, clutch, fired, c):
+    """The flow the engine takes at its operating point: ``mdot_f`` (the idle flow with the clutch open),
+    times the fired fraction of its cylinders (fuel cut-off)."""
+    return fired * (c.idle_fuel_flow if clutch == CLUTCH_OPEN else mdot_f)
+
+
+@equation
 def fuel_used_tangent(mdot_f, fired, d_mdot_f, d_fired, c):
     """Directional derivative of :func:`fuel_used` along (d_mdot_f, d_fired): the flow's, or the floor's
     where it holds (one-sided at the kink, as :func:`fuel_used` takes the floor there)."""
@@ -423,8 +430,8 @@ def powers_tangent(
     vv = v if v > 0.0 else 0.0
     road = (
         c.mass * (d_v * a + vv * d_a),
-        (vh.aero_force(vv, c) + 2.0 * c.aero_coefficient * vv * vv) * d_v,
-        (vh.rolling_force(vv, c) + c.road_load_b * vv * (vv > 0.0)) * d_v,
+        (vh.aero_force(vv, c) + vv * vh.aero_force_dv(vv, c)) * d_v,  # d/dv (F v) = F + v dF/dv
+        (vh.rolling_force(vv, c) + vv * vh.rolling_force_dv(vv, c)) * d_v,
         d_brake * vv + brake * d_v,
     )
     if clutch == CLUTCH_OPEN:

@@ -65,6 +65,12 @@ def wheel_force(v, a, c):
 
 
 @equation
+def total_ratio(gearbox_ratio, final_drive):
+    """i = i_g i_f: the ratio from the engine to the wheels, gearbox times final drive   (14)."""
+    return gearbox_ratio * final_drive
+
+
+@equation
 def engine_speed(v, ratio, c):
     """w_e = i w_w = i v / r   (14),(17)."""
     return ratio * v / c.wheel_radius
@@ -89,9 +95,28 @@ def engine_to_wheel_force(t_e, ratio, c):
 
 
 @equation
+def inertia_torque(dw_e, c):
+    """J_e dw_e/dt: the crank torque that accelerates the engine's own inertia   (1)."""
+    return c.inertia * dw_e
+
+
+@equation
+def engine_torque(t_cr, dw_e, c):
+    """T_e = T_cr - J_e dw_e/dt: the torque the engine passes on   (1)."""
+    return t_cr - inertia_torque(dw_e, c)
+
+
+@equation
 def crank_torque_demand(f_wheel, ratio, dw_e, c):
     """T_cr = T_e + J_e dw_e/dt with T_e from the wheel force   (1),(15),(16)."""
-    return wheel_to_engine_torque(f_wheel, ratio, c) + c.inertia * dw_e
+    return wheel_to_engine_torque(f_wheel, ratio, c) + inertia_torque(dw_e, c)
+
+
+@equation
+def acceleration_shortfall(t_short, ratio, c):
+    """The acceleration a crank-torque shortfall ``t_short`` costs the stiff driveline: F_w / m_eq of the
+    missing torque   (1),(14)-(18)."""
+    return engine_to_wheel_force(t_short, ratio, c) / equivalent_mass(ratio, c)
 
 
 @equation
@@ -124,6 +149,15 @@ def statespace_coefficients(ratio, c):
 
 
 @equation
+def rolling_coefficients(ratio, c):
+    """The rolling resistance's parts of (21) per equivalent mass: its constant part (in c4 while moving; at
+    rest static friction), and minus the coast-down road load's linear term B, which the paper's affine form
+    does not have: (m g c_r / m_eq, -B / m_eq)."""
+    m_eq = equivalent_mass(ratio, c)
+    return c.rolling_force / m_eq, -c.road_load_b / m_eq
+
+
+@equation
 def acceleration(f_drive, v, brake, mass, c):
     """dv/dt from the driving force at the wheels, road load (18) and brakes, for the mass ``mass`` moved.
 
@@ -137,10 +171,22 @@ def acceleration(f_drive, v, brake, mass, c):
 
 
 @equation
+def aero_force_dv(v, c):
+    """d/dv of :func:`aero_force`: 2 (1/2 c_d rho A_f) |v|."""
+    return 2.0 * c.aero_coefficient * abs(v)
+
+
+@equation
+def rolling_force_dv(v, c):
+    """d/dv of :func:`rolling_force` while moving: B of a coast-down road load (0 otherwise); its step at
+    rest is left out (static friction)."""
+    return c.road_load_b if v > 0.0 else 0.0
+
+
+@equation
 def road_load_dv(v, c):
-    """d/dv of :func:`road_load` while moving: 2 (1/2 c_d rho A_f) |v| (+ B of a coast-down road load); the
-    rolling force's step at rest is left out (static friction)."""
-    return 2.0 * c.aero_coefficient * abs(v) + (c.road_load_b if v > 0.0 else 0.0)
+    """d/dv of :func:`road_load` while moving: :func:`aero_force_dv` + :func:`rolling_force_dv`."""
+    return aero_force_dv(v, c) + rolling_force_dv(v, c)
 
 
 @equation
