@@ -770,3 +770,10 @@ def test_each_kernel_is_stamped_with_what_it_compiles_from():
     interp = {what for what, _ in _closure(tables._interp_loop.py_func)}
     assert "vpsim.model.tables.interp_at" in interp and "vpsim.model.engine.crank_torque" not in interp
     assert kernel_digest(backward.run_kernel.py_func) != kernel_digest(backward.account.py_func)
+
+
+def test_no_method_file_grows_past_800_lines():
+    """A structure that takes new powertrains without a new copy of each method: every file of
+    src/vpsim/methods/ stays readable (the forward method is split into its system and its integrators)."""
+    long = {f.name: n for f in (SRC / "methods").glob("*.py") if (n := len(f.read_text().splitlines())) > 800}
+    assert not long, long

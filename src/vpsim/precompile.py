@@ -76,6 +76,9 @@ KERNEL_MODULES = (
     "vpsim.model.engine",
     "vpsim.model.tables",
     "vpsim.methods.backward",
+    "vpsim.methods._fdm_system",
+    "vpsim.methods._fdm_rosenbrock",
+    "vpsim.methods._fdm_dopri5",
     "vpsim.methods.forward",
     "vpsim.methods.inverse",
 )

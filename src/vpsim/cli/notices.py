@@ -24,13 +24,15 @@ KERNELS = {
     "vpsim.model.engine": ("model's array views", "1-3 s"),
     "vpsim.model.tables": ("model's table look-ups", "1-2 s"),
     "vpsim.methods.backward": ("backward kernels", "15-30 s"),
-    "vpsim.methods.forward": ("forward integrator", "40-110 s"),
+    "vpsim.methods.forward": ("forward method's batch", "20-40 s"),
+    "vpsim.methods._fdm_rosenbrock": ("forward integrator", "40-110 s"),
+    "vpsim.methods._fdm_dopri5": ("forward method's Dormand-Prince integrator", "20-50 s"),
     "vpsim.methods.inverse": ("inverse kernels", "10-20 s"),
 }
 _MODEL = ("vpsim.model.engine", "vpsim.model.tables", "vpsim.methods.backward")  # maps and gear rule too
 METHOD_MODULES = {
     "backward": _MODEL,
-    "forward": (*_MODEL, "vpsim.methods.forward"),
+    "forward": (*_MODEL, "vpsim.methods._fdm_rosenbrock", "vpsim.methods.forward"),
     "inverse": (*_MODEL, "vpsim.methods.inverse"),
 }
 
