@@ -52,15 +52,17 @@ PEER_VEHICLE = "2012_Ford_Fusion.yaml"
 PEER_CYCLES = {"udds": "udds.csv", "hwfet": "hwfet.csv"}
 GASOLINE_KWH_PER_GAL = 33.7  # EPA's energy content of gasoline, to turn FASTSim's fuel energy into litres
 
-# target figures of the performance issue (ratios > 1: vpsim faster; inverse_vs_backward: a time ratio)
+# target figures of the performance issues (ratios > 1: vpsim faster; inverse_vs_backward: a time ratio);
+# "kernels ready in seconds": backward 100x FASTSim, batch backward 100,000 runs/s, forward 5x and batch
+# forward 1,700 runs/s kept, a process with the kernels cached (as after `pip install .`) within 1 s
 TARGETS = {
-    "backward_vs_fastsim_udds": (">=", 50.0),
+    "backward_vs_fastsim_udds": (">=", 100.0),
     "forward_vs_fastsim_udds": (">=", 5.0),
     "inverse_vs_backward": ("<=", 2.0),
-    "batch_backward_runs_per_s": (">=", 20000.0),
-    "batch_forward_runs_per_s": (">=", 1000.0),
+    "batch_backward_runs_per_s": (">=", 100000.0),
+    "batch_forward_runs_per_s": (">=", 1700.0),
     "linearity_max_dev": ("<=", 0.10),
-    "cold_start_s": ("<", 2.0),
+    "cold_start_s": ("<=", 1.0),
     # the forward method's accepted steps per second of UDDS (driver 1; issue target <= 2), in both modes:
     # the paper's stiff driveline, and the realistic mode's clutch, brakes and idle (what simulate runs)
     "forward_udds_steps_per_cycle_s_paper": ("<=", 2.0),
@@ -599,22 +601,23 @@ def _batch(settings: Settings, progress) -> dict:
 
     cyc = load_cycle("udds")
     out: dict = {}
-    for method, n in (
-        ("backward", settings.batch_backward_variants),
-        ("forward", settings.batch_forward_variants),
+    for method, n, mode in (
+        ("backward", settings.batch_backward_variants, "paper"),
+        ("backward", settings.batch_backward_variants, "realistic"),
+        ("forward", settings.batch_forward_variants, "paper"),
     ):
-        key = f"batch_{method}"
+        key = f"batch_{method}" if mode == "paper" else f"batch_{method}_{mode}"
         if n <= 0:
             out[key] = {"variants": 0, "runs_per_s": None, "error": "not measured in this profile"}
             continue
-        progress(f"batch {method}: {n} variants on udds")
+        progress(f"batch {method} ({mode} mode): {n} variants on udds")
         variants = batch_variants(n)
         try:
-            run_batch(cyc, variants.iloc[: min(n, 8)], method=method)  # load / compile
+            run_batch(cyc, variants.iloc[: min(n, 8)], method=method, mode=mode)  # load / compile
             times = []
             for _ in range(settings.batch_repeats):
                 t0 = time.perf_counter()
-                df = run_batch(cyc, variants, method=method)
+                df = run_batch(cyc, variants, method=method, mode=mode)
                 times.append(time.perf_counter() - t0)
         except Exception as exc:
             out[key] = {"variants": n, "runs_per_s": None, "error": _one_line(exc)}
@@ -623,6 +626,7 @@ def _batch(settings: Settings, progress) -> dict:
         out[key] = {
             "variants": n,
             "cycle": "udds",
+            "mode": mode,
             "median_s": med,
             "runs_per_s": n / med,
             "trace_miss_share": float(np.mean(df["trace_miss_s"] > 0)),
@@ -967,6 +971,7 @@ def run_benchmarks(profile: str = "full", *, peer: bool = True, progress=None) -
         "ratios_from_table": extra_ratios,
         "batch": batch,
         "batch_backward_runs_per_s": batch.get("batch_backward", {}).get("runs_per_s"),
+        "batch_backward_realistic_runs_per_s": batch.get("batch_backward_realistic", {}).get("runs_per_s"),
         "batch_forward_runs_per_s": batch.get("batch_forward", {}).get("runs_per_s"),
         "linearity": linearity,
         "linearity_max_dev": max(lin_devs) if lin_devs else None,
@@ -1061,12 +1066,12 @@ def format_report(report: dict) -> str:
             f"  {PEER}: Vehicle.from_resource {ps['vehicle_from_resource_ms']:.2f} ms; SimDrive() ms: {new}"
         )
     lines.append("")
-    for key in ("batch_backward", "batch_forward"):
+    for key in ("batch_backward", "batch_backward_realistic", "batch_forward"):
         b = report["batch"].get(key, {})
         if b.get("runs_per_s"):
             # run_batch's default: the paper mode (and driver 1 forward), where the stiff driveline creeps at
             # standstill and the soft PI leaves the band (the paper's own behaviour, docs/methods.md)
-            setting = "paper mode" + (", driver 1" if key == "batch_forward" else "")
+            setting = f"{b.get('mode', 'paper')} mode" + (", driver 1" if key == "batch_forward" else "")
             lines.append(
                 f"{key.replace('_', ' ')}: {b['variants']} variants on {b['cycle']} ({setting}) "
                 f"in {b['median_s']:.3f} s = "
@@ -1094,7 +1099,7 @@ def format_report(report: dict) -> str:
             lines.append(
                 f"cold start {method}: {c['wall_s']:.2f} s wall for a fresh process "
                 f"(import {c['import_s']:.2f} s, "
-                f"first udds run {c['first_run_s']:.3f} s, kernels from the cache)"
+                f"first udds run {c['first_run_s']:.3f} s, kernels from the cache, as after pip install .)"
             )
         elif c:
             lines.append(f"cold start {method}: failed ({c['error']})")
