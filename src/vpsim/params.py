@@ -26,6 +26,7 @@ be one that exists, which also bounds the work of the generated map (its grid gr
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import numbers
 import tomllib
@@ -738,7 +739,10 @@ def _from_mapping(data: dict[str, Any], where: str, base: Parameters | None) -> 
     return p
 
 
+@functools.cache
 def _preset(name: str) -> Parameters:
+    """A preset, parsed once per process (parameter sets are frozen: the same object serves every caller,
+    and what is cached per parameter set, :func:`vpsim.model.record.memo`, serves them too)."""
     text = resources.files("vpsim.presets").joinpath(f"{name}.toml").read_text()
     data = tomllib.loads(text)
     data.setdefault("name", name)

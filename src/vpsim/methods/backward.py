@@ -107,7 +107,8 @@ def _point(
     short = t_req - t_max if t_req > t_max else 0.0
     t_cr = t_req - short
     t_fired = t_cr if fired >= 1.0 else t_closed  # cylinders cut: the throttle is closed (manifold, fuel)
-    p = en.intake_pressure_for_torque(t_fired, w, c)
+    cm18 = en.speed_power(w, c)  # the friction law's power of the speed, once per interval (5)
+    p = en.intake_pressure_for_torque(t_fired, w, c, cm18)
     if fuel_kind == FUEL_EXACT:
         mdot = en.fuel_flow(p, w, c)
     elif fuel_kind == FUEL_TABLE:
@@ -115,7 +116,7 @@ def _point(
     else:
         mdot = math.nan
     mdot = rules.engine_fuel_flow(mdot, clutch, fired, c)  # idle with the clutch open; fuel cut-off
-    return v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot
+    return v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot, cm18
 
 
 @inline
@@ -170,9 +171,10 @@ def _book(
     c,
     with_engine,
     realistic,
+    cm18,
 ):
     """Add interval's fuel, distance, energy terms and trace miss to the sums; returns the speed deficit of
-    the current contiguous miss (``cur``)."""
+    the current contiguous miss (``cur``). ``cm18``: :func:`vpsim.model.engine.speed_power` at w."""
     _kahan(acc, comp, A_FUEL, rules.fuel_used(mdot, fired, c) * dt)
     _kahan(acc, comp, A_DIST, v * dt)
     pw = rules.powers(
@@ -190,6 +192,7 @@ def _book(
         rules.accessories_torque(w, realistic, c),
         1.0,
         c,
+        cm18,
     )
     if with_engine:  # the engine's terms need the model's physics at the operating point (plain sums: their
         # rounding, ~1e-13 of the balance, is far below what the balance is checked to)
@@ -264,7 +267,7 @@ def run_kernel(
     for k in range(gear.size):
         g, j = gear_index(time_s, k, sched_t, sched_gear, j)
         gear[k] = g + 1
-        v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot = _point(
+        v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot, cm18 = _point(
             time_s,
             speed,
             k,
@@ -307,6 +310,7 @@ def run_kernel(
                 c,
                 with_engine,
                 extended,
+                cm18,
             )
 
 
@@ -342,6 +346,7 @@ def account(time_s, rows, ratios, gear, recs, with_engine, extended, acc, comp):
             c,
             with_engine,
             extended,
+            en.speed_power(rows[R_W, k], c),
         )
 
 
