@@ -77,9 +77,10 @@ def _rows(df):
 
 def test_a_vehicles_own_measurement_never_enters_its_fit(tmp_path):
     """Doubling one vehicle's measured mpg leaves its own prediction unchanged and moves the others'."""
-    clean = run_fleet(write_list(tmp_path / "a.csv"), folds=3, peer=False)
+    # (single-record folds: on this 13-car list a family fold can hold the whole of T006's class)
+    clean = run_fleet(write_list(tmp_path / "a.csv"), folds=3, peer=False, group_by="record")
     target = "T006"
-    moved = run_fleet(write_list(tmp_path / "b.csv", perturb=target), folds=3, peer=False)
+    moved = run_fleet(write_list(tmp_path / "b.csv", perturb=target), folds=3, peer=False, group_by="record")
     a, b = _rows(clean.frame()), _rows(moved.frame())
     assert np.allclose(b.loc[target, "measured_mpg"], 0.6 * a.loc[target, "measured_mpg"], rtol=1e-3)
     np.testing.assert_array_equal(a.loc[target, "predicted_mpg"], b.loc[target, "predicted_mpg"])
@@ -141,13 +142,16 @@ def _check_outputs(out, cycles):
     for c in cycles:
         assert tuple(s["cycles"][c]) == STAT_KEYS
     fs = s["peer"]["fastsim"]
-    assert set(s["peer"]) == {"fastsim"}
-    if "measured" in fs:  # FASTSim not installed: said so, nothing faked
-        assert fs["measured"] is False and fs["reason"] and set(fs) == {"measured", "reason"}
-    else:
-        assert set(fs) == set(cycles)
-        for c in cycles:
-            assert tuple(fs[c]) == STAT_KEYS
+    assert set(s["peer"]) == {"fastsim", "fastsim_calibrated", "fastsim_calibrated_by_powertrain"}
+    assert s["peer"]["fastsim_calibrated_by_powertrain"] == {"conventional": s["peer"]["fastsim_calibrated"]}
+    for peer in (fs, s["peer"]["fastsim_calibrated"]):
+        if "measured" in peer:  # FASTSim not installed: said so, nothing faked
+            assert peer["measured"] is False and peer["reason"] and set(peer) == {"measured", "reason"}
+        else:
+            assert set(peer) == set(cycles)
+            for c in cycles:
+                assert tuple(peer[c]) == STAT_KEYS
+    assert s["validation"]["grouping"] in cal.GROUPINGS
     info = json.loads((out / "run.json").read_text())
     assert set(info["trace_miss"]) == set(cycles) and info["n_rows"] > 0
     df = pd.read_csv(out / "vehicles.csv")

@@ -20,7 +20,22 @@ from .main import cli
     show_default=True,
     help="Comma-separated subset of ftp_bag2, ftp_bag3, hwy, us06.",
 )
-@click.option("--folds", type=int, default=5, show_default=True, help="Cross-validation folds (by vehicle).")
+@click.option(
+    "--folds",
+    type=int,
+    default=5,
+    show_default=True,
+    help="Cross-validation folds (not used with --group-by manufacturer: one fold per manufacturer).",
+)
+@click.option(
+    "--group-by",
+    "group_by",
+    type=click.Choice(["family", "manufacturer", "record"]),
+    default="family",
+    show_default=True,
+    help="What a fold holds out together: a vehicle family (same test vehicle, model and engine, or same "
+    "model inputs), a manufacturer (leave one out), or single records.",
+)
 @click.option("--method", type=click.Choice(["backward", "forward"]), default="backward", show_default=True)
 @click.option("--local-cluster", "local_cluster", type=int, default=None, help="Run on N local Dask workers.")
 @click.option("--scheduler", default=None, help="Run on the Dask scheduler at this address.")
@@ -38,7 +53,9 @@ from .main import cli
     help="Only the first N usable vehicles (a quick look; exclusions: whole file).",
 )
 @click.option("--quiet", is_flag=True, help="No progress on stderr.")
-def fleet(file, out, cycles, folds, method, local_cluster, scheduler, workers, no_peer, limit, quiet):
+def fleet(
+    file, out, cycles, folds, group_by, method, local_cluster, scheduler, workers, no_peer, limit, quiet
+):
     """Predict the measured fuel economy of the vehicles of an EPA test car list FILE."""
     import matplotlib
 
@@ -58,6 +75,7 @@ def fleet(file, out, cycles, folds, method, local_cluster, scheduler, workers, n
         limit=limit,
         peer=not no_peer,
         workers=workers,
+        group_by=group_by,
     )
     command = (
         "vpsim fleet " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if sys.argv[1:2] == ["fleet"] else ""
@@ -69,21 +87,26 @@ def fleet(file, out, cycles, folds, method, local_cluster, scheduler, workers, n
     )
     click.echo("  " + ", ".join(f"{k} {v}" for k, v in s["excluded"].items()))
     fs = s["peer"]["fastsim"]
+    fc = s["peer"]["fastsim_calibrated"]
     measured = fs.get("measured", True)
+    v = s["validation"]
+    click.echo(f"held out by {v['grouping']}: {v['folds']} folds of {v['groups']} groups")
     click.echo(
-        f"{'cycle':10s} {'n':>5s} {'median':>8s} {'med|e|':>8s} {'p90|e|':>8s}   FASTSim: median, med|e|, p90"
-    )
-    for c in names:
-        v = s["cycles"][c]
-        line = (
-            f"{c:10s} {v['n']:5d} {_f(v['median_error_pct'])} {_f(v['median_abs_error_pct'])} "
-            f"{_f(v['p90_abs_error_pct'])}"
+        f"{'cycle':10s} {'n':>5s} {'median':>8s} {'med|e|':>8s} {'p90|e|':>8s}"
+        + (
+            "   FASTSim calibrated: median, med|e|, p90   FASTSim defaults: median, med|e|, p90"
+            if measured
+            else ""
         )
+    )
+
+    def trio(x):
+        return f"{_f(x['median_error_pct'])} {_f(x['median_abs_error_pct'])} {_f(x['p90_abs_error_pct'])}"
+
+    for c in names:
+        line = f"{c:10s} {s['cycles'][c]['n']:5d} {trio(s['cycles'][c])}"
         if measured:
-            f = fs[c]
-            line += (
-                f"   {_f(f['median_error_pct'])} {_f(f['median_abs_error_pct'])} {_f(f['p90_abs_error_pct'])}"
-            )
+            line += f"   {trio(fc[c])}   {trio(fs[c])}"
         click.echo(line)
     if not measured:
         click.echo(f"FASTSim not measured: {fs.get('reason')}")

@@ -14,18 +14,42 @@ conventional vehicle it ships) with what the record gives put in:
   is run with FASTSim's ``trace_miss_opts = "Allow"`` and reported as a trace miss.
 
 Fuel energy is turned into gallons with EPA's 33.7 kWh per gallon of gasoline (as ``vpsim bench`` does).
-No technology parameter of FASTSim is fitted: its errors are not cross-validated, they are FASTSim's own
-defaults (``held_out`` concerns vpsim's calibration).
+
+Two peers are reported. ``fastsim``: FASTSim's own defaults, nothing fitted. ``fastsim_calibrated``: FASTSim
+given the same chance as vpsim, three technology parameters per class (:data:`PEER_PARAMS`) fitted on the
+same folds by the same loss (mean |ln(predicted / measured)| over the training vehicles' cycles, an L1
+loss), then every vehicle run once more at its own fold's values:
+
+* ``efficiency_scale`` s: the fuel converter's efficiency curve times s (the analogue of vpsim's thermal
+  efficiency): FASTSim's fuel is exactly proportional to 1/s (checked), so s is solved, not searched;
+* ``accessory_power_w``: FASTSim's ``pwr_aux_base_watts`` (vpsim's accessory power);
+* ``part_load_exponent`` q: the curve's shape, eff(x) = s e_peak (e(x) / e_peak)^q: below 1 it raises the
+  part-load efficiency relative to the peak, above 1 it lowers it (the analogue of vpsim's friction, which
+  sets the part-load efficiency). Searched over 0.7-1.3, the scale over 0.6-1.6, the accessories over
+  0-2.5 kW.
+
+FASTSim runs each record and cycle at :data:`CAL_AUX` x :data:`CAL_Q` (s = 1); the fit interpolates ln fuel
+(quadratically in the accessory power, linearly in q) on a fine grid, the scale by the loss's median
+(the L1 minimiser). :func:`calibrate_peer` does it for any powertrain's rows, so the battery-electric and
+hybrid peers use the same method (``peer.fastsim_calibrated_by_powertrain``).
 """
 
 from __future__ import annotations
 
 import math
 
-from ..units import METRES_PER_MILE
+import numpy as np
+
+from ..units import METRES_PER_MILE, mpg_from_l_per_100km
 from .epa import VehicleRecord
 
 PEER_VERSION = "3.1.0"
+PEER_PARAMS = ("efficiency_scale", "accessory_power_w", "part_load_exponent")
+CAL_AUX = (0.0, 1000.0, 2500.0)  # W: the accessory powers FASTSim runs at
+CAL_Q = (0.7, 1.3)  # the part-load exponents it runs at (1: FASTSim's own curve)
+AUX_FINE = np.arange(0.0, 2500.1, 25.0)
+Q_FINE = np.linspace(0.7, 1.3, 25)
+SCALE_BOUNDS = (0.6, 1.6)
 PEER_VEHICLE = "2012_Ford_Fusion.yaml"
 GASOLINE_J_PER_GAL = 33.7 * 3.6e6
 
@@ -74,8 +98,9 @@ def _base_vehicle() -> dict:
     return _BASE
 
 
-def peer_vehicle(rec: VehicleRecord, cycle) -> dict:
-    """The FASTSim vehicle dict of a record on ``cycle`` (the road load folded over that cycle)."""
+def peer_vehicle(rec: VehicleRecord, cycle, technology: dict | None = None) -> dict:
+    """The FASTSim vehicle dict of a record on ``cycle`` (the road load folded over that cycle), with
+    ``technology`` (:data:`PEER_PARAMS`; default FASTSim's own)."""
     import copy
 
     from .vehicle import FRONTAL_AREA_M2, WHEEL_RADIUS_M, fold_road_load
@@ -93,44 +118,174 @@ def peer_vehicle(rec: VehicleRecord, cycle) -> dict:
     ratio = fc["pwr_out_max_init_watts"] / fc["pwr_out_max_watts"]
     fc["pwr_out_max_watts"] = rec.rated_power_kw * 1e3
     fc["pwr_out_max_init_watts"] = rec.rated_power_kw * 1e3 * ratio
-    return d
+    return with_technology(d, technology)
 
 
-def peer_chunk(items: list[tuple[VehicleRecord, str]]) -> list[dict]:
-    """FASTSim on each (record, fleet cycle); dicts with ``peer_mpg`` or ``peer_error``."""
+def with_technology(d: dict, technology: dict | None) -> dict:
+    """``d`` (from :func:`peer_vehicle`, FASTSim's defaults) with ``technology`` put in (:data:`PEER_PARAMS`);
+    a new dict sharing everything else with ``d``."""
+    if not technology:
+        return d
+    out = dict(d)
+    pt = dict(d["pt_type"])
+    conv = dict(pt["Conv"])
+    fc = dict(conv["fc"])
+    interp = dict(fc["eff_interp_from_pwr_out"])
+    data = dict(interp["data"])
+    values = dict(data["values"])
+    eff = _base_vehicle()["pt_type"]["Conv"]["fc"]["eff_interp_from_pwr_out"]["data"]["values"]["data"]
+    peak = max(eff)
+    s = technology.get("efficiency_scale", 1.0)
+    q = technology.get("part_load_exponent", 1.0)
+    values["data"] = [s * peak * (e / peak) ** q for e in eff]
+    data["values"], interp["data"], fc["eff_interp_from_pwr_out"] = values, data, interp
+    conv["fc"], pt["Conv"], out["pt_type"] = fc, conv, pt
+    if "accessory_power_w" in technology:
+        out["pwr_aux_base_watts"] = float(technology["accessory_power_w"])
+    return out
+
+
+def _sim_params():
+    import fastsim as fsim
+
+    params = fsim.SimParams.default().to_dict()
+    params["trace_miss_opts"] = "Allow"  # a car that cannot follow the trace is reported, not an error
+    return fsim.SimParams.from_dict(params)
+
+
+def _run(rec, name, cycles, sim_params, technology=None, vehicle=None) -> tuple[float, bool]:
+    """(mpg, trace met) of FASTSim on one record and fleet cycle (``vehicle``: its :func:`peer_vehicle`
+    dict with FASTSim's defaults, if at hand)."""
     import warnings
 
     import fastsim as fsim
 
     from .cycles import fleet_cycle
 
-    cycles = {}
-    params = fsim.SimParams.default().to_dict()
-    params["trace_miss_opts"] = "Allow"  # a car that cannot follow the trace is reported, not an error
-    sim_params = fsim.SimParams.from_dict(params)
+    cyc = fleet_cycle(name)
+    if name not in cycles:
+        cycles[name] = fsim.Cycle.from_dict(
+            {"time_seconds": cyc.time_s.tolist(), "speed_meters_per_second": cyc.speed_mps.tolist()}
+        )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        d = peer_vehicle(rec, cyc) if vehicle is None else vehicle
+        veh = fsim.Vehicle.from_dict(with_technology(d, technology))
+        sd = fsim.SimDrive(veh, cycles[name], sim_params)
+        sd.run()
+        o = sd.to_dict()
+    fuel_j = o["veh"]["pt_type"]["Conv"]["fc"]["state"]["energy_fuel_joules"]
+    dist_m = o["veh"]["state"]["dist_meters"]
+    return (dist_m / METRES_PER_MILE) / (fuel_j / GASOLINE_J_PER_GAL), bool(
+        o["veh"]["state"]["cyc_met_overall"]
+    )
+
+
+def _error_text(exc) -> str:
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0] if text else ''}"[:200]
+
+
+def peer_chunk(items: list[tuple]) -> list[dict]:
+    """FASTSim on each (record, fleet cycle[, technology]); dicts with ``peer_mpg`` or ``peer_error``."""
+    cycles: dict = {}
+    sim_params = _sim_params()
     out = []
-    for rec, name in items:
+    for item in items:
+        rec, name = item[0], item[1]
+        tech = item[2] if len(item) > 2 else None
         row = {"key": rec.key, "cycle": name, "peer_mpg": math.nan, "peer_error": "", "peer_trace_met": None}
         try:
-            cyc = fleet_cycle(name)
-            if name not in cycles:
-                cycles[name] = fsim.Cycle.from_dict(
-                    {"time_seconds": cyc.time_s.tolist(), "speed_meters_per_second": cyc.speed_mps.tolist()}
-                )
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", DeprecationWarning)
-                sd = fsim.SimDrive(fsim.Vehicle.from_dict(peer_vehicle(rec, cyc)), cycles[name], sim_params)
-                sd.run()
-                o = sd.to_dict()
-            fuel_j = o["veh"]["pt_type"]["Conv"]["fc"]["state"]["energy_fuel_joules"]
-            dist_m = o["veh"]["state"]["dist_meters"]
-            row["peer_mpg"] = (dist_m / METRES_PER_MILE) / (fuel_j / GASOLINE_J_PER_GAL)
-            row["peer_trace_met"] = bool(o["veh"]["state"]["cyc_met_overall"])
+            row["peer_mpg"], row["peer_trace_met"] = _run(rec, name, cycles, sim_params, tech)
         except Exception as exc:  # FASTSim raises its own error types (Rust errors as RuntimeError)
-            text = str(exc).strip().splitlines()
-            row["peer_error"] = f"{type(exc).__name__}: {text[0] if text else ''}"[:200]
+            row["peer_error"] = _error_text(exc)
         out.append(row)
     return out
 
 
-__all__ = ["PEER_VERSION", "peer_chunk", "peer_vehicle", "status"]
+def calibration_chunk(items: list[tuple]) -> list[dict]:
+    """FASTSim on each (record, fleet cycle) at every (accessory power, part-load exponent) of
+    :data:`CAL_AUX` x :data:`CAL_Q`: ``log_l100`` (len(CAL_AUX), len(CAL_Q)), or ``peer_error``."""
+    cycles: dict = {}
+    sim_params = _sim_params()
+    out = []
+    for rec, name in items:
+        row = {"key": rec.key, "cycle": name, "log_l100": None, "peer_error": ""}
+        try:
+            from .cycles import fleet_cycle
+
+            d = peer_vehicle(rec, fleet_cycle(name))  # the record's vehicle once, its technology varied
+            grid = np.empty((len(CAL_AUX), len(CAL_Q)))
+            for i, aux in enumerate(CAL_AUX):
+                for j, q in enumerate(CAL_Q):
+                    tech = {"accessory_power_w": aux, "part_load_exponent": q}
+                    mpg, _ = _run(rec, name, cycles, sim_params, tech, vehicle=d)
+                    grid[i, j] = math.log(mpg_from_l_per_100km(mpg))  # L/100 km
+            if not np.all(np.isfinite(grid)):
+                raise ValueError("non-finite fuel on the calibration grid")
+            row["log_l100"] = grid
+        except Exception as exc:
+            row["peer_error"] = _error_text(exc)
+        out.append(row)
+    return out
+
+
+def _surrogate(grid: np.ndarray) -> np.ndarray:
+    """ln fuel at s = 1 on (AUX_FINE, Q_FINE) for each row of ``grid`` (rows, len(CAL_AUX), len(CAL_Q)):
+    quadratic through the three accessory powers, linear in the exponent."""
+    x = np.asarray(CAL_AUX)
+    lag = np.empty((len(x), AUX_FINE.size))
+    for i in range(len(x)):
+        others = [k for k in range(len(x)) if k != i]
+        lag[i] = np.prod([(AUX_FINE - x[k]) / (x[i] - x[k]) for k in others], axis=0)
+    in_aux = np.einsum("rij,ia->raj", grid, lag)  # (rows, aux, q nodes)
+    w = (Q_FINE - CAL_Q[0]) / (CAL_Q[1] - CAL_Q[0])
+    return in_aux[:, :, :1] * (1 - w)[None, None, :] + in_aux[:, :, 1:2] * w[None, None, :]
+
+
+def fit_peer(grid: np.ndarray, log_measured: np.ndarray) -> tuple[dict, float]:
+    """The peer technology minimising mean |ln(pred / meas)| over the rows; (params, loss)."""
+    if grid.shape[0] == 0:
+        raise ValueError("no vehicle to fit the peer's technology on")
+    sur = _surrogate(grid)  # ln fuel at s = 1
+    resid = sur - log_measured[:, None, None]  # ln pred - ln meas = resid - ln s
+    ln_s = np.clip(np.median(resid, axis=0), *np.log(SCALE_BOUNDS))
+    loss = np.mean(np.abs(resid - ln_s[None]), axis=0)
+    i, j = np.unravel_index(int(np.argmin(loss)), loss.shape)
+    params = {
+        "efficiency_scale": float(np.exp(ln_s[i, j])),
+        "accessory_power_w": float(AUX_FINE[i]),
+        "part_load_exponent": float(Q_FINE[j]),
+    }
+    return params, float(loss[i, j])
+
+
+def calibrate_peer(grid, log_measured, vehicle_fold, vehicle_class, k, classes) -> dict:
+    """The peer's technology per (fold, class), each fitted without that fold's rows, as
+    :func:`vpsim.fleet.calibrate.cross_validate` does for vpsim (a class without training rows in a fold
+    falls back to all classes' training rows of that fold)."""
+    out = {}
+    for fold in range(k):
+        train = vehicle_fold != fold
+        for cls in classes:
+            rows = train & (vehicle_class == cls)
+            basis = "class"
+            if not rows.any():
+                rows, basis = train, "all classes (no training vehicle of this class)"
+            if not rows.any():
+                raise ValueError(f"fold {fold} leaves no vehicle to train the peer on")
+            params, loss = fit_peer(grid[rows], log_measured[rows])
+            out[(fold, cls)] = {**params, "train_loss": loss, "n_train": int(rows.sum()), "basis": basis}
+    return out
+
+
+__all__ = [
+    "PEER_PARAMS",
+    "PEER_VERSION",
+    "calibrate_peer",
+    "calibration_chunk",
+    "fit_peer",
+    "peer_chunk",
+    "peer_vehicle",
+    "status",
+]

@@ -37,7 +37,7 @@ CSV_COLUMNS = (
     "fold",
     "status",
 )
-SUMMARY_KEYS = ("n_vehicles", "excluded", "held_out", "cycles", "peer")  # exactly these
+SUMMARY_KEYS = ("n_vehicles", "excluded", "held_out", "cycles", "peer", "validation")  # exactly these
 STAT_KEYS = ("n", "median_error_pct", "median_abs_error_pct", "p90_abs_error_pct")
 FIGURES = ("predicted_vs_measured.png", "error_histograms.png", "error_by_group.png", "worst_vehicles.png")
 N_WORST = 20
@@ -66,14 +66,52 @@ def summary(run) -> dict:
         "held_out": True,
         "cycles": {c: error_stats(predicted[predicted["cycle"] == c]["error_pct"]) for c in run.cycles},
         "peer": {},
+        "validation": validation(run),
     }
     if run.peer.get("available"):
         both = predicted[np.isfinite(predicted["fastsim_error_pct"])]
         out["peer"]["fastsim"] = {
             c: error_stats(both[both["cycle"] == c]["fastsim_error_pct"]) for c in run.cycles
         }
+        cal_rows = predicted[np.isfinite(predicted.get("fastsim_calibrated_error_pct", np.nan))]
+        calibrated = {
+            c: error_stats(cal_rows[cal_rows["cycle"] == c]["fastsim_calibrated_error_pct"])
+            for c in run.cycles
+        }
+        out["peer"]["fastsim_calibrated"] = calibrated
+        out["peer"]["fastsim_calibrated_by_powertrain"] = {"conventional": calibrated}
     else:
-        out["peer"]["fastsim"] = {"measured": False, "reason": run.peer.get("reason", "not run")}
+        missing = {"measured": False, "reason": run.peer.get("reason", "not run")}
+        out["peer"]["fastsim"] = missing
+        out["peer"]["fastsim_calibrated"] = dict(missing)
+        out["peer"]["fastsim_calibrated_by_powertrain"] = {"conventional": dict(missing)}
+    return out
+
+
+def validation(run) -> dict:
+    """How the errors were held out, and what was chosen while looking at this list (``summary.json``)."""
+    from .tuned import TUNED_ON_THIS_LIST
+
+    return {
+        "grouping": run.grouping,
+        "folds": run.folds,
+        "groups": run.n_groups,
+        "tuned_on_this_list": [dict(t) for t in TUNED_ON_THIS_LIST],
+    }
+
+
+def technology_bounds(run) -> dict:
+    """{"fold<k>.<class>" or "all.<class>": {parameter: {"bound": "low"|"high", "value", "reason"}}} for the
+    fitted values that sit on their search bounds."""
+    out = {}
+    fits = {**run.technology, **{f"all.{c}": t for c, t in run.technology_all.items()}}
+    for name, t in fits.items():
+        hits = cal.on_bounds(t)
+        if hits:
+            out[name] = {
+                p: {"bound": side, "value": t[p], "reason": cal.BOUND_REASONS.get((p, side), "")}
+                for p, side in hits.items()
+            }
     return out
 
 
@@ -450,7 +488,16 @@ def figure_predicted_vs_measured(df, cycles, peer: bool):
         sub = df[(df["cycle"] == c) & np.isfinite(df["predicted_mpg"])]
         lo = 0.9 * min(sub["measured_mpg"].min(), sub["predicted_mpg"].min()) if len(sub) else 0
         hi = 1.05 * max(sub["measured_mpg"].max(), sub["predicted_mpg"].max()) if len(sub) else 1
-        if peer and "fastsim_mpg" in sub:
+        if peer and "fastsim_calibrated_mpg" in sub:  # the peer calibrated as vpsim is, the fair comparison
+            ax.scatter(
+                sub["measured_mpg"],
+                sub["fastsim_calibrated_mpg"],
+                s=7,
+                c="tab:orange",
+                alpha=0.45,
+                label="FASTSim 3.1, calibrated",
+            )
+        elif peer and "fastsim_mpg" in sub:
             ax.scatter(
                 sub["measured_mpg"], sub["fastsim_mpg"], s=7, c="tab:orange", alpha=0.45, label="FASTSim 3.1"
             )
@@ -492,16 +539,21 @@ def figure_histograms(df, cycles, peer: bool):
     for ax, c in zip(axes, cycles, strict=False):
         sub = df[(df["cycle"] == c) & np.isfinite(df["error_pct"])]
         ax.hist(np.clip(sub["error_pct"], -59.9, 59.9), bins=bins, alpha=0.7, color="tab:blue", label="vpsim")
-        if peer and "fastsim_error_pct" in sub:
-            e = sub["fastsim_error_pct"].dropna()
-            ax.hist(
-                np.clip(e, -59.9, 59.9),
-                bins=bins,
-                histtype="step",
-                lw=1.5,
-                color="tab:orange",
-                label="FASTSim 3.1",
-            )
+        peers = (
+            ("fastsim_calibrated_error_pct", "FASTSim 3.1, calibrated", "-"),
+            ("fastsim_error_pct", "FASTSim 3.1, defaults", ":"),
+        )
+        for col, label, style in peers if peer else ():
+            if col in sub:
+                ax.hist(
+                    np.clip(sub[col].dropna(), -59.9, 59.9),
+                    bins=bins,
+                    histtype="step",
+                    lw=1.5,
+                    ls=style,
+                    color="tab:orange",
+                    label=label,
+                )
         ax.axvline(0, color="k", lw=0.8)
         ax.set_title(f"{c}: median {np.median(sub['error_pct']):+.1f} %" if len(sub) else c)
         ax.set_xlabel("error of predicted mpg, % (clipped at ±60)")
@@ -586,7 +638,17 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
         columns=["line", "vehicle_id", "configuration", "make", "model", "test_number", "reason"],
     ).to_csv(out / "excluded.csv", index=False)
     (out / "technology.json").write_text(
-        json.dumps({"out_of_fold": run.technology, "all_vehicles": run.technology_all}, indent=2) + "\n"
+        json.dumps(
+            {
+                "out_of_fold": run.technology,
+                "all_vehicles": run.technology_all,
+                "search_bounds": {k: list(v) for k, v in cal.search_bounds().items()},
+                "on_search_bound": technology_bounds(run),
+                "peer_fastsim_calibrated_out_of_fold": run.peer_technology,
+            },
+            indent=2,
+        )
+        + "\n"
     )
     s = summary(run)
     info = run_info(run)
@@ -651,7 +713,15 @@ def markdown(run, s, info, df, w, command: str) -> str:
         "extended mode; technology (`engine.thermal_efficiency`, `engine.friction_coefficient`, "
         "`engine.accessory_power` per class: "
         f"aspirated, boosted, high-output above {cal.HIGH_OUTPUT_KW_PER_L:g} kW/L) "
-        f"fitted by {run.folds}-fold cross-validation by vehicle: **every error below is out of fold**.",
+        f"fitted by {run.folds}-fold cross-validation"
+        + {
+            "family": " holding out whole vehicle families (the same test vehicle, the same manufacturer, "
+            "model and engine, or the same inputs to the model)",
+            "manufacturer": ", one manufacturer held out at a time",
+            "record": " by single records (a vehicle's twin or sibling configuration may be in another fold)",
+        }[run.grouping]
+        + f" ({run.n_groups} groups): **every error below is out of fold**. Constants chosen while looking "
+        "at this list's errors are listed at the end of this report.",
     ]
     if command:
         L += ["", f"Command: `{command}`"]
@@ -674,25 +744,28 @@ def markdown(run, s, info, df, w, command: str) -> str:
     L += [
         "## Errors per cycle (error = predicted / measured mpg − 1)",
         "",
-        "| cycle | n | vpsim median | vpsim median abs | vpsim p90 abs | trace misses | FASTSim median | "
-        "FASTSim median abs | FASTSim p90 abs |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "Median / median abs / p90 abs error. FASTSim 3.1 twice: calibrated as vpsim is (three technology "
+        "parameters per class fitted on the same folds by the same loss: `vpsim.fleet.peer`), and with its "
+        "own defaults.",
+        "",
+        "| cycle | n | vpsim | trace misses | FASTSim calibrated | FASTSim defaults |",
+        "|---|---|---|---|---|---|",
     ]
     fs = s["peer"]["fastsim"]
+    fc = s["peer"].get("fastsim_calibrated", {})
     measured = fs.get("measured", True)
+
+    def trio(v):
+        return (
+            f"{_fmt(v.get('median_error_pct'))} / {_fmt(v.get('median_abs_error_pct'), '.1f')} / "
+            f"{_fmt(v.get('p90_abs_error_pct'), '.1f')} %"
+        )
+
     for c in run.cycles:
         v = s["cycles"][c]
-        f = fs.get(c, {}) if measured else {}
         L.append(
-            f"| {c} | {v['n']} | {_fmt(v['median_error_pct'])} % | "
-            f"{_fmt(v['median_abs_error_pct'], '.1f')} % | "
-            f"{_fmt(v['p90_abs_error_pct'], '.1f')} % | {info['trace_miss'][c]} | "
-            + (
-                f"{_fmt(f.get('median_error_pct'))} % | {_fmt(f.get('median_abs_error_pct'), '.1f')} % | "
-                f"{_fmt(f.get('p90_abs_error_pct'), '.1f')} % |"
-                if f
-                else "not measured | | |"
-            )
+            f"| {c} | {v['n']} | {trio(v)} | {info['trace_miss'][c]} | "
+            + (f"{trio(fc.get(c, {}))} | {trio(fs.get(c, {}))} |" if measured else "not measured | |")
         )
     if not measured:
         L += ["", f"FASTSim: not measured ({fs.get('reason')})."]
@@ -767,6 +840,36 @@ def markdown(run, s, info, df, w, command: str) -> str:
             f"{r.median_error_pct:+.1f} % | {r.mechanism} |"
         )
     L += ["", "![worst vehicles](worst_vehicles.png)", ""]
+    bounds = technology_bounds(run)
+    L += ["## Fitted values on their search bounds", ""]
+    if not bounds:
+        L += ["None: every fitted technology value lies inside its search range.", ""]
+    else:
+        L += [
+            "A value on its bound is where the fit would go further if allowed; the bound stays for the "
+            "reason given (`technology.json`: `on_search_bound`).",
+            "",
+            "| fit | parameter | value | bound | why the bound holds |",
+            "|---|---|---|---|---|",
+        ]
+        for fit, hits in bounds.items():
+            for par, h in hits.items():
+                L.append(f"| {fit} | `{par}` | {h['value']:g} | {h['bound']} | {h['reason']} |")
+        L.append("")
+    tuned = s["validation"]["tuned_on_this_list"]
+    L += [
+        f"## Constants chosen while looking at this list ({len(tuned)})",
+        "",
+        "Beyond the technology fitted out of fold, these constants were chosen, compared or tuned on "
+        "this same list's results (from the project's history). An error on a car nobody looked at may be "
+        "larger by what they absorbed; the grouped and leave-one-manufacturer-out runs (`--group-by`) show "
+        "how much of the accuracy carries across vehicles and makers.",
+        "",
+        "| constant | value | where | how it was chosen |",
+        "|---|---|---|---|",
+    ]
+    for t in tuned:
+        L.append(f"| `{t['name']}` | {t['value']} | `{t['where']}` | {t['how']} |")
     return "\n".join(L) + "\n"
 
 

@@ -5,7 +5,8 @@
 
 Steps (:mod:`vpsim.fleet.calibrate` explains the calibration):
 
-1. read the list (:func:`vpsim.fleet.epa.read_test_car_list`); fold per vehicle;
+1. read the list (:func:`vpsim.fleet.epa.read_test_car_list`); folds by vehicle family (or manufacturer,
+   or record: :func:`vpsim.fleet.calibrate.vehicle_groups`);
 2. per vehicle and cycle: its parameters (road load folded over *that* cycle's speeds), its gear schedule
    (the documented rule of :func:`vpsim.gears.default_schedule` with an earlier upshift,
    :data:`~vpsim.fleet.vehicle.GEAR_RULE`, and for a manual a driver's shift point,
@@ -59,6 +60,9 @@ class FleetRun:
     timings: dict = field(default_factory=dict)
     execution: str = "serial"
     peer: dict = field(default_factory=dict)  # FASTSim status: available, version, reason
+    grouping: str = cal.DEFAULT_GROUPING  # what cross-validation holds out together (calibrate.GROUPINGS)
+    n_groups: int = 0
+    peer_technology: dict = field(default_factory=dict)  # the calibrated FASTSim's, "fold<k>.<class>"
 
     def frame(self):
         import pandas as pd
@@ -246,12 +250,15 @@ def run_fleet(
     limit: int | None = None,
     peer: bool = True,
     workers: int | None = None,
+    group_by: str = cal.DEFAULT_GROUPING,
 ) -> FleetRun:
     """Run every usable vehicle of ``source`` (a path or a :class:`TestCarList`) on the cycles it measured.
 
     ``limit``: only the first ``limit`` usable vehicles (in file order), for a quick look. ``peer``: also
     run FASTSim (:mod:`vpsim.fleet.peer`) on the same records when it is installed. ``workers``: local
     processes when no Dask cluster is given (default: the number of cores; 1 runs in this process).
+    ``group_by``: what a fold holds out together (:func:`vpsim.fleet.calibrate.vehicle_groups`): ``family``
+    (default), ``record``, or ``manufacturer`` (one fold per manufacturer; ``folds`` is then not used).
     """
     t_start = time.perf_counter()
     cycles = tuple(cycles)
@@ -268,17 +275,24 @@ def run_fleet(
         raise VpsimError(f"local cluster size must be at least 1, got {local_cluster}")
     if workers is not None and workers < 1:
         raise VpsimError(f"workers must be at least 1, got {workers}")
+    if group_by not in cal.GROUPINGS:
+        raise VpsimError(f"--group-by {group_by!r}: expected one of {', '.join(cal.GROUPINGS)}")
     if folds < 2:
         raise VpsimError(f"--folds must be at least 2 (cross-validation), got {folds}")
     cars = source if isinstance(source, TestCarList) else read_test_car_list(source)
     vehicles = [v for v in cars.vehicles if any(c in v.measured_mpg for c in cycles)]
     if limit is not None:
         vehicles = vehicles[:limit]
-    if len(vehicles) < folds:
+    groups = cal.vehicle_groups(vehicles, group_by)
+    n_groups = len(set(groups.values()))
+    if group_by == "manufacturer":
+        folds = n_groups  # leave one manufacturer out at a time
+    if n_groups < max(folds, 2):
         raise VpsimError(
-            f"{len(vehicles)} usable vehicle(s) with a test on {', '.join(cycles)}: too few for {folds} folds"
+            f"{len(vehicles)} usable vehicle(s) in {n_groups} {group_by} group(s) with a test on "
+            f"{', '.join(cycles)}: too few for {max(folds, 2)} folds"
         )
-    fold_of = cal.assign_folds([v.key for v in vehicles], folds)
+    fold_of = cal.assign_folds([v.key for v in vehicles], folds, groups=groups)
     timings = {"read_s": time.perf_counter() - t_start}
     work = [(v, tuple(c for c in cycles if c in v.measured_mpg)) for v in vehicles]
     chunks = [work[i : i + CHUNK] for i in range(0, len(work), CHUNK)]
@@ -340,6 +354,8 @@ def run_fleet(
             else {"available": False, "version": None, "reason": "not run (--no-peer)"}
         )
         peer_rows: dict[tuple[str, str], dict] = {}
+        peer_cal_rows: dict[tuple[str, str], dict] = {}
+        peer_technology: dict = {}
         if peer_state["available"]:
             t0 = time.perf_counter()
             pitems = [(v, c) for v, cs in work for c in cs]
@@ -351,6 +367,36 @@ def run_fleet(
                 done += len(part)
                 _progress("FASTSim runs", done, len(pitems), t0, progress)
             timings["peer_s"] = time.perf_counter() - t0
+            # the calibrated peer: its technology per class on the same folds, then one run per row
+            t0 = time.perf_counter()
+            grid_peer: list[dict] = []
+            done = 0
+            for part in executor.map(peer_mod.calibration_chunk, pch):
+                grid_peer += part
+                done += len(part)
+                _progress("FASTSim calibration runs", done, len(pitems), t0, progress)
+            okp = [r for r in grid_peer if r["log_l100"] is not None]
+            if okp:
+                peer_tech = peer_mod.calibrate_peer(
+                    np.stack([r["log_l100"] for r in okp]),
+                    np.array([_log_l100(by_key[r["key"]].measured_mpg[r["cycle"]]) for r in okp]),
+                    np.array([fold_of[r["key"]] for r in okp]),
+                    np.array([_vehicle_class(by_key[r["key"]]) for r in okp]),
+                    folds,
+                    cal.CLASSES,
+                )
+                citems = [
+                    (v, c, peer_tech[(fold_of[v.key], _vehicle_class(v))]) for v, cs in work for c in cs
+                ]
+                cch = [citems[i : i + CHUNK * 2] for i in range(0, len(citems), CHUNK * 2)]
+                for part in executor.map(peer_mod.peer_chunk, cch):
+                    for r in part:
+                        peer_cal_rows[(r["key"], r["cycle"])] = r
+                peer_technology = {
+                    f"fold{f}.{cls}": {k: (round(x, 6) if isinstance(x, float) else x) for k, x in t.items()}
+                    for (f, cls), t in sorted(peer_tech.items())
+                }
+            timings["peer_calibrated_s"] = time.perf_counter() - t0
     rows = []
     for v, cs in work:
         for c in cs:
@@ -366,6 +412,12 @@ def run_fleet(
                 row["fastsim_status"] = pr.get("peer_error") or (
                     "ok" if pr.get("peer_trace_met") else "trace_miss" if pr else "not run"
                 )
+                pc = peer_cal_rows.get((v.key, c), {})
+                mpg = pc.get("peer_mpg", math.nan)
+                row["fastsim_calibrated_mpg"] = round(mpg, 4) if math.isfinite(mpg) else math.nan
+                row["fastsim_calibrated_error_pct"] = (
+                    round(100 * (mpg - meas) / meas, 4) if math.isfinite(mpg) else math.nan
+                )
             rows.append(row)
     timings["total_s"] = time.perf_counter() - t_start
     technology = {
@@ -373,7 +425,19 @@ def run_fleet(
         for (f, cls), t in sorted(tech.items())
     }
     return FleetRun(
-        rows, cars, cycles, folds, method, technology, tech_all, timings, executor.name, peer_state
+        rows,
+        cars,
+        cycles,
+        folds,
+        method,
+        technology,
+        tech_all,
+        timings,
+        executor.name,
+        peer_state,
+        grouping=group_by,
+        n_groups=n_groups,
+        peer_technology=peer_technology,
     )
 
 

@@ -1,0 +1,218 @@
+"""Honest validation of the fleet: folds that hold out whole families or manufacturers, the constants chosen
+on the list declared, fitted values on their bounds reported, and a peer calibrated the way vpsim is."""
+
+from __future__ import annotations
+
+import importlib
+import json
+import math
+import re
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fleet_csv import write_list
+from vpsim.cli.main import main
+from vpsim.fleet import calibrate as cal
+from vpsim.fleet import peer
+from vpsim.fleet.epa import read_test_car_list
+from vpsim.fleet.run import run_fleet
+from vpsim.fleet.tuned import TUNED_ON_THIS_LIST
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def cars(tmp_path_factory):
+    return read_test_car_list(write_list(tmp_path_factory.mktemp("list") / "list.csv", bad_rows=False))
+
+
+def test_family_groups_join_configurations_models_and_twins(cars):
+    vs = list(cars.vehicles)
+    a = vs[0]
+    sibling = replace(a, configuration=a.configuration + 7, etw_lb=a.etw_lb + 250)  # same test vehicle
+    same_model = replace(
+        vs[1],
+        vehicle_id="X900",
+        model=a.model,
+        displacement_l=a.displacement_l,
+        cylinders=a.cylinders,
+        manufacturer=a.manufacturer,
+    )  # same make, model, engine
+    twin = replace(vs[2], vehicle_id="X901", model="Other", manufacturer="Else")  # same inputs as vs[2]
+    groups = cal.vehicle_groups([*vs, sibling, same_model, twin], "family")
+    assert groups[sibling.key] == groups[a.key] == groups[same_model.key]
+    assert groups[twin.key] == groups[vs[2].key]
+    assert groups[vs[3].key] != groups[a.key]
+    assert cal.vehicle_groups(vs, "record") == {v.key: v.key for v in vs}
+    by_maker = cal.vehicle_groups(vs, "manufacturer")
+    assert len(set(by_maker.values())) == len({v.manufacturer.upper() for v in vs})
+    with pytest.raises(ValueError, match="unknown grouping"):
+        cal.vehicle_groups(vs, "make")
+
+
+def test_a_group_always_shares_a_fold_and_record_folds_are_as_before():
+    keys = [f"V{i}#0" for i in range(40)]
+    groups = {k: f"G{i // 3}" for i, k in enumerate(keys)}  # groups of 3
+    folds = cal.assign_folds(keys, 4, groups=groups)
+    for g in set(groups.values()):
+        assert len({folds[k] for k in keys if groups[k] == g}) == 1
+    sizes = np.bincount(list(folds.values()))
+    assert sizes.sum() == 40 and sizes.max() - sizes.min() <= 3  # balanced to within one group
+    # one record per group: the round-robin deal of a shuffled order (the folds of earlier versions)
+    order = sorted(keys)
+    perm = np.random.default_rng(cal.SEED).permutation(len(order))
+    assert cal.assign_folds(keys, 5) == {order[j]: i % 5 for i, j in enumerate(perm)}
+    with pytest.raises(ValueError, match="cannot fill"):
+        cal.assign_folds(keys[:6], 4, groups={k: "one" if i < 4 else "two" for i, k in enumerate(keys[:6])})
+
+
+def test_leave_one_manufacturer_out_predicts_each_maker_from_the_others(tmp_path):
+    run = run_fleet(
+        write_list(tmp_path / "l.csv", bad_rows=False), group_by="manufacturer", peer=False, cycles=("hwy",)
+    )
+    df = run.frame()
+    assert run.grouping == "manufacturer" and run.folds == run.n_groups == df["make"].str.upper().nunique()
+    assert df.groupby("fold")["make"].nunique().max() == 1  # one maker per fold
+    for name, t in run.technology.items():
+        fold, cls = name.split(".")
+        if t["basis"] == "class":  # fitted on the other makers' vehicles of its class, none of its own
+            others = df[(df["fold"] != int(fold[4:])) & (df["technology_class"] == cls)]
+            assert t["n_train"] == len(others)
+
+
+def test_summary_declares_the_validation(tmp_path, capsys):
+    out = tmp_path / "o"
+    lst = write_list(tmp_path / "list.csv", bad_rows=False)
+    assert (
+        main(
+            [
+                "fleet",
+                str(lst),
+                "--out",
+                str(out),
+                "--folds",
+                "3",
+                "--cycles",
+                "hwy",
+                "--no-peer",
+                "--quiet",
+                "--group-by",
+                "family",
+            ]
+        )
+        == 0
+    )
+    text = capsys.readouterr().out
+    assert "held out by family: 3 folds" in text
+    s = json.loads((out / "summary.json").read_text())
+    v = s["validation"]
+    assert v["grouping"] == "family" and v["folds"] == 3 and v["groups"] >= 3
+    assert v["tuned_on_this_list"] == [dict(t) for t in TUNED_ON_THIS_LIST]
+    report = (out / "report.md").read_text()
+    assert "Constants chosen while looking at this list" in report
+    assert "holding out whole vehicle families" in report
+    tech = json.loads((out / "technology.json").read_text())
+    assert set(tech["search_bounds"]) == set(cal.TECH_PARAMS)
+    for fit, hits in tech["on_search_bound"].items():
+        for par, h in hits.items():
+            lo, hi = tech["search_bounds"][par]
+            assert h["value"] == (lo if h["bound"] == "low" else hi) and h["reason"], (fit, par)
+    assert main(["fleet", str(lst), "--out", str(out), "--group-by", "maker"]) == 2
+    assert "'maker' is not one of" in capsys.readouterr().err
+
+
+def test_on_bounds_sees_a_value_on_its_bound():
+    lo, hi = cal.search_bounds()[cal.TECH_PARAMS[2]]
+    assert cal.on_bounds({cal.TECH_PARAMS[2]: hi, cal.TECH_PARAMS[1]: 0.8}) == {cal.TECH_PARAMS[2]: "high"}
+    assert cal.on_bounds({cal.TECH_PARAMS[1]: float(cal.GRID[1][0])}) == {cal.TECH_PARAMS[1]: "low"}
+    for (par, side), reason in cal.BOUND_REASONS.items():
+        assert par in cal.TECH_PARAMS and side in ("low", "high") and len(reason) > 20
+
+
+# --- the constants chosen on the list: each one's value is the code's ---------------------------------
+
+_WHERE = re.compile(r"^src/vpsim/(?P<path>[\w/]+)\.py: (?P<ident>[A-Za-z_][\w.]*)(?:\[(?P<key>'[^']+')\])?$")
+
+
+@pytest.mark.parametrize("entry", TUNED_ON_THIS_LIST, ids=[t["name"] for t in TUNED_ON_THIS_LIST])
+def test_a_declared_constant_has_the_codes_value(entry):
+    assert set(entry) == {"name", "value", "where", "how"} and len(entry["how"]) > 15
+    m = _WHERE.match(entry["where"])
+    assert m, f"where = {entry['where']!r}: expected 'src/vpsim/<module>.py: <name>'"
+    assert (REPO / "src" / "vpsim" / f"{m['path']}.py").is_file()
+    obj = importlib.import_module("vpsim." + m["path"].replace("/", "."))
+    for part in m["ident"].split("."):
+        obj = getattr(obj, part)
+    if m["key"]:
+        obj = obj[m["key"].strip("'")]
+    if callable(obj):  # a rule, not a number: the entry describes it in words
+        assert isinstance(entry["value"], str) and len(entry["value"]) > 15, entry["name"]
+        return
+    value = obj.tolist() if isinstance(obj, np.ndarray) else obj
+    value = list(value) if isinstance(value, tuple) else value
+    expected = entry["value"]
+    if isinstance(expected, float) or isinstance(value, float):
+        assert value == pytest.approx(expected, rel=1e-12), entry["name"]
+    else:
+        assert value == expected, entry["name"]
+
+
+# --- the calibrated peer -----------------------------------------------------------------------------
+
+
+def test_peer_fit_recovers_a_known_technology():
+    """Synthetic FASTSim-like fuel: ln F = ln(W + a aux) + k (1 - q) (a concave rise with the accessories, a
+    part-load term), measured at (s, aux, q) = (1.15, 900 W, 0.8): the fit finds them (the scale exactly
+    by the median, the others on their fine grids)."""
+    rng = np.random.default_rng(5)
+    n = 80
+    w = rng.uniform(3.0, 9.0, n)  # L/100 km at no accessory load
+    a = rng.uniform(4e-4, 9e-4, n)  # L/100 km per W
+    k = rng.uniform(0.2, 0.5, n)
+
+    def ln_f(aux, q):
+        return np.log(w[:, None, None] + a[:, None, None] * aux) + k[:, None, None] * (1 - q)
+
+    aux_n = np.asarray(peer.CAL_AUX)[None, :, None]
+    q_n = np.asarray(peer.CAL_Q)[None, None, :]
+    grid = ln_f(aux_n, q_n)
+    meas = (ln_f(900.0, 0.8) - math.log(1.15))[:, 0, 0]
+    params, loss = peer.fit_peer(grid, meas)
+    assert params["accessory_power_w"] == pytest.approx(900.0, abs=100.0)
+    assert params["part_load_exponent"] == pytest.approx(0.8, abs=0.04)
+    assert params["efficiency_scale"] == pytest.approx(1.15, rel=0.02)
+    assert loss < 0.01
+
+
+def test_peer_technology_changes_only_what_it_names():
+    pytest.importorskip("fastsim")
+    base = peer._base_vehicle()
+    eff = base["pt_type"]["Conv"]["fc"]["eff_interp_from_pwr_out"]["data"]["values"]["data"]
+    d = peer.with_technology(
+        base, {"efficiency_scale": 1.1, "accessory_power_w": 1200.0, "part_load_exponent": 1.0}
+    )
+    new = d["pt_type"]["Conv"]["fc"]["eff_interp_from_pwr_out"]["data"]["values"]["data"]
+    assert new == pytest.approx([1.1 * e for e in eff], rel=1e-12) and d["pwr_aux_base_watts"] == 1200.0
+    assert base["pt_type"]["Conv"]["fc"]["eff_interp_from_pwr_out"]["data"]["values"]["data"] == eff
+    q = peer.with_technology(base, {"part_load_exponent": 0.5})
+    vals = q["pt_type"]["Conv"]["fc"]["eff_interp_from_pwr_out"]["data"]["values"]["data"]
+    assert max(vals) == pytest.approx(max(eff)) and min(vals) > min(eff)  # the peak kept, part load raised
+    assert peer.CAL_Q[0] < 1.0 < peer.CAL_Q[1]  # FASTSim's own curve inside the searched range
+
+
+def test_calibrated_peer_in_the_summary(tmp_path):
+    pytest.importorskip("fastsim")
+    from vpsim.fleet.report import summary
+
+    run = run_fleet(write_list(tmp_path / "l.csv", bad_rows=False), folds=3, cycles=("hwy",))
+    s = summary(run)
+    fc = s["peer"]["fastsim_calibrated"]
+    assert set(fc["hwy"]) == {"n", "median_error_pct", "median_abs_error_pct", "p90_abs_error_pct"}
+    assert fc["hwy"]["n"] == s["peer"]["fastsim"]["hwy"]["n"]
+    assert s["peer"]["fastsim_calibrated_by_powertrain"]["conventional"] == fc
+    assert set(run.peer_technology) == {f"fold{f}.{c}" for f in range(3) for c in cal.CLASSES}
+    df = run.frame()
+    assert np.isfinite(df["fastsim_calibrated_mpg"]).all()
