@@ -30,6 +30,14 @@ def check_path(name: Any, error: type[Exception], what: str = "file") -> Path:
     return Path(name)
 
 
+def printable(text: Any) -> str:
+    """``text`` with every control character (newline, ESC, NUL, DEL, ...) written as an escape: safe for
+    one line on a terminal or in a file's comment, whatever a record held."""
+    return "".join(
+        ch if ch.isprintable() else ch.encode("unicode_escape").decode("ascii") for ch in str(text)
+    )
+
+
 def short_name(text: Any, limit: int = 120) -> str:
     """A file name cut for a one-line message."""
     s = str(text).replace("\x00", "\\0")

@@ -60,10 +60,17 @@ def fleet(
     import matplotlib
 
     matplotlib.use("Agg")
-    from ..fleet.report import write_outputs
+    from ..errors import VpsimError
+    from ..fleet.report import prepare_output_folder, write_outputs
     from ..fleet.run import run_fleet
 
     names = tuple(c.strip() for c in cycles.split(",") if c.strip())
+    twice = sorted({c for c in names if names.count(c) > 1})
+    if twice:
+        raise VpsimError(f"--cycles names {', '.join(twice)} more than once; give each cycle once")
+    if limit is not None and limit < 1:
+        raise VpsimError(f"--limit {limit}: expected a positive number of vehicles")
+    prepare_output_folder(out, [file])  # before the work: a folder that cannot be written fails now
     run = run_fleet(
         file,
         cycles=names,

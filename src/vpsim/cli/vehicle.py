@@ -38,12 +38,16 @@ def from_epa(file, vehicle_id, config, out, technology):
     """Write the parameters of test vehicle --id of the EPA test car list FILE as an editable TOML."""
     from ..fleet.calibrate import TECH_PARAMS, vehicle_class
     from ..fleet.epa import read_test_car_list
+    from ..fleet.report import check_complete
     from ..fleet.vehicle import record_parameters, vehicle_toml
+    from ..textio import printable
 
+    _not_an_input(out, file, technology)
     cars = read_test_car_list(file)
     rec = cars.find(vehicle_id, config)
     tech, note = None, ""
     if technology:
+        check_complete(Path(technology).parent, Path(technology).name)
         try:
             data = json.loads(Path(technology).read_text())
             cls = vehicle_class(rec)
@@ -66,6 +70,16 @@ def from_epa(file, vehicle_id, config, out, technology):
     )
     engine = f"{rec.displacement_l:g} L {rec.cylinders} cyl. {'boosted' if rec.boosted else 'NA'}"
     click.echo(
-        f"wrote {out}: {rec.make} {rec.model} ({rec.key}), {rec.mass_kg:.0f} kg, {engine}, {box}; "
-        f"measured {meas or 'nothing usable'}"
+        printable(
+            f"wrote {out}: {rec.make} {rec.model} ({rec.key}), {rec.mass_kg:.0f} kg, {engine}, {box}; "
+            f"measured {meas or 'nothing usable'}"
+        )
     )
+
+
+def _not_an_input(out, *inputs) -> None:
+    """--out may not name an input: writing it would replace what is being read."""
+    target = Path(out).resolve()
+    for name in inputs:
+        if name and Path(name).resolve() == target:
+            raise VpsimError(f"--out {out}: that is an input of this command ({name}); choose another file")

@@ -624,10 +624,53 @@ def figure_worst(w):
 # --- writing --------------------------------------------------------------------------------------------
 
 
+INCOMPLETE = ".vpsim-fleet-incomplete"  # present in an output folder while (or if) its writing did not finish
+
+
+def check_complete(folder, what: str = "output") -> None:
+    """One-line error if ``folder`` holds a ``vpsim fleet`` output whose writing did not finish (a run killed
+    while writing leaves files of two runs side by side: none of them is to be trusted)."""
+    from ..errors import VpsimError
+
+    if (Path(folder) / INCOMPLETE).exists():
+        raise VpsimError(
+            f"{Path(folder) / what}: from a vpsim fleet run that did not finish writing its folder "
+            f"({Path(folder) / INCOMPLETE} is there); run vpsim fleet again"
+        )
+
+
+def prepare_output_folder(out_dir, inputs=()) -> Path:
+    """Check, before any work, that ``out_dir`` can be written and is no input; one-line error if not."""
+    import tempfile
+
+    from ..errors import VpsimError
+
+    out = Path(out_dir)
+    for name in inputs:
+        src = Path(name).resolve()
+        if src == out.resolve() or out.resolve() in src.parents:
+            raise VpsimError(
+                f"--out {out_dir}: holds an input of this command ({name}); choose another folder"
+            )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out, prefix=".vpsim-write-test-"):
+            pass
+    except OSError as exc:
+        raise VpsimError(f"--out {out_dir}: cannot write there ({exc.strerror or exc})") from None
+    return out
+
+
 def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
-    """Write everything into ``out_dir``; returns (summary, run info)."""
+    """Write everything into ``out_dir``; returns (summary, run info).
+
+    While it writes, the folder holds a marker (:data:`INCOMPLETE`), removed once every file is written:
+    a folder killed halfway says so, and readers of its files (``vpsim vehicle from-epa --technology``)
+    refuse it (:func:`check_complete`)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    marker = out / INCOMPLETE
+    marker.write_text("vpsim fleet is writing this folder; if this file stays, the run did not finish\n")
     df = run.frame()
     cols = list(CSV_COLUMNS) + [c for c in df.columns if c not in CSV_COLUMNS]
     df[cols].to_csv(out / "vehicles.csv", index=False)
@@ -665,6 +708,7 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
     for name, fig in figs.items():
         fig.savefig(out / name, dpi=110)
     (out / "report.md").write_text(markdown(run, s, info, df, w, command))
+    marker.unlink()
     return s, info
 
 

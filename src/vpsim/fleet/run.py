@@ -267,6 +267,10 @@ def run_fleet(
             raise VpsimError(f"unknown fleet cycle {c!r}; expected some of {', '.join(FLEET_CYCLES)}")
     if not cycles:
         raise VpsimError("no cycle given")
+    if len(set(cycles)) != len(cycles):
+        raise VpsimError(f"cycles {', '.join(cycles)}: a cycle named twice would count its rows twice")
+    if limit is not None and limit < 1:
+        raise VpsimError(f"limit = {limit}: expected a positive number of vehicles")
     if method not in METHODS:
         raise VpsimError(f"method {method!r} is not available for the fleet; expected backward or forward")
     if scheduler is not None and local_cluster is not None:

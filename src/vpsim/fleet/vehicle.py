@@ -47,6 +47,7 @@ from ..errors import VpsimError
 from ..gears import GearRule
 from ..model import vehicle as vh
 from ..params import Parameters, load_parameters
+from ..textio import printable
 from .epa import CERT_FUEL_KG_PER_L, CERT_FUEL_LHV_J_PER_KG, MPH_TO_MPS, VehicleRecord, coastdown_record
 
 BASE_PRESET = "hofman2011"
@@ -383,7 +384,24 @@ def _toml_value(v) -> str:
         return "nan" if math.isnan(v) else repr(float(f"{v:.6g}"))
     if isinstance(v, list | tuple):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"') + '"'
+    return _toml_string(str(v))
+
+
+_TOML_ESCAPES = {"\\": "\\\\", '"': '\\"', "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+
+
+def _toml_string(text: str) -> str:
+    """A TOML basic string: quotes, backslashes and every control character escaped (a record's text can
+    hold anything; it must come back as the same text, never as TOML of its own)."""
+    out = []
+    for ch in text:
+        if ch in _TOML_ESCAPES:
+            out.append(_TOML_ESCAPES[ch])
+        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
+            out.append(f"\\u{ord(ch):04X}")
+        else:
+            out.append(ch)
+    return '"' + "".join(out) + '"'
 
 
 def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", technology_note: str = "") -> str:
@@ -395,8 +413,10 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
     """
     a, b, c = rec.road_load_si
     lines = [
-        f"# {rec.make} {rec.model}: test vehicle {rec.vehicle_id}, configuration {rec.configuration}",
-        f"# built by vpsim vehicle from-epa from {source or 'an EPA test car list'}",
+        printable(
+            f"# {rec.make} {rec.model}: test vehicle {rec.vehicle_id}, configuration {rec.configuration}"
+        ),
+        printable(f"# built by vpsim vehicle from-epa from {source or 'an EPA test car list'}"),
         "# (the module vpsim.fleet.vehicle documents the mapping and its defaults)",
         "# SI units. Edit freely; run with: vpsim simulate --vehicle THIS_FILE",
         f'base = "{BASE_PRESET}"',

@@ -1,0 +1,101 @@
+"""Hostile input to the certification-list surfaces: from-epa's --out and its text, the fleet's options and
+output folder, and a folder a killed fleet run left behind."""
+
+from __future__ import annotations
+
+import csv
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+from _fuzz import run_cli
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: the made-up list
+from fleet_csv import write_list  # noqa: E402
+from vpsim.fleet.report import INCOMPLETE  # noqa: E402
+from vpsim.params import load_parameters  # noqa: E402
+
+
+def _renamed(src: Path, dst: Path, vehicle_id: str, model: str) -> Path:
+    """The made-up list with ``vehicle_id``'s model name replaced by ``model``."""
+    with src.open(newline="") as f:
+        rows = list(csv.reader(f))
+    head = rows[0]
+    i_id, i_model = head.index("Test Vehicle ID"), head.index("Represented Test Veh Model")
+    for r in rows[1:]:
+        if r[i_id] == vehicle_id:
+            r[i_model] = model
+    with dst.open("w", newline="") as f:
+        csv.writer(f).writerows(rows)
+    return dst
+
+
+def test_from_epa_refuses_to_overwrite_its_input(tmp_path, capsys):
+    lst = write_list(tmp_path / "list.csv")
+    before = lst.read_bytes()
+    code, _, err = run_cli(capsys, "vehicle", "from-epa", lst, "--id", "T004", "--out", lst)
+    assert code == 2 and "an input of this command" in err
+    assert lst.read_bytes() == before
+
+
+@pytest.mark.parametrize(
+    "model",
+    [
+        'Runner"\n[vehicle]\nmass = 1',  # a newline that would inject a table
+        "Runner\x1b[31mRED\x1b[0m",  # an ESC sequence for the terminal
+        "Runner\x00nul\x7fdel\ttab\\back",  # NUL, DEL, tab, backslash
+    ],
+)
+def test_from_epa_writes_any_record_text_as_text(tmp_path, capsys, model):
+    lst = _renamed(write_list(tmp_path / "list.csv"), tmp_path / "hostile.csv", "T004", model)
+    car = tmp_path / "car.toml"
+    code, out, _ = run_cli(capsys, "vehicle", "from-epa", lst, "--id", "T004", "--out", car)
+    if code != 0:  # the reader may refuse the row (one line): then nothing is written
+        assert not car.exists()
+        return
+    assert "\x1b" not in out and "\x00" not in out  # escaped for the terminal
+    data = tomllib.loads(car.read_text())  # valid TOML: the text stayed a string
+    assert set(data) >= {"base", "name", "vehicle"} and data["vehicle"].get("mass", 0) > 100
+    assert model.replace("\x00", "") in data["name"] or model in data["name"]
+    assert load_parameters(car).vehicle.mass == data["vehicle"]["mass"]
+
+
+@pytest.mark.parametrize(
+    ("args", "expect"),
+    [
+        (["--cycles", "ftp_bag2,ftp_bag2"], "more than once"),
+        (["--limit", "-1"], "--limit -1"),
+        (["--limit", "0"], "--limit 0"),
+        (["--group-by", "maker"], "maker"),
+    ],
+)
+def test_fleet_refuses_bad_options_before_any_work(tmp_path, capsys, args, expect):
+    lst = write_list(tmp_path / "list.csv")
+    code, _, err = run_cli(capsys, "fleet", lst, "--out", tmp_path / "o", "--no-peer", "--quiet", *args)
+    assert code == 2 and expect in err
+
+
+def test_fleet_refuses_an_output_it_cannot_write_before_running(tmp_path, capsys):
+    lst = write_list(tmp_path / "list.csv")
+    blocker = tmp_path / "afile"
+    blocker.write_text("not a folder")
+    code, _, err = run_cli(capsys, "fleet", lst, "--out", blocker / "sub", "--no-peer", "--quiet")
+    assert code == 2 and "cannot write there" in err
+    code, _, err = run_cli(capsys, "fleet", lst, "--out", tmp_path, "--no-peer", "--quiet")
+    assert code == 2 and "holds an input" in err  # the input lies inside the output folder
+
+
+def test_a_folder_from_an_unfinished_fleet_run_is_not_trusted(tmp_path, capsys):
+    lst = write_list(tmp_path / "list.csv")
+    out = tmp_path / "fleet"
+    code, _, _ = run_cli(
+        capsys, "fleet", lst, "--out", out, "--no-peer", "--quiet", "--cycles", "hwy", "--folds", "3"
+    )
+    assert code == 0 and not (out / INCOMPLETE).exists()
+    car = tmp_path / "car.toml"
+    args = ["vehicle", "from-epa", lst, "--id", "T004", "--out", car, "--technology", out / "technology.json"]
+    assert run_cli(capsys, *args)[0] == 0
+    (out / INCOMPLETE).write_text("killed while writing\n")  # as a run killed halfway leaves it
+    code, _, err = run_cli(capsys, *args)
+    assert code == 2 and "did not finish writing" in err
