@@ -446,7 +446,8 @@ def test_rosenbrock_constants_are_the_published_rodas3():
     cc = np.diag(1.0 / np.diag(_RODAS3_G)) - gi
     a = _RODAS3_A @ gi
     m, m_hat = _RODAS3_B @ gi, _RODAS3_BHAT @ gi
-    f = forward
+    from vpsim.methods import _fdm_rosenbrock as f  # the integrator's module
+
     assert f._ROS_GAMMA == 0.5 == _RODAS3_G[0, 0]
     assert [f._WC21, f._WC31, f._WC32, f._WC41, f._WC42, f._WC43] == pytest.approx(
         [cc[1, 0], cc[2, 0], cc[2, 1], cc[3, 0], cc[3, 1], cc[3, 2]], abs=1e-14
