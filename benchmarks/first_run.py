@@ -1,6 +1,6 @@
-"""A newcomer's first minutes, timed: `pip install .` in a fresh virtual environment, then the first run of each
-method, `vpsim paper`, and a later process; then the same first runs with an empty kernel cache (what a
-install without the precompiled kernels, or an edited source, costs).
+"""A newcomer's first minutes, timed: `pip install .` in a fresh virtual environment, then the first run of
+each method, `vpsim paper`, and a later process; then the same first runs with an empty kernel cache (what
+an install without the precompiled kernels, or an edited source, costs).
 
     python benchmarks/first_run.py [--json FILE] [--keep DIR]
 
