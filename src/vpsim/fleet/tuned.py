@@ -162,4 +162,16 @@ TUNED_ON_THIS_LIST: tuple[dict, ...] = (
         "where": "src/vpsim/fleet/vehicle.py: scaled_drivers",
         "how": "Gains scaled with A_max after the forward fleet's band misses (e70dc76), then with the pedal's range after boosted cars' US06 band misses (1421f85).",
     },
+    {
+        "name": "city_mpg_at_least_highway",
+        "value": "a record whose city (FTP) mpg is at least its highway mpg is excluded as a hybrid",
+        "where": "src/vpsim/fleet/epa.py: _classify",
+        "how": "Row filter on the measured outcome, written with the reader (8f9fbf8) before any fleet result; listed because it filters rows by what they measured.",
+    },
+    {
+        "name": "model_shares_exclusion",
+        "value": "every test vehicle of a make and model excluded when one of them is a plug-in or hybrid",
+        "where": "src/vpsim/fleet/epa.py: read_test_car_list",
+        "how": "Added after the RAV4 Prime's gasoline-only test vehicle ran as a conventional car at -25 % on US06 (cfd8bc1); 12 more vehicles excluded.",
+    },
 )
