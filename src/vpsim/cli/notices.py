@@ -24,8 +24,8 @@ KERNELS = {
     "vpsim.model.engine": ("model's array views", "1-3 s"),
     "vpsim.model.tables": ("model's table look-ups", "1-2 s"),
     "vpsim.methods.backward": ("backward kernels", "15-30 s"),
-    "vpsim.methods.forward": ("forward method's batch", "20-40 s"),
-    "vpsim.methods._fdm_rosenbrock": ("forward integrator", "40-110 s"),
+    "vpsim.methods.forward": ("forward method's start state and batch", "2-40 s"),
+    "vpsim.methods._fdm_rosenbrock": ("forward integrator", "35-110 s"),
     "vpsim.methods._fdm_dopri5": ("forward method's Dormand-Prince integrator", "20-50 s"),
     "vpsim.methods.inverse": ("inverse kernels", "10-20 s"),
 }
