@@ -297,18 +297,30 @@ def cross_validate(
     in some fold falls back to the fit over all classes' training rows of that fold (and says so in the
     returned dict).
     """
-    out: dict[tuple[int, str], dict[str, float]] = {}
+
+    def fit_rows(rows):
+        pw = None if per_watt is None else per_watt[rows]
+        return fit(log_fuel_grid[rows], log_measured_fuel[rows], pw)
+
+    return per_fold_and_class(fit_rows, vehicle_fold, vehicle_class, k)
+
+
+def per_fold_and_class(fit_rows, vehicle_fold, vehicle_class, k: int, classes=CLASSES) -> dict:
+    """``fit_rows(mask) -> (params, loss)`` per (fold, class) on the training rows (the other folds' rows of
+    the class): the one cross-validation procedure, for vpsim's technology and for the peer's
+    (:func:`vpsim.fleet.peer.calibrate_peer`). A class with no training row in some fold falls back to all
+    classes' training rows of that fold, and says so (``basis``)."""
+    out: dict[tuple[int, str], dict] = {}
     for fold in range(k):
         train = vehicle_fold != fold
-        for cls in CLASSES:
+        for cls in classes:
             rows = train & (vehicle_class == cls)
             basis = "class"
             if not rows.any():
                 rows, basis = train, "all classes (no training vehicle of this class)"
             if not rows.any():
                 raise ValueError(f"fold {fold} leaves no vehicle to train on; use fewer folds")
-            pw = None if per_watt is None else per_watt[rows]
-            params, loss = fit(log_fuel_grid[rows], log_measured_fuel[rows], pw)
+            params, loss = fit_rows(rows)
             out[(fold, cls)] = {**params, "train_loss": loss, "n_train": int(rows.sum()), "basis": basis}
     return out
 
@@ -334,6 +346,7 @@ __all__ = [
     "GROUPINGS",
     "assign_folds",
     "cross_validate",
+    "per_fold_and_class",
     "fit",
     "fit_all",
     "fuel_per_watt",

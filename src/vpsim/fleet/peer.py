@@ -261,22 +261,13 @@ def fit_peer(grid: np.ndarray, log_measured: np.ndarray) -> tuple[dict, float]:
 
 
 def calibrate_peer(grid, log_measured, vehicle_fold, vehicle_class, k, classes) -> dict:
-    """The peer's technology per (fold, class), each fitted without that fold's rows, as
-    :func:`vpsim.fleet.calibrate.cross_validate` does for vpsim (a class without training rows in a fold
-    falls back to all classes' training rows of that fold)."""
-    out = {}
-    for fold in range(k):
-        train = vehicle_fold != fold
-        for cls in classes:
-            rows = train & (vehicle_class == cls)
-            basis = "class"
-            if not rows.any():
-                rows, basis = train, "all classes (no training vehicle of this class)"
-            if not rows.any():
-                raise ValueError(f"fold {fold} leaves no vehicle to train the peer on")
-            params, loss = fit_peer(grid[rows], log_measured[rows])
-            out[(fold, cls)] = {**params, "train_loss": loss, "n_train": int(rows.sum()), "basis": basis}
-    return out
+    """The peer's technology per (fold, class), each fitted without that fold's rows, by vpsim's own
+    cross-validation procedure (:func:`vpsim.fleet.calibrate.per_fold_and_class`)."""
+    from .calibrate import per_fold_and_class
+
+    return per_fold_and_class(
+        lambda rows: fit_peer(grid[rows], log_measured[rows]), vehicle_fold, vehicle_class, k, classes
+    )
 
 
 __all__ = [
