@@ -99,3 +99,49 @@ def test_a_folder_from_an_unfinished_fleet_run_is_not_trusted(tmp_path, capsys):
     (out / INCOMPLETE).write_text("killed while writing\n")  # as a run killed halfway leaves it
     code, _, err = run_cli(capsys, *args)
     assert code == 2 and "did not finish writing" in err
+
+
+def _edited(src: Path, dst: Path, vehicle_id: str, field: str, value: str) -> Path:
+    """The made-up list with ``field`` (a key of vpsim.fleet.epa.COL) of ``vehicle_id``'s rows set to
+    ``value``."""
+    from vpsim.fleet.epa import COL
+
+    with src.open(newline="") as f:
+        rows = list(csv.reader(f))
+    i_id, i_field = rows[0].index("Test Vehicle ID"), rows[0].index(COL[field])
+    for r in rows[1:]:
+        if r[i_id] == vehicle_id:
+            r[i_field] = value
+    with dst.open("w", newline="") as f:
+        csv.writer(f).writerows(rows)
+    return dst
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "reason"),
+    [
+        ("cylinders", "abc", "not a number: cylinders"),
+        ("cylinders", "inf", "not a number: cylinders"),
+        ("rated_hp", "4,000", "not a number: rated_hp"),
+        ("cylinders", "2.5", "cylinders: 2.5 is not a whole number"),
+        ("n_gears", "6.7", "n_gears: 6.7 is not a whole number"),
+        ("displacement_l", "0", "implausible displacement_l"),
+        ("displacement_l", "-2", "implausible displacement_l"),
+        ("displacement_l", "0.05", "implausible displacement_l"),
+        ("etw_lb", "1e300", "implausible etw_lb"),
+        ("configuration", "1.9", "configuration 1.9 is not a whole number"),
+    ],
+)
+def test_a_bad_record_field_is_named_never_routed_elsewhere(tmp_path, field, value, reason):
+    """Each field checked on its own: a non-number is not 'missing', an impossible engine is not 'electric',
+    a huge test weight is not a 'hybrid', a fractional count is not rounded, configuration 1.9 is not 1."""
+    from vpsim.fleet.epa import read_test_car_list
+
+    lst = _edited(
+        write_list(tmp_path / "list.csv", bad_rows=False), tmp_path / "bad.csv", "T004", field, value
+    )
+    cars = read_test_car_list(lst)
+    assert "T004" not in {v.vehicle_id for v in cars.vehicles}
+    reasons = [r["reason"] for r in cars.excluded_rows if r["vehicle_id"] == "T004"]
+    assert reasons and all(reason in r for r in reasons), reasons
+    assert not any(r.startswith(("electric", "hybrid", "missing")) for r in reasons), reasons

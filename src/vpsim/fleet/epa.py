@@ -16,7 +16,7 @@ Exclusion rules (a vehicle excluded is counted under its reason; the first rule 
 ==============================  ==============================================================================
 reason                          rule
 ==============================  ==============================================================================
-``electric``                    a test on ``Electricity`` and no gasoline test, or displacement < 0.1 L
+``electric``                    a test on ``Electricity`` and no gasoline test, or displacement 0 and no gasoline test
 ``plug-in hybrid``              a charge-depleting (``CD``) or electricity test beside gasoline tests
 ``fuel cell``                   a test on hydrogen
 ``diesel``                      a test on diesel fuel
@@ -55,6 +55,7 @@ from pathlib import Path
 
 from ..errors import VpsimError
 from ..model import vehicle as vh
+from ..textio import printable
 from ..units import LITRES_PER_GALLON, METRES_PER_MILE, MPH_TO_MPS, mpg_from_l_per_100km
 
 # --- unit conversions (exact definitions) -------------------------------------------------------------------
@@ -276,11 +277,12 @@ class TestCarList:
 
 
 def _num(x) -> float:
+    """A record's number; NaN for anything that is not a finite plain number (``abc``, ``inf``, ``4,000``)."""
     try:
         v = float(x)
     except (TypeError, ValueError):
         return math.nan
-    return v
+    return v if math.isfinite(v) else math.nan
 
 
 def _text(x) -> str:
@@ -308,8 +310,12 @@ def read_test_car_list(path: str | Path) -> TestCarList:
     rows = []
     for i, raw in enumerate(df[list(COL.values())].itertuples(index=False, name=None)):
         r = {k: raw[j] for j, k in enumerate(COL)}
+        r["not_a_number"] = {}  # field -> the text that is not a number (a problem unlike an empty field)
         for k in NUMERIC:
-            r[k] = _num(r[k]) if r[k] != "" else math.nan
+            text = str(r[k]).strip()
+            r[k] = _num(text) if text != "" else math.nan
+            if text and not math.isfinite(r[k]):
+                r["not_a_number"][k] = text
         for k in COL:
             if k not in NUMERIC:
                 r[k] = _text(r[k])
@@ -321,7 +327,18 @@ def read_test_car_list(path: str | Path) -> TestCarList:
     excluded_rows: list[dict] = []
     for r in rows:
         if r["vehicle_id"] == "" or not math.isfinite(r["configuration"]):
-            excluded_rows.append(_excl(r, "missing Test Vehicle ID or configuration", test=True))
+            bad = r["not_a_number"].get("configuration")
+            why = (
+                f"configuration {printable(bad)!r} is not a number"
+                if bad
+                else "missing Test Vehicle ID or configuration"
+            )
+            excluded_rows.append(_excl(r, why, test=True))
+            continue
+        if r["configuration"] != int(r["configuration"]):  # 1.9 is no configuration 1
+            excluded_rows.append(
+                _excl(r, f"configuration {r['configuration']:g} is not a whole number", test=True)
+            )
             continue
         groups.setdefault((r["vehicle_id"], int(r["configuration"])), []).append(r)
     # what a vehicle's own tests say, then what the other test vehicles of the same model say (a plug-in's
@@ -373,7 +390,9 @@ def _classify(tests: list[dict]) -> str | None:
     gasoline = any("gasoline" in f for f in fuels)
     electric = "electricity" in fuels or "CD" in cats
     disp = [t["displacement_l"] for t in tests if math.isfinite(t["displacement_l"])]
-    if (electric and not gasoline) or (disp and max(disp) < 0.1):
+    if electric and not gasoline:
+        return "electric"
+    if disp and max(disp) == 0.0 and not gasoline:  # no engine, and nothing burnt: an electric car
         return "electric"
     if electric:
         return "plug-in hybrid"
@@ -411,9 +430,10 @@ def implied_hwy_efficiency(t: dict, hwy_mpg: float) -> float:
 
     from .cycles import fleet_cycle
 
-    vals = [t[k] for k in ("target_a_lbf", "target_b_lbf_per_mph", "target_c_lbf_per_mph2", "etw_lb")]
-    if not all(math.isfinite(x) for x in vals) or not hwy_mpg > 0:
-        return math.nan
+    names = ("target_a_lbf", "target_b_lbf_per_mph", "target_c_lbf_per_mph2", "etw_lb")
+    vals = [t[k] for k in names]
+    if any(_field_problem(k, t[k]) for k in names) or not hwy_mpg > 0:
+        return math.nan  # (an implausible field is reported as such, not screened as a hybrid)
     cyc = fleet_cycle("hwy")
     v = 0.5 * (cyc.speed_mps[1:] + cyc.speed_mps[:-1])
     dt = np.diff(cyc.time_s)
@@ -443,12 +463,20 @@ def _harmonic(xs: list[float]) -> float:
     return len(xs) / sum(1.0 / x for x in xs)
 
 
-def _field_problem(name: str, value: float) -> str | None:
+WHOLE = ("cylinders", "n_gears")  # counts: 2.5 cylinders are no engine, 6.7 gears no gearbox
+
+
+def _field_problem(name: str, value: float, not_a_number: dict | None = None) -> str | None:
+    text = (not_a_number or {}).get(name)
+    if text is not None:
+        return f"not a number: {name} = {printable(text)[:40]!r}"
     if not math.isfinite(value):
         return f"missing {name}"
     lo, hi = PLAUSIBLE[name]
     if not lo <= value <= hi:
         return f"implausible {name}: {value:g} outside [{lo:g}, {hi:g}]"
+    if name in WHOLE and value != int(value):
+        return f"implausible {name}: {value:g} is not a whole number"
     return None
 
 
@@ -491,7 +519,7 @@ def _vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[VehicleRecord | Non
         "rated_hp",
         "nv_ratio",
     ):
-        problem = _field_problem(name, first[name])
+        problem = _field_problem(name, first[name], first["not_a_number"])
         if problem:
             return None, problem, test_rows
     code = first["transmission_code"].upper()
@@ -501,8 +529,10 @@ def _vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[VehicleRecord | Non
     if kind == "other":
         return None, "transmission type other", test_rows
     n_gears = first["n_gears"]
-    if not math.isfinite(n_gears):
-        return None, "missing n_gears", test_rows
+    if "n_gears" in first["not_a_number"] or not math.isfinite(n_gears):
+        return None, _field_problem("n_gears", n_gears, first["not_a_number"]) or "missing n_gears", test_rows
+    if n_gears != int(n_gears):
+        return None, f"implausible n_gears: {n_gears:g} is not a whole number", test_rows
     if kind == "cvt":
         n_gears = 1
     elif not 3 <= n_gears <= 12:
