@@ -17,15 +17,17 @@ from vpsim.fleet.report import INCOMPLETE  # noqa: E402
 from vpsim.params import load_parameters  # noqa: E402
 
 
-def _renamed(src: Path, dst: Path, vehicle_id: str, model: str) -> Path:
-    """The made-up list with ``vehicle_id``'s model name replaced by ``model``."""
+def _edited(src: Path, dst: Path, vehicle_id: str, field: str, value: str) -> Path:
+    """The made-up list with ``field`` (a key of vpsim.fleet.epa.COL) of ``vehicle_id``'s rows set to
+    ``value``."""
+    from vpsim.fleet.epa import COL
+
     with src.open(newline="") as f:
         rows = list(csv.reader(f))
-    head = rows[0]
-    i_id, i_model = head.index("Test Vehicle ID"), head.index("Represented Test Veh Model")
+    i_id, i_field = rows[0].index("Test Vehicle ID"), rows[0].index(COL[field])
     for r in rows[1:]:
         if r[i_id] == vehicle_id:
-            r[i_model] = model
+            r[i_field] = value
     with dst.open("w", newline="") as f:
         csv.writer(f).writerows(rows)
     return dst
@@ -48,7 +50,7 @@ def test_from_epa_refuses_to_overwrite_its_input(tmp_path, capsys):
     ],
 )
 def test_from_epa_writes_any_record_text_as_text(tmp_path, capsys, model):
-    lst = _renamed(write_list(tmp_path / "list.csv"), tmp_path / "hostile.csv", "T004", model)
+    lst = _edited(write_list(tmp_path / "list.csv"), tmp_path / "hostile.csv", "T004", "model", model)
     car = tmp_path / "car.toml"
     code, out, _ = run_cli(capsys, "vehicle", "from-epa", lst, "--id", "T004", "--out", car)
     if code != 0:  # the reader may refuse the row (one line): then nothing is written
@@ -99,22 +101,6 @@ def test_a_folder_from_an_unfinished_fleet_run_is_not_trusted(tmp_path, capsys):
     (out / INCOMPLETE).write_text("killed while writing\n")  # as a run killed halfway leaves it
     code, _, err = run_cli(capsys, *args)
     assert code == 2 and "did not finish writing" in err
-
-
-def _edited(src: Path, dst: Path, vehicle_id: str, field: str, value: str) -> Path:
-    """The made-up list with ``field`` (a key of vpsim.fleet.epa.COL) of ``vehicle_id``'s rows set to
-    ``value``."""
-    from vpsim.fleet.epa import COL
-
-    with src.open(newline="") as f:
-        rows = list(csv.reader(f))
-    i_id, i_field = rows[0].index("Test Vehicle ID"), rows[0].index(COL[field])
-    for r in rows[1:]:
-        if r[i_id] == vehicle_id:
-            r[i_field] = value
-    with dst.open("w", newline="") as f:
-        csv.writer(f).writerows(rows)
-    return dst
 
 
 @pytest.mark.parametrize(
