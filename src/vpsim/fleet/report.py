@@ -73,7 +73,7 @@ def summary(run) -> dict:
         out["peer"]["fastsim"] = {
             c: error_stats(both[both["cycle"] == c]["fastsim_error_pct"]) for c in run.cycles
         }
-        cal_rows = predicted[np.isfinite(predicted.get("fastsim_calibrated_error_pct", np.nan))]
+        cal_rows = predicted[np.isfinite(predicted["fastsim_calibrated_error_pct"])]
         calibrated = {
             c: error_stats(cal_rows[cal_rows["cycle"] == c]["fastsim_calibrated_error_pct"])
             for c in run.cycles
