@@ -16,7 +16,7 @@ Exclusion rules (a vehicle excluded is counted under its reason; the first rule 
 ==============================  ==============================================================================
 reason                          rule
 ==============================  ==============================================================================
-``electric``                    a test on ``Electricity`` and no gasoline test, or displacement 0 and no gasoline test
+``electric``                    a test on ``Electricity`` and no gasoline test, or displacement 0 and none
 ``plug-in hybrid``              a charge-depleting (``CD``) or electricity test beside gasoline tests
 ``fuel cell``                   a test on hydrogen
 ``diesel``                      a test on diesel fuel
