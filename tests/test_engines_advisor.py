@@ -154,6 +154,14 @@ HOSTILE = [
     ("long_chain", "x = " + "+".join(["1"] * 5000), 1, "too long"),
     ("interp1_outside", "x = interp1([1 2], [3 4], 5)", 1, "outside the range"),
     ("text_arithmetic", "x = 'a' + 1", 1, "text arithmetic"),
+    ("find_two_outputs", "x = 1;\n[i, j] = find([1 0; 0 1]);", 2, "[i, j] = find(x) is not supported"),
+    ("find_count", "x = find([1 1], 1)", 1, "find takes 1 argument(s), got 2"),
+    ("find_text", "x = find('ab')", 1, "text 'ab' used as a number (find)"),
+    ("find_logical_index", "x = [1 2];\ny = x(x > 1);", 2, "logical indexing is not supported"),
+    ("fliplr_cell", "x = fliplr({1, 2})", 1, "a cell array used as a number (fliplr)"),
+    ("isempty_no_argument", "x = isempty()", 1, "isempty takes 1 argument(s), got 0"),
+    ("clear_everything_pattern", "x = 1;\nclear *", 2, "only variable names"),
+    ("clear_pattern_not_a_name", "x = 1;\nclear x-y*", 2, "only variable names"),
 ]
 
 
@@ -248,6 +256,40 @@ def test_matlab_subset_semantics() -> None:
     assert v["g2"].tolist() == [[0, 0], [7, 8]] and v["g3"].tolist() == [0, 0, 5]
     assert v["rn"].tolist() == [-3, 3]  # MATLAB rounds halves away from zero
     assert v["q"] == "q" and "tmp" not in v
+
+
+def test_find_gives_matlab_positions() -> None:
+    """find: 1-based column-major positions; a row for a row vector (1x0 when none), else a column."""
+    v = evaluate_m_text(
+        "a = find([0 3 0 -2]); b = find([0; 1; 1]); c = find([0 0]); d = find([1 0; 0 1]);\n"
+        "e = find([1 2 3] > 1); f = find([]); t = [-2 -1 0 1 2]; g = t(find(t > 0));"
+    )
+    assert v["a"].tolist() == [2, 4] and v["b"].tolist() == [2, 3]
+    assert v["c"].size == 0 and v["d"].tolist() == [1, 4] and v["e"].tolist() == [2, 3]
+    assert v["f"].size == 0 and v["g"].tolist() == [1, 2]
+
+
+def test_fliplr_and_flipud() -> None:
+    v = evaluate_m_text(
+        "m = [1 2 3; 4 5 6]; a = fliplr(m); b = flipud(m);\nc = fliplr([1 2 3]); d = fliplr(7);"
+    )
+    assert v["a"].tolist() == [[3, 2, 1], [6, 5, 4]] and v["b"].tolist() == [[4, 5, 6], [1, 2, 3]]
+    assert v["c"].tolist() == [3, 2, 1] and v["d"] == 7
+
+
+def test_isempty() -> None:
+    v = evaluate_m_text(
+        "a = isempty([]); b = isempty(find([0 0])); c = isempty(0);\nd = isempty(''); e = isempty({1});"
+    )
+    assert (v["a"], v["b"], v["c"], v["d"], v["e"]) == (1, 1, 0, 1, 0)
+    # the ADVISOR idiom it serves
+    v = evaluate_m_text("z = find([0 1] == 0); y = 0; if ~isempty(z)\n y = z + 1;\nend")
+    assert v["y"] == 2
+
+
+def test_clear_with_wildcards() -> None:
+    v = evaluate_m_text("temp_a = 1; temp_b = 2; tempo = 3; keep = 4; xay = 5; xy = 6; clear temp* x*y")
+    assert sorted(v) == ["keep"]
 
 
 def test_eval_single_assignment_is_parsed_not_run() -> None:

@@ -19,3 +19,7 @@ class CycleError(VpsimError):
 
 class EngineFileError(VpsimError):
     """An engine data file (ADVISOR .m or JSON) cannot be read safely."""
+
+
+class MachineFileError(EngineFileError):
+    """An electric-machine data file (ADVISOR MC_*.m or GC_*.m) cannot be read safely or makes no sense."""

@@ -97,3 +97,43 @@ def write_map_figures(eng, out: Path) -> list[Path]:
     df.to_csv(p, index=False, float_format="%.6g")
     written.append(p)
     return written
+
+
+def plot_machine_efficiency(machine, ax=None, n: int = 120):
+    """Efficiency contours of an electric machine (measured map or :class:`~vpsim.model.machine.MachineSpec`)
+    over speed (rpm) and torque (N m), both quadrants, with its torque envelope. Returns the axes."""
+    import matplotlib.pyplot as plt
+
+    from .model.machine import MachineSpec, efficiency_table, machine_record, max_torque, min_torque
+
+    if isinstance(machine, MachineSpec):
+        m = machine_record(machine)
+        w_hi = machine.max_speed_radps
+        upper = lambda w: max_torque(w, m)  # noqa: E731
+        lower = lambda w: min_torque(w, m)  # noqa: E731
+        title = f"scaled model, {machine.kind}, {machine.rated_power_w / 1e3:.1f} kW"
+    else:
+        w_hi = machine.max_speed_radps
+        upper, lower = machine.max_torque_at, machine.min_torque_at
+        title = f"{machine.name}: {machine.description}" if machine.description else machine.name
+    speeds = np.linspace(0.0, w_hi, n)
+    t_hi = float(np.max(upper(speeds)))
+    t_lo = float(np.min(lower(speeds)))
+    torques = np.linspace(t_lo, t_hi, n)
+    eff = efficiency_table(machine, speeds, torques)
+    if ax is None:
+        _, ax = plt.subplots(figsize=(7.5, 5.5))
+    rpm = speeds * 60.0 / (2.0 * np.pi)
+    levels = [0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.88, 0.9, 0.92, 0.94, 0.96]
+    filled = ax.contourf(rpm, torques, np.clip(eff.T, 0.4, 1.0), levels=[0.4, *levels, 1.0], cmap="viridis")
+    lines = ax.contour(rpm, torques, eff.T, levels=levels, colors="k", linewidths=0.5)
+    ax.clabel(lines, fmt="%.2f", fontsize=7)
+    ax.plot(rpm, upper(speeds), "r-", lw=1.5, label="torque envelope")
+    ax.plot(rpm, lower(speeds), "r-", lw=1.5)
+    ax.axhline(0.0, color="0.3", lw=0.5)
+    ax.figure.colorbar(filled, ax=ax, label="efficiency (machine and inverter)")
+    ax.set_xlabel("speed (rpm)")
+    ax.set_ylabel("torque (N m), > 0 motoring, < 0 generating")
+    ax.set_title(title, fontsize=9)
+    ax.legend(loc="upper right", fontsize=8)
+    return ax

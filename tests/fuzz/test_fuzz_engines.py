@@ -38,6 +38,12 @@ M_CASES = [
     ("x = [1 2; 3];", "dimensions"),
     ("x = 'unclosed", "not closed"),
     ("x = y + 1;", "y"),
+    ("x = find(ones(1, 1e12));", "more than"),
+    ("x = fliplr(zeros(1e6, 1e6));", "more than"),
+    ("a = ones(1, 999999); for k = 1:200, b = find(a); end", "too much computation"),
+    ("[i, j] = find(1);", "find"),
+    ("x = isempty(1, 2);", "isempty"),
+    ("clear *", "only variable names"),
 ]
 
 

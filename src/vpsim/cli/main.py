@@ -36,6 +36,7 @@ COMMAND_MODULES = (
     "sweep",
     "vehicle",
     "fleet",
+    "machine",
 )
 
 EXIT_ERROR = 2  # bad input: the user can act on the message

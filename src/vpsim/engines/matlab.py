@@ -24,10 +24,12 @@ Supported
       assignment ``[a, b] = f(...)``.
     * Statements: ``;`` ``,`` or newline separators, ``%`` and ``%{ ... %}`` comments, ``...``
       continuations, ``for v = expr ... end``, ``if / elseif / else ... end``, ``clear`` (command or
-      function syntax).
+      function syntax; names may hold ``*`` wildcards, as in ``clear temp*``).
     * Constants ``pi``, ``eps``, ``Inf``/``inf``, ``true``, ``false``. ``NaN`` is refused.
     * Functions: ``zeros ones size length numel max min sum abs sqrt round floor ceil interp1 meshgrid
-      linspace exist disp inline eval``.
+      linspace find fliplr flipud isempty exist disp inline eval``.
+        - ``find(x)`` gives the 1-based linear positions of the non-zero elements (column-major): a row
+          for a row vector, a column otherwise; ``[i, j] = find(x)`` and ``find(x, n)`` are refused.
         - ``disp`` prints nothing (it is accepted and ignored).
         - ``exist(name)`` / ``exist(name, 'var')`` only looks at the variables assigned so far (1 or 0),
           never at files or the MATLAB path.
@@ -891,6 +893,20 @@ def _check_size(count: int, line: int, what: str) -> None:
         raise _MError(line, f"{what} would have {count} elements, more than the limit of {MAX_ELEMENTS}")
 
 
+def _wildcard_match(pattern: str, name: str) -> bool:
+    """Whether ``name`` matches a ``clear`` pattern in which ``*`` stands for any run of characters."""
+    parts = pattern.split("*")
+    if not name.startswith(parts[0]) or len(name) < sum(map(len, parts)):
+        return False
+    pos = len(parts[0])
+    for part in parts[1:-1]:
+        found = name.find(part, pos)
+        if found < 0:
+            return False
+        pos = found + len(part)
+    return name.endswith(parts[-1]) and len(name) - len(parts[-1]) >= pos
+
+
 class _Interp:
     def __init__(self) -> None:
         self.vars: dict[str, Any] = {}
@@ -985,6 +1001,12 @@ class _Interp:
             self.vars.clear()
             return
         for name in names:
+            plain = name.replace("*", "")
+            if "*" in name and name[0] != "*" and plain.isascii() and plain.isidentifier():
+                # A wildcard pattern such as "temp*": '*' matches any run of name characters.
+                for var in [v for v in self.vars if _wildcard_match(name, v)]:
+                    del self.vars[var]
+                continue
             if not (name.isascii() and name.isidentifier() and name[0].isalpha()):
                 raise _MError(line, f"clear: only variable names are supported, got {_short(name)}")
             self.vars.pop(name, None)
@@ -1544,6 +1566,41 @@ def _f_meshgrid(ip: _Interp, args: list, nargout: int, line: int) -> list:
     _check_size(x.size * y.size, line, "meshgrid")
     xx, yy = np.meshgrid(x.ravel(), y.ravel())
     return [ip.result(xx, line), ip.result(yy, line)]
+
+
+@_builtin("find")
+def _f_find(ip: _Interp, args: list, nargout: int, line: int) -> list:
+    _nargs("find", args, line, 1, 1)
+    if nargout > 1:
+        raise _MError(line, "[i, j] = find(x) is not supported; use k = find(x)")
+    a = _num(args[0], line, "find")
+    # 1-based linear positions of the non-zero elements, in MATLAB's column-major order; a row vector
+    # gives a row (1x0 when nothing is found), anything else a column.
+    k = np.flatnonzero(a.ravel(order="F") != 0).astype(float) + 1.0
+    shape = (1, k.size) if a.shape[0] == 1 and a.size else (k.size, 1)
+    if a.size == 0:
+        shape = (0, 0)
+    return [ip.result(k.reshape(shape), line)]
+
+
+def _make_flip(name: str, axis: int) -> _Builtin:
+    def flip(ip: _Interp, args: list, nargout: int, line: int) -> list:
+        _nargs(name, args, line, 1, 1)
+        a = _num(args[0], line, name)
+        return [ip.result(np.flip(a, axis=axis).copy(), line)]
+
+    return flip
+
+
+_BUILTINS["fliplr"] = _make_flip("fliplr", 1)
+_BUILTINS["flipud"] = _make_flip("flipud", 0)
+
+
+@_builtin("isempty")
+def _f_isempty(ip: _Interp, args: list, nargout: int, line: int) -> list:
+    _nargs("isempty", args, line, 1, 1)
+    r, c = _shape(args[0])
+    return [_scalar(1.0 if r * c == 0 else 0.0)]
 
 
 @_builtin("linspace")

@@ -1,0 +1,154 @@
+"""Fit the electric machine's normalised loss coefficients on ADVISOR's measured maps; print the LOO check.
+
+    python benchmarks/machine_fit.py            # coefficients per kind and the leave-one-out table
+    python benchmarks/machine_fit.py --json     # the same as JSON
+
+Reads the six motor maps MC_*.m from ``../shared/data/raw/advisor`` (``$VPSIM_SHARED`` to override; they are
+never copied into the repository) with :func:`vpsim.engines.machine_map.load_machine`.
+
+Fit: for each file the rating comes from its envelope (peak power, corner speed P_max / T_max, highest
+speed); every map point in the torque envelope of both quadrants with T != 0 and w != 0
+(``MeasuredMachine.map_points``) gives one equation P_loss / P_r = sum_k c_k phi_k(tau, omega), where the
+basis phi_k is :func:`vpsim.model.machine.loss_w` itself evaluated with one coefficient set to 1 and a
+rating of 1 W (so the fit uses the model's one definition). The coefficients are the non-negative least
+squares solution (scipy.optimize.nnls) over the pooled points of the files fitted; non-negative because
+each term is a loss.
+
+Leave-one-out: each file is predicted by coefficients fitted on the *other* files of its kind when at least
+two remain (the PM files: three others each), otherwise on all five other files (the two induction files),
+scaled to the file's own rating. The figure per file is the median of |efficiency error| in percentage
+points over its map points. The shipped defaults (vpsim.model.machine.DEFAULT_COEFFICIENTS) are each
+kind's fit on all its files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import nnls
+
+from vpsim.engines.machine_map import MeasuredMachine, load_machine
+from vpsim.model.machine import (
+    COEFFICIENT_NAMES,
+    LossCoefficients,
+    MachineSpec,
+    efficiency_errors_pts,
+    loss_w,
+    machine_record,
+)
+
+FILES = {
+    "MC_AC59": "induction",
+    "MC_AC75": "induction",
+    "MC_PM32": "pm",
+    "MC_PM49": "pm",
+    "MC_PM58": "pm",
+    "MC_PRIUS_JPN": "pm",
+}
+REPO = Path(__file__).resolve().parents[1]
+
+
+def advisor_dir() -> Path:
+    return Path(os.environ.get("VPSIM_SHARED", REPO.parent / "shared")) / "data" / "raw" / "advisor"
+
+
+def load_all(folder: Path | None = None) -> dict[str, MeasuredMachine]:
+    folder = folder or advisor_dir()
+    return {name: load_machine(folder / f"{name}.m") for name in FILES}
+
+
+def design(machine: MeasuredMachine) -> tuple[np.ndarray, np.ndarray]:
+    """(basis, target): one row per map point, columns the normalised loss terms, target P_loss / P_r."""
+    t, w, eff = machine.map_points()
+    p_mech = t * w
+    loss = np.where(p_mech > 0, p_mech / eff - p_mech, -p_mech * (1.0 - eff))
+    columns = []
+    for name in COEFFICIENT_NAMES:
+        unit = LossCoefficients(**{k: float(k == name) for k in COEFFICIENT_NAMES})
+        spec = MachineSpec.from_measured(machine, coefficients=unit)
+        columns.append(loss_w(t, w, machine_record(spec)) / spec.rated_power_w)
+    return np.column_stack(columns), loss / machine.rated_power_w
+
+
+def fit(machines: list[MeasuredMachine]) -> LossCoefficients:
+    rows = [design(m) for m in machines]
+    basis = np.vstack([r[0] for r in rows])
+    target = np.concatenate([r[1] for r in rows])
+    c, _ = nnls(basis, target)
+    return LossCoefficients(**dict(zip(COEFFICIENT_NAMES, (float(x) for x in c), strict=True)))
+
+
+def training_set(name: str) -> list[str]:
+    same = [o for o in FILES if o != name and FILES[o] == FILES[name]]
+    return same if len(same) >= 2 else [o for o in FILES if o != name]
+
+
+def fitted_defaults(machines: dict[str, MeasuredMachine]) -> dict[str, LossCoefficients]:
+    kinds = sorted(set(FILES.values()))
+    return {k: fit([machines[n] for n in FILES if FILES[n] == k]) for k in kinds}
+
+
+def leave_one_out(machines: dict[str, MeasuredMachine]) -> list[dict]:
+    rows = []
+    for name, kind in FILES.items():
+        train = training_set(name)
+        coeffs = fit([machines[o] for o in train])
+        m = machines[name]
+        err, _, _ = efficiency_errors_pts(m, MachineSpec.from_measured(m, kind=kind, coefficients=coeffs))
+        rows.append(
+            {
+                "file": name,
+                "kind": kind,
+                "rated_power_kw": m.rated_power_w / 1e3,
+                "base_speed_rpm": m.base_speed_radps * 30 / math.pi,
+                "max_speed_rpm": m.max_speed_radps * 30 / math.pi,
+                "fitted_on": train,
+                "n_points": int(err.size),
+                "median_abs_efficiency_error_pts": float(np.median(np.abs(err))),
+                "max_abs_efficiency_error_pts": float(np.max(np.abs(err))),
+            }
+        )
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    args = ap.parse_args(argv)
+    folder = advisor_dir()
+    if not folder.is_dir():
+        print(f"machine_fit: reference data not found at {folder} (set VPSIM_SHARED)", file=sys.stderr)
+        return 2
+    machines = load_all(folder)
+    defaults = fitted_defaults(machines)
+    loo = leave_one_out(machines)
+    if args.json:
+        out = {"defaults": {k: c.as_dict() for k, c in defaults.items()}, "leave_one_out": loo}
+        print(json.dumps(out, indent=2))
+        return 0
+    print("Default coefficients (each kind fitted on all its files):")
+    for kind, c in defaults.items():
+        print(f"  {kind:9s} " + ", ".join(f"{k}={v:.6g}" for k, v in c.as_dict().items()))
+    print()
+    print(
+        "| file | kind | rating kW | base rpm | max rpm | fitted on | points | median abs error (pts) | max |"
+    )
+    print("|---|---|---:|---:|---:|---|---:|---:|---:|")
+    for r in loo:
+        fitted = ", ".join(x.removeprefix("MC_") for x in r["fitted_on"])
+        print(
+            f"| {r['file']} | {r['kind']} | {r['rated_power_kw']:.1f} | {r['base_speed_rpm']:.0f} | "
+            f"{r['max_speed_rpm']:.0f} | {fitted} | {r['n_points']} | "
+            f"{r['median_abs_efficiency_error_pts']:.2f} | {r['max_abs_efficiency_error_pts']:.1f} |"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
