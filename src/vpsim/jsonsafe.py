@@ -20,6 +20,14 @@ _REASONS = {
     "energy_relative_residual": "no indicated work, so a residual relative to it is undefined",
     "diff_vs_bqm_pct": "the backward method's figure it is compared with is undefined",
     "std_error": "the fit ended at a bound of this parameter, so it has no standard error",
+    "electric_wh_per_km": "no traction battery in this powertrain, or no distance driven",
+    "wall_wh_per_km": "no traction battery in this powertrain, or no distance driven",
+    "mpge": "no traction battery in this powertrain, or the run drew no net energy from the battery",
+    "soc_start": "no traction battery in this powertrain",
+    "soc_end": "no traction battery in this powertrain",
+    "regen_wh": "no electric machine in this powertrain",
+    "machine_at_limit_s": "no electric machine in this powertrain",
+    "battery_at_limit_s": "no traction battery in this powertrain",
 }
 # figures some result objects hold as the text "nan" (vpsim.calibration's std_error): treated as numbers
 _TEXT_NUMBER_KEYS = ("std_error",)

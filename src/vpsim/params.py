@@ -41,7 +41,7 @@ from .errors import ParameterError
 from .textio import check_path, read_text
 from .units import FIELD_DIMENSIONS, to_si
 
-PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l")
+PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l", "bev")
 
 
 @dataclass(frozen=True)
@@ -190,6 +190,54 @@ class Driver:
 
 
 @dataclass(frozen=True)
+class Powertrain:
+    """What drives the car: ``conventional`` (the engine, gearbox and the sections above) or ``bev`` (a
+    battery-electric car: [battery], [machine], [electric]; the [engine] is not used)."""
+
+    type: str = "conventional"
+
+
+@dataclass(frozen=True)
+class Battery:
+    """The traction battery (:mod:`vpsim.model.battery`): ``cells_in_series`` x ``cells_in_parallel`` cells
+    of ``cell`` (a preset: nmc, lfp, nimh; or an ADVISOR ESS_*.m file)."""
+
+    cell: str = "nmc"
+    cells_in_series: int = 96
+    cells_in_parallel: int = 30
+    soc_initial: float = 0.9  # state of charge at the start of a run (fraction)
+    soc_min: float = 0.05  # no discharge at or below
+    soc_max: float = 0.98  # no charge at or above
+
+
+@dataclass(frozen=True)
+class Machine:
+    """The traction machine with its inverter (:mod:`vpsim.model.machine`): the scalable loss model at this
+    rating, or a measured map (``map_file``: an ADVISOR MC_*.m file; its envelope and efficiency)."""
+
+    rated_power: float = 150.0e3  # W, peak
+    base_speed: float = 420.0  # rad/s: constant torque below, constant power above
+    max_speed: float = 920.0  # rad/s
+    kind: str = "pm"  # pm (permanent magnet) or induction
+    inertia: float = 0.05  # kg m^2, the rotor
+    map_file: str = ""
+
+
+@dataclass(frozen=True)
+class Electric:
+    """The electric powertrain's own settings (:mod:`vpsim.model.electric`)."""
+
+    accessory_power: float = 300.0  # W, constant electric load
+    charger_efficiency: float = 0.88  # wall to battery
+    regen_share: float = 1.0  # the share of braking the driven axle's machine may take
+    regen_speed_low: float = 1.0  # m/s: no regeneration below
+    regen_speed_high: float = 3.0  # m/s: the full share above (linear between)
+    forward_kp: float = 4.0  # 1/s: the forward driver's P gain on the speed error (per unit mass)
+    forward_ki: float = 4.0  # 1/s^2: its I gain
+    forward_max_step: float = 0.25  # s: the forward method's step
+
+
+@dataclass(frozen=True)
 class Parameters:
     """A complete parameter set. ``provenance`` maps ``"section.field"`` to its confidence label/note."""
 
@@ -199,6 +247,10 @@ class Parameters:
     engine: Engine
     simulation: Simulation
     drivers: dict[str, Driver]
+    powertrain: Powertrain = field(default_factory=Powertrain)
+    battery: Battery = field(default_factory=Battery)
+    machine: Machine = field(default_factory=Machine)
+    electric: Electric = field(default_factory=Electric)
     provenance: dict[str, str] = field(default_factory=dict, compare=False, repr=False)
     citation: str = field(default="", compare=False, repr=False)
 
@@ -247,7 +299,18 @@ def changed_section(params: Parameters, sec: str, changes: dict[str, Any]):
     return replace(obj, **kw)
 
 
-_SECTIONS = {"vehicle": Vehicle, "transmission": Transmission, "engine": Engine, "simulation": Simulation}
+_SECTIONS = {
+    "vehicle": Vehicle,
+    "transmission": Transmission,
+    "engine": Engine,
+    "simulation": Simulation,
+    "powertrain": Powertrain,
+    "battery": Battery,
+    "machine": Machine,
+    "electric": Electric,
+}
+POWERTRAINS = ("conventional", "bev")
+MACHINE_KINDS = ("pm", "induction")
 _ATTR_ALIASES = {"lambda": "lambda_"}  # TOML name -> attribute
 _FIELD_NAMES = {v: k for k, v in _ATTR_ALIASES.items()}
 
@@ -302,6 +365,21 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "engine.boost_pressure": (0.0, 4.0e5, True),
     "engine.rated_power": (0.0, 2.0e6, True),
     "engine.boost_enrichment": (0.0, 0.5, True),  # lambda down to 0.67 at full boost
+    "battery.soc_initial": (0.0, 1.0, True),
+    "battery.soc_min": (0.0, 1.0, True),
+    "battery.soc_max": (0.0, 1.0, True),
+    "machine.rated_power": (0.0, 2.0e6, False),
+    "machine.base_speed": (0.0, 5000.0, False),
+    "machine.max_speed": (0.0, 5000.0, False),
+    "machine.inertia": (0.0, 10.0, True),
+    "electric.accessory_power": (0.0, 1.0e5, True),
+    "electric.charger_efficiency": (0.0, 1.0, False),
+    "electric.regen_share": (0.0, 1.0, True),
+    "electric.regen_speed_low": (0.0, 50.0, True),
+    "electric.regen_speed_high": (0.0, 50.0, True),
+    "electric.forward_kp": (0.0, 100.0, False),
+    "electric.forward_ki": (0.0, 100.0, False),
+    "electric.forward_max_step": (1e-3, 1.0, False),
 }
 # Whole numbers: (low, high). Production piston engines have 1 to 16 cylinders and are two-stroke (1
 # revolution per cycle) or four-stroke (2); Newton converges in a handful of iterations or not at all.
@@ -309,6 +387,8 @@ _INT_RANGES: dict[str, tuple[int, int]] = {
     "engine.cylinders": (1, 16),
     "engine.revolutions_per_cycle": (1, 2),
     "transmission.lockup_min_gear": (1, 21),  # above the number of gears: never locked
+    "battery.cells_in_series": (1, 2000),
+    "battery.cells_in_parallel": (1, 2000),
 }
 _MAX_LIST = 20  # gears of a gearbox (heavy trucks have up to 18)
 _LIST_LENGTHS = {"engine.map_speed_range": 2}
@@ -359,6 +439,8 @@ def _typed(typ: str, value: Any) -> Any:
             return int(value)
         f = float(value)
         return int(f) if f.is_integer() else None
+    if typ == "str":
+        return value if isinstance(value, str) else None
     if typ == "float":
         if not _is_number(value):
             return None
@@ -414,7 +496,7 @@ def _describe(typ: str, key: str = "") -> str:
         return f"list of {n} numbers ([low, high])" if n == 2 else f"list of {n} numbers"
     if typ.startswith("tuple"):
         return f"non-empty list of at most {_MAX_LIST} numbers (true/false and text are not numbers)"
-    return {"int": "whole number", "float": "number"}.get(typ, "number")
+    return {"int": "whole number", "float": "number", "str": "text"}.get(typ, "number")
 
 
 def validate(p: Parameters, where: str = "parameters") -> None:
@@ -504,6 +586,7 @@ def validate(p: Parameters, where: str = "parameters") -> None:
             f"{where}: engine.min_throttle_area must be smaller than engine.max_throttle_area"
         )
     _check_engine(p.engine, where)
+    _check_electric(p, where)
     for k, d in p.drivers.items():
         for f in fields(d):
             v = getattr(d, f.name)
@@ -512,6 +595,55 @@ def validate(p: Parameters, where: str = "parameters") -> None:
 
 
 _ENTRY_KEYS = ("value", "unit", "confidence", "note")
+
+
+def _check_electric(p: Parameters, where: str) -> None:
+    """The electric sections as a whole: a known powertrain and machine kind, a cell that exists, an SOC
+    window that holds the start, a base speed below the top speed."""
+    if p.powertrain.type not in POWERTRAINS:
+        raise ParameterError(
+            f"{where}: powertrain.type = {p.powertrain.type!r}; expected one of {', '.join(POWERTRAINS)}"
+        )
+    if p.machine.kind not in MACHINE_KINDS:
+        raise ParameterError(
+            f"{where}: machine.kind = {p.machine.kind!r}; expected one of {', '.join(MACHINE_KINDS)}"
+        )
+    b = p.battery
+    if not b.soc_min < b.soc_max:
+        raise ParameterError(
+            f"{where}: battery.soc_min = {b.soc_min:g} must be below battery.soc_max = {b.soc_max:g}"
+        )
+    if not b.soc_min <= b.soc_initial <= b.soc_max:
+        raise ParameterError(
+            f"{where}: battery.soc_initial = {b.soc_initial:g} is outside the window "
+            f"[soc_min, soc_max] = [{b.soc_min:g}, {b.soc_max:g}]"
+        )
+    m = p.machine
+    if not m.base_speed < m.max_speed:
+        raise ParameterError(
+            f"{where}: machine.base_speed = {m.base_speed:g} rad/s must be below machine.max_speed = "
+            f"{m.max_speed:g}"
+        )
+    e = p.electric
+    if e.regen_speed_high < e.regen_speed_low:
+        raise ParameterError(
+            f"{where}: electric.regen_speed_high = {e.regen_speed_high:g} m/s is below regen_speed_low = "
+            f"{e.regen_speed_low:g}"
+        )
+    if p.powertrain.type == "bev":
+        from .model.battery import CELLS
+
+        if b.cell not in CELLS and not b.cell.lower().endswith(".m"):
+            raise ParameterError(
+                f"{where}: battery.cell = {b.cell!r}; expected one of {', '.join(CELLS)} or an ADVISOR "
+                "ESS_*.m file"
+            )
+        if len(p.transmission.gearbox_ratios) != 1 or p.transmission.is_cvt:
+            raise ParameterError(
+                f"{where}: a battery-electric car has a single reduction: transmission.gearbox_ratios must "
+                "hold "
+                f"one ratio, got {len(p.transmission.gearbox_ratios)}"
+            )
 
 
 def engine_check_figures(c) -> dict:
@@ -787,7 +919,26 @@ def load_parameters(source: str | Path = "hofman2011") -> Parameters:
     else:
         raise ParameterError(f"{path}: base = {base_name!r} is not a preset; available: {', '.join(PRESETS)}")
     data.setdefault("name", path.stem)
+    _files_beside(data, path.parent)
     return _from_mapping(data, str(path), base)
+
+
+def _files_beside(data: dict[str, Any], folder: Path) -> None:
+    """A data file a parameter file names (battery.cell as an ESS_*.m, machine.map_file) is found beside it
+    when its path is relative."""
+    for sec, key in (("battery", "cell"), ("machine", "map_file")):
+        section = data.get(sec)
+        if not isinstance(section, dict) or key not in section:
+            continue
+        entry = section[key]
+        value = entry.get("value") if isinstance(entry, dict) else entry
+        if not isinstance(value, str) or not value.lower().endswith(".m") or Path(value).is_absolute():
+            continue
+        resolved = str(folder / value)
+        if isinstance(entry, dict):
+            section[key] = {**entry, "value": resolved}
+        else:
+            section[key] = resolved
 
 
 def as_dict(p: Parameters) -> dict[str, Any]:

@@ -24,7 +24,8 @@ import time
 # and the maps compile
 GROUPS = {  # two of about equal length (60 s on a 2-core machine)
     "rosenbrock": "forward method (Rosenbrock, the default solver) and its batch",
-    "others": "backward and inverse methods, their batch, the maps and the forward method's Dormand-Prince",
+    "others": "backward and inverse methods, their batch, the maps, the forward method's Dormand-Prince and "
+    "the battery-electric car",
 }
 
 
@@ -81,6 +82,7 @@ KERNEL_MODULES = (
     "vpsim.methods._fdm_dopri5",
     "vpsim.methods.forward",
     "vpsim.methods.inverse",
+    "vpsim.methods.bev",
 )
 
 
@@ -120,6 +122,8 @@ def run_group(group: str) -> None:
                 vpsim.simulate(cycle, method="inverse", mode=mode, driver=driver)
             run_batch(cycle, variants, method="backward", mode=mode)
             vpsim.simulate(cycle, method="forward", mode=mode, solver="dopri5")
+        for method in ("backward", "forward", "inverse"):  # the battery-electric car
+            vpsim.simulate(cycle, method=method, params="bev")
     elif group == "rosenbrock":
         for mode in ("paper", "realistic"):
             vpsim.simulate(cycle, method="forward", mode=mode)

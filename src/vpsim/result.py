@@ -100,6 +100,50 @@ class EnergyBalance:
 
 
 @dataclass(frozen=True)
+class ElectricBalance:
+    """Energy bookkeeping of an electric powertrain over a run (J), by name
+    (:data:`vpsim.methods.bev.ELECTRIC_TERMS`):
+
+    chemical = battery_loss + accessories + machine_loss + rotor_kinetic + driveline_loss + vehicle_kinetic
+               + aero + rolling + brake - trace_miss - unserved  (+ residual)
+
+    ``chemical`` is the energy the pack's stored charge gave (U_oc I; negative when the run charged it);
+    ``unserved`` the electric power asked beyond the pack's limits (an empty pack's accessories).
+    """
+
+    terms: dict
+
+    @property
+    def consumers(self) -> float:
+        t = self.terms
+        return (
+            sum(v for k, v in t.items() if k not in ("chemical", "trace_miss", "unserved"))
+            - t.get("trace_miss", 0.0)
+            - t.get("unserved", 0.0)
+        )
+
+    @property
+    def residual(self) -> float:
+        return self.terms["chemical"] - self.consumers
+
+    @property
+    def relative_residual(self) -> float:
+        scale = sum(abs(v) for v in self.terms.values())
+        return self.residual / scale if scale > 0 else float("nan")
+
+    def as_dict(self) -> dict[str, float]:
+        return {**self.terms, "residual": self.residual}
+
+    def __str__(self) -> str:
+        parts = ", ".join(f"{k} {v / 3.6e3:.2f}" for k, v in self.terms.items())
+        return f"{parts} Wh (relative residual {self.relative_residual:.1e})"
+
+
+# summary keys of an electric powertrain; NaN (null in JSON, with the reason) for a car without one
+ELECTRIC_KEYS = ("electric_wh_per_km", "wall_wh_per_km", "mpge", "soc_start", "soc_end", "regen_wh")
+
+
+@dataclass(frozen=True)
 class TraceMiss:
     """Where the powertrain could not do what the cycle (or driver) asked.
 
@@ -160,6 +204,9 @@ class Deviations:
     max_engine_speed_radps: float | None = 0.0
     negative_intake_pressure_s: float | None = 0.0
     negative_fuel_flow_s: float | None = 0.0
+    # an electric powertrain's limits (NaN: the powertrain has no machine or battery)
+    machine_at_limit_s: float = float("nan")
+    battery_at_limit_s: float = float("nan")
     band_kmh: float = BAND_KMH
 
     @property
@@ -285,6 +332,7 @@ def assess(series: dict, limits: dict, trace) -> Deviations:
             max_engine_speed_radps=None,
             negative_intake_pressure_s=None,
             negative_fuel_flow_s=None,
+            **_electric_limits(trace.details if isinstance(trace.details, dict) else {}),
         )
     w = sample_weights(series["time_s"])
     f = flags(series, limits)
@@ -312,7 +360,12 @@ def assess(series: dict, limits: dict, trace) -> Deviations:
         max_engine_speed_radps=float(np.nanmax(w_e, initial=0.0)),
         negative_intake_pressure_s=sec("negative_intake_pressure"),
         negative_fuel_flow_s=sec("negative_fuel_flow"),
+        **_electric_limits(exact),
     )
+
+
+def _electric_limits(exact: dict) -> dict:
+    return {k: float(exact[k]) for k in ("machine_at_limit_s", "battery_at_limit_s") if k in exact}
 
 
 def _union_s(w, f, exact) -> float:
@@ -364,6 +417,7 @@ class Result:
     notes: tuple[str, ...] = ()
     solver: dict = field(default_factory=dict)  # integrator statistics (steps, rejections, evaluations)
     limits: dict = field(default_factory=dict, repr=False)  # physical limits the run is assessed against
+    electric: dict = field(default_factory=dict)  # an electric powertrain's figures (ELECTRIC_KEYS and more)
 
     @property
     def deviations(self) -> Deviations:
@@ -422,6 +476,7 @@ class Result:
             "max_speed_error_mps": float(self.trace_miss.max_speed_error_mps),
             "infeasible_throttle_s": float(self.trace_miss.infeasible_throttle_s),
             "energy_relative_residual": None if self.energy is None else float(self.energy.relative_residual),
+            **{k: float(self.electric.get(k, float("nan"))) for k in ELECTRIC_KEYS},
             **self.deviations.as_dict(),
         }
 
@@ -478,6 +533,15 @@ class Result:
     def __repr__(self) -> str:
         from .jsonsafe import number
 
+        if self.electric:
+            return (
+                f"Result({self.method}{'' if self.driver is None else ' driver ' + str(self.driver)}, "
+                f"{self.cycle}: {number(self.electric['electric_wh_per_km'], '.1f', 'electric_wh_per_km')} "
+                f"Wh/km battery, {number(self.electric['mpge'], '.1f', 'mpge')} MPGe, SOC "
+                f"{self.electric['soc_start']:.3f} -> {self.electric['soc_end']:.3f} over "
+                f"{self.distance_km:.3f} km, {self.steps} steps, {self.cpu_time_s * 1e3:.2f} ms; "
+                f"{self.deviations})"
+            )
         lp100 = number(self.fuel_l_per_100km, ".3f", "fuel_l_per_100km")
         return (
             f"Result({self.method}{'' if self.driver is None else ' driver ' + str(self.driver)}, "
@@ -507,6 +571,14 @@ class Result:
             if "gearbox_ratio" in df and df["gear"].nunique() > MAX_STEPPED_GEARS
             else ("gear", [("gear", 1, None)]),
             ("engine speed (rad/s)", [("engine_speed_radps", 1, None)]),
+            ("machine speed (rad/s)", [("machine_speed_radps", 1, None)]),
+            ("machine torque (N m)", [("machine_torque_nm", 1, None)]),
+            ("state of charge (%)", [("soc", 100, None)]),
+            ("battery current (A)", [("battery_current_a", 1, None)]),
+            (
+                "battery voltage (V)",
+                [("battery_voltage_v", 1, "terminal"), ("open_circuit_voltage_v", 1, "open circuit")],
+            ),
             ("crank torque (N m)", [("crank_torque_nm", 1, None)]),
             ("intake pressure (kPa)", [("intake_pressure_pa", 1e-3, None)]),
             ("throttle area (mm²)", [("throttle_area_m2", 1e6, None)]),
@@ -562,9 +634,15 @@ class Result:
             if any(c[2] for c in curves) and len(curves) > 1 or ax is axes[0]:
                 ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.0, 0.5))
         axes[-1].set_xlabel("time (s)")
+        figure = (
+            f"{number(self.electric['electric_wh_per_km'], '.1f', 'electric_wh_per_km')} Wh/km (battery), "
+            f"{number(self.electric['mpge'], '.1f', 'mpge')} MPGe"
+            if self.electric
+            else f"{number(self.fuel_l_per_100km, '.2f', 'fuel_l_per_100km')} L/100 km"
+        )
         axes[0].set_title(
             f"{self.method}{'' if self.driver is None else ' driver ' + str(self.driver)} on {self.cycle} "
-            f"({self.mode}): {number(self.fuel_l_per_100km, '.2f', 'fuel_l_per_100km')} L/100 km",
+            f"({self.mode}): {figure}",
             fontsize=9,
         )
         fig.tight_layout()

@@ -63,6 +63,10 @@ def simulate(
     from .model.rules import canonical_mode
 
     mode = canonical_mode(mode)
+    if not isinstance(params, Parameters):
+        params = load_parameters(params)
+    if params.powertrain.type == "bev":
+        return _simulate_bev(cycle, method, params, driver, mode, gears, options)
     cycle, params, schedule = resolve_inputs(cycle, params, gears)
     if method == "backward":
         if driver is not None:
@@ -79,3 +83,25 @@ def simulate(
     from .methods import inverse
 
     return inverse.run(cycle, params, driver=driver, schedule=schedule, mode=mode, **options)
+
+
+def _simulate_bev(cycle, method, params, driver, mode, gears, options):
+    """The battery-electric car (:mod:`vpsim.methods.bev`): a single reduction, so no gear schedule."""
+    if gears is not None:
+        raise VpsimError("a battery-electric car has a single reduction and takes no gear schedule")
+    if options:
+        raise VpsimError(
+            f"option {sorted(options)[0]!r} does not apply to a battery-electric car (its methods take none)"
+        )
+    if method == "backward" and driver is not None:
+        raise VpsimError("the backward method tracks the cycle exactly and takes no driver")
+    if method == "inverse":
+        driver = "2" if driver is None else str(driver)
+        params.driver(driver)  # validates
+    elif method == "forward":
+        driver = None  # the electric PI driver's gains are electric.forward_kp / forward_ki
+    if not isinstance(cycle, Cycle):
+        cycle = load_cycle(cycle)
+    from .methods import bev
+
+    return bev.run(cycle, params, method, driver=driver, mode=mode)

@@ -145,17 +145,21 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         f"{method} on {result.cycle} ({result.mode} mode, vehicle {result.vehicle}"
         f"{'' if result.driver is None else ', driver ' + result.driver})"
     )
-    lp100 = number(summary["fuel_l_per_100km"], "8.3f", "fuel_l_per_100km")
-    click.echo(f"  fuel consumption  {lp100}{' L/100 km' if _ok(lp100) else ''}")
-    mpg = number(summary["fuel_economy_mpg"], "8.2f", "fuel_economy_mpg")
-    click.echo(f"  fuel economy      {mpg}{' mpg (US)' if _ok(mpg) else ''}")
-    if measured is not None:
+    if result.electric:
+        _echo_electric(summary)
+    else:
+        lp100 = number(summary["fuel_l_per_100km"], "8.3f", "fuel_l_per_100km")
+        click.echo(f"  fuel consumption  {lp100}{' L/100 km' if _ok(lp100) else ''}")
+        mpg = number(summary["fuel_economy_mpg"], "8.2f", "fuel_economy_mpg")
+        click.echo(f"  fuel economy      {mpg}{' mpg (US)' if _ok(mpg) else ''}")
+    if measured is not None and not result.electric:
         err = number(summary["measured_error_pct"], "+.1f", "measured_error_pct")
         click.echo(
             f"  measured          {measured:8.2f} mpg (the record's test on this cycle); "
             f"predicted {err}{' %' if _ok(err) else ''}"
         )
-    click.echo(f"  fuel              {number(result.fuel_kg * 1e3, '8.1f', 'fuel_kg')} g")
+    if not result.electric:
+        click.echo(f"  fuel              {number(result.fuel_kg * 1e3, '8.1f', 'fuel_kg')} g")
     click.echo(f"  distance          {number(result.distance_km, '8.3f', 'distance_km')} km")
     click.echo(f"  CPU time          {result.cpu_time_s * 1e3:8.2f} ms ({result.steps} steps)")
     dev = result.deviations
@@ -173,7 +177,8 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
     )
     if result.energy is not None:
         res = number(summary["energy_relative_residual"], ".1e", "energy_relative_residual")
-        click.echo(f"  energy balance    residual {res}{' of the indicated work' if _ok(res) else ''}")
+        of = " of the energy terms" if result.electric else " of the indicated work"
+        click.echo(f"  energy balance    residual {res}{of if _ok(res) else ''}")
     for note in result.notes:
         click.echo(f"  note: {note}")
     for p in written:
@@ -202,6 +207,24 @@ def _measured_mpg(vehicle: str, cycle: str) -> float | None:
         if _normalise(str(name)) == cycle and isinstance(mpg, int | float) and not isinstance(mpg, bool):
             return float(mpg) if mpg > 0 and math.isfinite(mpg) else None
     return None
+
+
+def _echo_electric(summary: dict) -> None:
+    """The battery-electric figures of a run's summary, one per line."""
+    for label, key, spec, unit in (
+        ("battery energy", "electric_wh_per_km", "8.1f", " Wh/km (terminal, net)"),
+        ("wall energy", "wall_wh_per_km", "8.1f", " Wh/km (charger included)"),
+        ("economy", "mpge", "8.1f", " MPGe"),
+        ("recovered", "regen_wh", "8.1f", " Wh (machine, generating)"),
+    ):
+        text = number(summary[key], spec, key)
+        click.echo(f"  {label:<16}  {text}{unit if _ok(text) else ''}")
+    click.echo(f"  state of charge   {summary['soc_start']:.4f} -> {summary['soc_end']:.4f}")
+    for key, what in (
+        ("machine_at_limit_s", "machine at its limit"),
+        ("battery_at_limit_s", "battery at its limit"),
+    ):
+        click.echo(f"  {what:<22}  {number(summary[key], 'g', key)} s")
 
 
 def _seconds(x) -> str:

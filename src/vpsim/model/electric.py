@@ -1,0 +1,361 @@
+"""The battery-electric powertrain: battery, machine and inverter, single reduction, regenerative braking.
+
+The components are written once: the battery in :mod:`vpsim.model.battery`, the machine in
+:mod:`vpsim.model.machine`, the vehicle's road load in :mod:`vpsim.model.vehicle`. This module composes them
+into the one operating point every method evaluates (:func:`drive_point`, :func:`battery_point`), so the
+backward, forward and inverse methods differ only in where speed and acceleration come from.
+
+Driveline (E1): machine speed w_m = i v / r (the engine's (14),(17)); the reduction's efficiency eta applies
+in the direction of the power flow,
+
+    T_m = F_w r / (i eta) + J_m dw_m/dt   (driving)       T_m = F_w r eta / i + J_m dw_m/dt   (braking)
+
+Regenerative braking (E2): of a braking demand (T_m < 0) the machine takes the share
+s(v) = regen_share x clamp((v - v_low) / (v_high - v_low), 0, 1) (``regen_share``: the driven axle's share of
+the braking; the fade-out at low speed, where a real car hands over to the friction brakes), down to its
+generating envelope and to what the battery may accept; the friction brakes take the rest at the wheels.
+
+Electric power (E3): P_batt = P_el(T_m, w_m) + P_acc, the machine's DC power (its losses and the inverter's
+included; negative while generating) plus the accessories. The battery's current follows from (B2) within
+its limits; where it cannot give (or take) the power, the machine's torque is cut to what it can: a cut in
+driving is a trace miss (backward, inverse) or a slower car (forward); a cut in braking goes to the friction
+brakes.
+
+Wall energy (E4): the energy drawn from the grid to put back what the cycle took, E_wall = E_chem / eta_ch
+(``charger_efficiency``: wall to battery, the charger's and the charging's losses together); MPGe =
+distance / (E_wall / 33.705 kWh) (EPA's gallon equivalent).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import battery as bt
+from . import machine as mc
+from . import tables as tb
+from . import vehicle as vh
+from .engine import equation
+
+KWH_PER_GALLON_EQUIVALENT = 33.705  # EPA: the energy content of a gallon of gasoline, for MPGe
+BISECTION_STEPS = 48  # halvings of a torque cut to the battery's limit (to 2^-48 of the demand)
+
+# the electric record: the battery's scalars, the electric section and the machine's inertia
+E_FIELDS = (
+    "capacity_as",
+    "v_min",
+    "v_max",
+    "i_max_discharge",
+    "i_max_charge",
+    "soc_min",
+    "soc_max",
+    "coulombic_efficiency",
+    "inv_soc",
+    "accessory_power",
+    "charger_efficiency",
+    "regen_share",
+    "regen_speed_low",
+    "regen_speed_high",
+    "machine_inertia",
+    "measured_machine",
+    "inv_map_speed",
+    "inv_map_torque",
+    "inv_env_speed",
+)
+E_DTYPE = np.dtype([(n, np.float64) for n in E_FIELDS], align=True)
+
+
+@dataclass(frozen=True)
+class Tables:
+    """The arrays a kernel reads beside the records: the pack's tables and, for a measured machine, its loss
+    map and envelope (empty otherwise)."""
+
+    soc: np.ndarray
+    ocv: np.ndarray
+    r_dis: np.ndarray
+    r_chg: np.ndarray
+    map_speed: np.ndarray
+    map_torque: np.ndarray
+    map_loss: np.ndarray
+    env_speed: np.ndarray
+    env_max: np.ndarray
+    env_min: np.ndarray
+
+    def astuple(self):
+        return (
+            self.soc,
+            self.ocv,
+            self.r_dis,
+            self.r_chg,
+            self.map_speed,
+            self.map_torque,
+            self.map_loss,
+            self.env_speed,
+            self.env_max,
+            self.env_min,
+        )
+
+
+# --- equations --------------------------------------------------------------------------------------------
+
+
+@equation
+def regen_fraction(v, e):
+    """s(v) of (E2): the share of a braking demand the machine may take."""
+    if e.regen_speed_high <= e.regen_speed_low:
+        fade = 1.0 if v > e.regen_speed_low else 0.0
+    else:
+        fade = min(max((v - e.regen_speed_low) / (e.regen_speed_high - e.regen_speed_low), 0.0), 1.0)
+    return e.regen_share * fade
+
+
+@equation
+def shaft_torque(f_wheel, ratio, c):
+    """The reduction's input torque for wheel force F_w, the efficiency in the power's direction (E1)."""
+    t = f_wheel * c.wheel_radius / ratio
+    if t >= 0.0:
+        return t / c.efficiency
+    return t * c.efficiency
+
+
+@equation
+def wheel_force_of_shaft(t, ratio, c):
+    """The wheel force of input torque T (the inverse of :func:`shaft_torque`)."""
+    if t >= 0.0:
+        return t * c.efficiency * ratio / c.wheel_radius
+    return t / c.efficiency * ratio / c.wheel_radius
+
+
+@equation
+def rotor_torque(dw, e):
+    """J_m dw_m/dt: the torque that accelerates the rotor (E1)."""
+    return e.machine_inertia * dw
+
+
+@equation
+def envelope(w, m, e, env_speed, env_max, env_min):
+    """(T_min <= 0, T_max >= 0) the machine can give at w: the scalable model's, or the measured map's."""
+    if e.measured_machine > 0.0:
+        if w > env_speed[env_speed.size - 1]:
+            return 0.0, 0.0
+        return (
+            tb.interp_at(w, env_speed, env_min, e.inv_env_speed),
+            tb.interp_at(w, env_speed, env_max, e.inv_env_speed),
+        )
+    return mc.min_torque(w, m), mc.max_torque(w, m)
+
+
+@equation
+def machine_power(t, w, m, e, map_speed, map_torque, map_loss):
+    """The machine's DC power at (T, w) (E3): T w plus its losses (model, or the measured map's)."""
+    if e.measured_machine > 0.0:  # the map's loss, held at its edges (as MeasuredMachine.loss_w)
+        ws = min(max(w, map_speed[0]), map_speed[map_speed.size - 1])
+        ts = min(max(t, map_torque[0]), map_torque[map_torque.size - 1])
+        loss = tb.bilinear_at(map_speed, map_torque, map_loss, ws, ts, e.inv_map_speed, e.inv_map_torque)
+        return t * w + max(loss, 0.0)
+    return mc.electric_power(t, w, m)
+
+
+@equation
+def battery_state(soc, e, soc_grid, ocv, r_dis, r_chg):
+    """(U_oc, R_dis, R_chg, I_low, I_high) of the pack at this state of charge (B1), (B3)."""
+    u_oc = bt.open_circuit_voltage(soc, soc_grid, ocv, e.inv_soc)
+    r_d = bt.resistance(1.0, soc, soc_grid, r_dis, r_chg, e.inv_soc)
+    r_c = bt.resistance(-1.0, soc, soc_grid, r_dis, r_chg, e.inv_soc)
+    lo, hi = bt.current_limits(
+        soc, u_oc, r_d, r_c, e.v_min, e.v_max, e.i_max_discharge, e.i_max_charge, e.soc_min, e.soc_max
+    )
+    return u_oc, r_d, r_c, lo, hi
+
+
+@equation
+def pack_power(current, u_oc, r_d, r_c):
+    """Terminal power at current I: (U_oc - R I) I."""
+    r = r_d if current >= 0.0 else r_c
+    return (u_oc - r * current) * current
+
+
+@equation
+def pack_current(p, u_oc, r_d, r_c):
+    """Current of terminal power p (B2), the resistance of the current's direction."""
+    return bt.current_for_power(p, u_oc, r_d if p >= 0.0 else r_c)
+
+
+@equation
+def torque_for_power(p_target, t_from, w, m, e, map_speed, map_torque, map_loss):
+    """The torque between 0 and ``t_from`` whose DC power plus the accessories is ``p_target`` (bisection:
+    the power rises with the torque). ``t_from`` is the torque asked, whose power is beyond the target."""
+    lo, hi = 0.0, t_from
+    if t_from < 0.0:
+        lo, hi = t_from, 0.0
+    for _ in range(BISECTION_STEPS):
+        mid = 0.5 * (lo + hi)
+        if machine_power(mid, w, m, e, map_speed, map_torque, map_loss) + e.accessory_power > p_target:
+            hi = mid
+        else:
+            lo = mid
+    return lo if t_from > 0.0 else hi
+
+
+@equation
+def electric_point(f_demand, v, dw, ratio, soc, c, e, m, tabs):
+    """The operating point of a wheel force demand ``f_demand`` (traction + inertia, N) at speed v with
+    rotor acceleration dw: (w_m, T_m, brake force N, force missing N, current A, U_oc V, R Ohm,
+    P_machine W, at the machine's limit, at the battery's limit) by (E1)-(E3), (B1)-(B3)."""
+    soc_grid, ocv, r_dis, r_chg, map_speed, map_torque, map_loss, env_speed, env_max, env_min = tabs
+    w = vh.engine_speed(v, ratio, c)
+    t_min, t_max = envelope(w, m, e, env_speed, env_max, env_min)
+    t_ask = shaft_torque(f_demand, ratio, c) + rotor_torque(dw, e)
+    at_machine = 0.0
+    brake = 0.0
+    if t_ask >= 0.0:
+        t = t_ask
+        if t > t_max:
+            t = t_max
+            at_machine = 1.0
+    else:
+        t = t_ask * regen_fraction(v, e)
+        if t < t_min:
+            t = t_min
+            at_machine = 1.0
+    u_oc, r_d, r_c, i_lo, i_hi = battery_state(soc, e, soc_grid, ocv, r_dis, r_chg)
+    p = machine_power(t, w, m, e, map_speed, map_torque, map_loss) + e.accessory_power
+    i = pack_current(p, u_oc, r_d, r_c)
+    at_battery = 0.0
+    if i > i_hi or i < i_lo:
+        at_battery = 1.0
+        i = i_hi if i > i_hi else i_lo
+        p_lim = pack_power(i, u_oc, r_d, r_c)
+        if t != 0.0 and (t > 0.0) == (p > p_lim):
+            t = torque_for_power(p_lim, t, w, m, e, map_speed, map_torque, map_loss)
+            p = machine_power(t, w, m, e, map_speed, map_torque, map_loss) + e.accessory_power
+            i = pack_current(p, u_oc, r_d, r_c)
+            i = min(max(i, i_lo), i_hi)
+        # the accessories alone beyond the limit (an empty pack): the current is the limit's, the power the
+        # pack's; the rest is missing
+    # the force the wheels get from the machine; braking's rest goes to the friction brakes
+    f_machine = wheel_force_of_shaft(t - rotor_torque(dw, e), ratio, c)
+    missing = 0.0
+    if f_demand > f_machine:
+        if t_ask >= 0.0:
+            missing = f_demand - f_machine
+        else:
+            brake = 0.0
+    if f_demand < f_machine:
+        brake = f_machine - f_demand
+    r = r_d if i >= 0.0 else r_c
+    p_machine = machine_power(t, w, m, e, map_speed, map_torque, map_loss)
+    return w, t, brake, missing, i, u_oc, r, p_machine, at_machine, at_battery
+
+
+@equation
+def wall_energy(chemical_j, e):
+    """E_wall = E_chem / eta_ch (E4): the grid's energy to put back what the run drew from the pack."""
+    return chemical_j / e.charger_efficiency
+
+
+@equation
+def rotor_mass(ratio, driving, c, e):
+    """J_m (i / r)^2 through the reduction in the power's direction (E1): the rotor's inertia seen at the
+    wheels as mass (times eta while driving, over eta while braking)."""
+    k = ratio / c.wheel_radius
+    mass = e.machine_inertia * k * k
+    return mass * c.efficiency if driving else mass / c.efficiency
+
+
+# --- records (built once per parameter set) --------------------------------------------------------------
+
+
+def machine_spec(params):
+    """The :class:`vpsim.model.machine.MachineSpec` of ``params.machine`` (the scalable loss model)."""
+    p = params.machine
+    return mc.MachineSpec(
+        rated_power_w=p.rated_power,
+        base_speed_radps=p.base_speed,
+        max_speed_radps=p.max_speed,
+        kind=p.kind,
+        inertia_kgm2=p.inertia,
+    )
+
+
+def _measured_tables(params):
+    """(loss map speed, torque, loss; envelope speed, max, min) of a measured machine, scaled to nothing:
+    the file's own machine; empty arrays without a map file."""
+    empty = np.array([0.0, 1.0])  # a table the kernels never read (two nodes keep its spacing finite)
+    if not params.machine.map_file:
+        return empty, empty, np.zeros((2, 2)), empty, empty, empty
+    from ..engines.machine_map import load_machine
+
+    mm = load_machine(params.machine.map_file)
+    return (
+        mm.speed_grid,
+        mm.torque_grid,
+        mm._loss_table,
+        mm.envelope_speed,
+        mm.max_torque,
+        mm.min_torque,
+    )
+
+
+def pack_of(params):
+    """The pack of ``params.battery`` (:func:`vpsim.model.battery.pack`)."""
+    from .record import memo
+
+    def build(p):
+        b = p.battery
+        return bt.pack(bt.resolve_cell(b.cell), b.cells_in_series, b.cells_in_parallel, b.soc_min, b.soc_max)
+
+    return memo(params, "pack", build)
+
+
+def electric_records(params):
+    """(e, m, tables) of a parameter set: the electric record (:data:`E_FIELDS`), the machine's record and the
+    arrays (:class:`Tables`), built once per parameter set."""
+    from .record import memo
+
+    return memo(params, "electric", _electric_records)
+
+
+def _electric_records(params):
+    pk = pack_of(params)
+    ms, mt, ml, es, emax, emin = _measured_tables(params)
+    measured = 1.0 if params.machine.map_file else 0.0
+    el_ = params.electric
+    e = np.zeros(1, E_DTYPE).view(np.recarray)
+    e[0] = (
+        pk.capacity_as,
+        pk.v_min,
+        pk.v_max,
+        pk.i_max_discharge,
+        pk.i_max_charge,
+        pk.soc_min,
+        pk.soc_max,
+        pk.coulombic_efficiency,
+        tb.inverse_spacing(pk.soc),
+        el_.accessory_power,
+        el_.charger_efficiency,
+        el_.regen_share,
+        el_.regen_speed_low,
+        el_.regen_speed_high,
+        params.machine.inertia,
+        measured,
+        tb.inverse_spacing(ms),
+        tb.inverse_spacing(mt),
+        tb.inverse_spacing(es),
+    )
+    e.flags.writeable = False
+    m = mc.machine_record(machine_spec(params))
+    tabs = Tables(
+        soc=pk.soc,
+        ocv=pk.ocv_v,
+        r_dis=pk.r_discharge_ohm,
+        r_chg=pk.r_charge_ohm,
+        map_speed=np.ascontiguousarray(ms, float),
+        map_torque=np.ascontiguousarray(mt, float),
+        map_loss=np.ascontiguousarray(ml, float),
+        env_speed=np.ascontiguousarray(es, float),
+        env_max=np.ascontiguousarray(emax, float),
+        env_min=np.ascontiguousarray(emin, float),
+    )
+    return e[0], m, tabs
