@@ -42,7 +42,9 @@ def car_with_machine(machine, base=None):
         }
         if machine.inertia_kgm2 > 0:
             section["inertia"] = machine.inertia_kgm2
-    ratio = section["max_speed"] * params.vehicle.wheel_radius / DESIGN_TOP_SPEED_MPS
+    from .model.electric import ratio_for_speed
+
+    ratio = ratio_for_speed(section["max_speed"], DESIGN_TOP_SPEED_MPS, params.vehicle.wheel_radius)
     return params.with_changes(machine=section, transmission={"final_drive": ratio})
 
 

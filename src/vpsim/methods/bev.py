@@ -84,7 +84,7 @@ def _book(v, a, dw, w, t, brake, missing, i, u_oc, r, p_machine, ratio, c, e, dt
     sums[T_MLOSS] += (p_machine - t * w) * dt
     sums[T_ROTOR] += rotor * dt
     sums[T_DRIVE] += (t * w - rotor - f_wheel * vv) * dt
-    sums[T_KIN] += c.mass * a * vv * dt
+    sums[T_KIN] += el.kinetic_power(vv, a, c) * dt
     sums[T_AERO] += vh.aero_force(vv, c) * vv * dt
     sums[T_ROLL] += vh.rolling_force(vv, c) * vv * dt
     sums[T_BRAKE] += brake * vv * dt
@@ -143,12 +143,11 @@ def _forward_point(v, xi, soc, v_ref, kp, ki, ratio, c, e, m, tabs):
     mass the net force moves (:func:`vpsim.model.electric.rotor_mass`)."""
     vv = v if v > 0.0 else 0.0
     u = kp * (v_ref - v) + ki * xi
-    f_cmd = c.mass * u + vh.road_load(vv, c)
+    f_cmd = el.driver_force(u, vv, c)
     w, t, brake, missing, i, u_oc, r, p_m, at_m, at_b = el.electric_point(
         f_cmd, vv, 0.0, ratio, soc, c, e, m, tabs
     )
-    f_net = el.wheel_force_of_shaft(t, ratio, c) - brake - vh.road_load(vv, c)
-    acc = f_net / (c.mass + el.rotor_mass(ratio, t >= 0.0, c, e))
+    acc = el.forward_acceleration(t, brake, vv, ratio, c, e)
     if vv <= 0.0 and acc < 0.0:
         acc = 0.0  # at rest the brakes hold; the car does not roll back
     return acc, w, t, brake, i, u_oc, r, p_m, at_m, at_b

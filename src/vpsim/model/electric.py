@@ -359,3 +359,29 @@ def _electric_records(params):
         env_min=np.ascontiguousarray(emin, float),
     )
     return e[0], m, tabs
+
+
+@equation
+def driver_force(u, v, c):
+    """The forward driver's wheel-force demand for an acceleration command u: m u plus the road load it
+    feels (the PI's integral then trims what the road load model does not know)."""
+    return c.mass * u + vh.road_load(v, c)
+
+
+@equation
+def forward_acceleration(t, brake, v, ratio, c, e):
+    """dv/dt of the stiff electric driveline: the machine's wheel force less the brakes and the road load,
+    over the mass with the rotor's (E1),(18)."""
+    f_net = wheel_force_of_shaft(t, ratio, c) - brake - vh.road_load(v, c)
+    return f_net / (c.mass + rotor_mass(ratio, t >= 0.0, c, e))
+
+
+@equation
+def kinetic_power(v, a, c):
+    """m a v: the power that goes into the vehicle's kinetic energy."""
+    return c.mass * a * v
+
+
+def ratio_for_speed(machine_speed, vehicle_speed, wheel_radius):
+    """i = w r / v: the total ratio at which vehicle speed v turns the machine at w   (14),(17)."""
+    return machine_speed * wheel_radius / vehicle_speed
