@@ -67,6 +67,9 @@ TARGETS = {
     # the paper's stiff driveline, and the realistic mode's clutch, brakes and idle (what simulate runs)
     "forward_udds_steps_per_cycle_s_paper": ("<=", 2.0),
     "forward_udds_steps_per_cycle_s_realistic": ("<=", 2.0),
+    # the battery-electric car (the bev preset) against FASTSim 3.1's BEV on the same car, UDDS
+    "bev_backward_vs_fastsim_udds": (">=", 100.0),
+    "bev_forward_vs_fastsim_udds": (">=", 5.0),
 }
 
 
@@ -842,6 +845,53 @@ def _ratio(num, den) -> float | None:
     return num["median_ms"] / den["median_ms"]
 
 
+def bev_peer_inputs(params) -> tuple:
+    """The bev preset as FASTSim's BEV peer takes a car (:func:`vpsim.fleet.peer_bev.bev_peer_vehicle`):
+    mass, road load A (N), B (N per m/s), C (N per (m/s)^2) and rated power (W), from the model's record."""
+    from .model.record import record
+
+    c = record(params)
+    return (float(c.mass), float(c.rolling_force), float(c.road_load_b), float(c.aero_coefficient))
+
+
+def _bev_peer_ms(settings: Settings, progress) -> dict:
+    """FASTSim 3.1's BEV on the bev preset's car over UDDS: median ms of ``SimDrive.run()`` (the vehicle and
+    cycle built outside the timing), before any vpsim kernel runs in this process."""
+    import warnings
+
+    import fastsim as fsim
+
+    from .fleet import peer_bev as pb
+    from .params import load_parameters
+
+    progress("FASTSim BEV on the bev preset, UDDS")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        p = load_parameters("bev")
+        mass, a, b, cc = bev_peer_inputs(p)
+        veh = fsim.Vehicle.from_dict(pb.bev_peer_vehicle(mass, a, b, cc, p.machine.rated_power))
+        cyc = pb._fastsim_cycle("udds")
+        params = pb._sim_params()
+        median, runs = _timed(lambda sd: sd.run(), settings, setup=lambda: fsim.SimDrive(veh, cyc, params))
+    return {"median_ms": median * 1e3, "runs": runs}
+
+
+def _bev_rows(settings: Settings, progress) -> dict:
+    """vpsim's battery-electric car (the bev preset) on UDDS, each method: median ms of one run."""
+    from .cycles import load_cycle
+    from .params import load_parameters
+    from .simulation import simulate
+
+    progress("vpsim battery-electric car, UDDS")
+    p = load_parameters("bev")
+    cyc = load_cycle("udds")
+    out = {}
+    for method in ("backward", "forward", "inverse"):
+        median, runs = _timed(lambda m=method: simulate(cyc, m, p), settings)
+        out[method] = {"median_ms": median * 1e3, "runs": runs}
+    return out
+
+
 def run_benchmarks(profile: str = "full", *, peer: bool = True, progress=None) -> dict:
     """Measure everything (see the module docstring) and return one JSON-ready dict.
 
@@ -873,6 +923,12 @@ def run_benchmarks(profile: str = "full", *, peer: bool = True, progress=None) -
         except Exception as exc:
             status = {**status, "available": False, "reason": f"failed: {_one_line(exc)}"}
     peer_fresh = _peer_fresh(settings, progress) if status["available"] else {}
+    bev_peer: dict = {}
+    if status["available"]:
+        try:
+            bev_peer = _bev_peer_ms(settings, progress)
+        except Exception as exc:
+            bev_peer = {"failed": _one_line(exc)}
     for r in peer_rows:  # the peer's figure: its fastest settled speed, in this process or a fresh one
         best = peer_fresh.get(r["cycle"], {}).get("best_ms")
         r["in_process_median_ms"] = r["median_ms"]
@@ -880,6 +936,7 @@ def run_benchmarks(profile: str = "full", *, peer: bool = True, progress=None) -
             r["median_ms"] = best
             r["runs"] = -1  # marks the figure as coming from the fresh processes
     rows, setup, failures, calls = _vpsim_rows(settings, progress)
+    bev = _bev_rows(settings, progress)
     vpsim_fresh = _vpsim_fresh(settings, progress) if status["available"] else {}
     rows += peer_rows
     paired_ratios, paired = _ratios(settings, calls, makers, progress)
@@ -942,6 +999,11 @@ def run_benchmarks(profile: str = "full", *, peer: bool = True, progress=None) -
         ratios[key] = a_ms / b_ms
         if res:
             res["best_ms"] = [a_ms, b_ms]
+    for method in ("backward", "forward"):
+        peer_ms = bev_peer.get("median_ms")
+        ratios[f"bev_{method}_vs_fastsim_udds"] = (
+            None if peer_ms is None else peer_ms / bev[method]["median_ms"]
+        )
     steps = _forward_steps(settings)
     lin_devs = [v["max_dev"] for v in linearity.values() if "max_dev" in v]
     cold_walls = [
@@ -979,6 +1041,7 @@ def run_benchmarks(profile: str = "full", *, peer: bool = True, progress=None) -
         "cold_start_s": max(cold_walls) if cold_walls else None,
         "first_compile_s": cold.get("first_compile", {}).get("wall_s"),
         "forward_udds_steps": steps,
+        "bev": {"vpsim": bev, PEER: bev_peer},
     }
     for mode, v in steps.items():
         report[f"forward_udds_steps_per_cycle_s_{mode}"] = v["per_cycle_s"]
@@ -1139,6 +1202,17 @@ def format_report(report: dict) -> str:
         items = [f"{k} {v:.2f}" for k, v in used.items()]
         for i in range(0, len(items), 3):
             lines.append("    " + ", ".join(items[i : i + 3]))
+    bev = report.get("bev", {})
+    if bev.get("vpsim"):
+        peer_bev = bev.get(PEER, {})
+        runs = ", ".join(f"{m} {v['median_ms']:.3f} ms" for m, v in bev["vpsim"].items())
+        fs = (
+            f"{PEER} BEV {peer_bev['median_ms']:.2f} ms ({peer_bev['runs']} runs, timed before vpsim's "
+            "code ran)"
+            if "median_ms" in peer_bev
+            else f"{PEER} BEV not measured{': ' + peer_bev['failed'] if 'failed' in peer_bev else ''}"
+        )
+        lines += ["", f"battery-electric car (bev preset), one UDDS run: {runs}; {fs}"]
     lines += ["", "targets:"]
     for t in report["targets"]:
         state = {True: "met", False: "MISSED", None: "not measured"}[t["met"]]
