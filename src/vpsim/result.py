@@ -587,6 +587,8 @@ class Result:
                 [("fuel_flow_kgps", 1e3, "model"), ("fuel_flow_used_kgps", 1e3, "with idle floor")],
             ),
         ]
+        if self.electric:  # a single reduction: no gear to show
+            panels = [p for p in panels if p[0] not in ("gear", "gearbox ratio")]
         panels = [
             (lab, [c for c in cs if c[0] in df and np.any(np.isfinite(df[c[0]].to_numpy(float)))])
             for lab, cs in panels
