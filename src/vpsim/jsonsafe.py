@@ -22,7 +22,11 @@ _REASONS = {
     "std_error": "the fit ended at a bound of this parameter, so it has no standard error",
     "electric_wh_per_km": "no traction battery in this powertrain, or no distance driven",
     "wall_wh_per_km": "no traction battery in this powertrain, or no distance driven",
-    "mpge": "no traction battery in this powertrain, or the run drew no net energy from the battery",
+    "mpge": "defined for a battery-electric car (from its wall energy), and only when the run drew energy "
+    "from its battery",
+    "fuel_l_per_100km_cs": "the charge-sustaining fuel is a hybrid's figure (a battery-electric car burns "
+    "none), "
+    "or the cycle drives no distance",
     "soc_start": "no traction battery in this powertrain",
     "soc_end": "no traction battery in this powertrain",
     "regen_wh": "no electric machine in this powertrain",

@@ -41,7 +41,7 @@ from .errors import ParameterError
 from .textio import check_path, read_text
 from .units import FIELD_DIMENSIONS, to_si
 
-PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l", "bev")
+PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l", "bev", "hev_p2")
 
 
 @dataclass(frozen=True)
@@ -238,6 +238,29 @@ class Electric:
 
 
 @dataclass(frozen=True)
+class Hybrid:
+    """A hybrid's energy management (:mod:`vpsim.model.hybrid`, :mod:`vpsim.methods.hev`)."""
+
+    ems: str = "ecms"  # rule, ecms or dp (dynamic programming; backward method only)
+    soc_target: float = 0.6  # the state of charge the management sustains
+    # rule: the engine starts above this demand at the gearbox input (W), or below soc_low; stops below
+    # engine_off_power once it has run min_on_time and the charge is above soc_low + the hysteresis
+    engine_on_power: float = 15.0e3
+    engine_off_power: float = 8.0e3
+    soc_low: float = 0.5
+    soc_hysteresis: float = 0.05
+    charge_power: float = 5.0e3  # W: the load-point shift that recharges at soc_low (linear to 0 at target)
+    min_on_time: float = 5.0  # s
+    # ECMS: equivalence factor s = s0 + ecms_gain (soc_target - soc): fuel + s P_chem / q_hv is minimised
+    ecms_factor: float = 2.5
+    ecms_gain: float = 20.0
+    engine_start_fuel: float = 0.3e-3  # kg of fuel one engine start costs (cranking, enrichment)
+    torque_levels: int = 24  # engine torques the ECMS and DP choose from at each step (between its lines)
+    dp_soc_points: int = 121  # the DP's state-of-charge grid
+    dp_soc_span: float = 0.2  # its width around soc_target
+
+
+@dataclass(frozen=True)
 class Parameters:
     """A complete parameter set. ``provenance`` maps ``"section.field"`` to its confidence label/note."""
 
@@ -251,6 +274,7 @@ class Parameters:
     battery: Battery = field(default_factory=Battery)
     machine: Machine = field(default_factory=Machine)
     electric: Electric = field(default_factory=Electric)
+    hybrid: Hybrid = field(default_factory=Hybrid)
     provenance: dict[str, str] = field(default_factory=dict, compare=False, repr=False)
     citation: str = field(default="", compare=False, repr=False)
 
@@ -308,8 +332,10 @@ _SECTIONS = {
     "battery": Battery,
     "machine": Machine,
     "electric": Electric,
+    "hybrid": Hybrid,
 }
-POWERTRAINS = ("conventional", "bev")
+POWERTRAINS = ("conventional", "bev", "hev_p2")
+EMS = ("rule", "ecms", "dp")
 MACHINE_KINDS = ("pm", "induction")
 _ATTR_ALIASES = {"lambda": "lambda_"}  # TOML name -> attribute
 _FIELD_NAMES = {v: k for k, v in _ATTR_ALIASES.items()}
@@ -380,6 +406,17 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "electric.forward_kp": (0.0, 100.0, False),
     "electric.forward_ki": (0.0, 100.0, False),
     "electric.forward_max_step": (1e-3, 1.0, False),
+    "hybrid.soc_target": (0.0, 1.0, False),
+    "hybrid.engine_on_power": (0.0, 1.0e6, True),
+    "hybrid.engine_off_power": (0.0, 1.0e6, True),
+    "hybrid.soc_low": (0.0, 1.0, True),
+    "hybrid.soc_hysteresis": (0.0, 0.5, True),
+    "hybrid.charge_power": (0.0, 1.0e6, True),
+    "hybrid.min_on_time": (0.0, 600.0, True),
+    "hybrid.ecms_factor": (0.0, 20.0, True),
+    "hybrid.ecms_gain": (0.0, 1000.0, True),
+    "hybrid.engine_start_fuel": (0.0, 0.1, True),
+    "hybrid.dp_soc_span": (0.01, 1.0, True),
 }
 # Whole numbers: (low, high). Production piston engines have 1 to 16 cylinders and are two-stroke (1
 # revolution per cycle) or four-stroke (2); Newton converges in a handful of iterations or not at all.
@@ -389,6 +426,8 @@ _INT_RANGES: dict[str, tuple[int, int]] = {
     "transmission.lockup_min_gear": (1, 21),  # above the number of gears: never locked
     "battery.cells_in_series": (1, 2000),
     "battery.cells_in_parallel": (1, 2000),
+    "hybrid.torque_levels": (2, 200),
+    "hybrid.dp_soc_points": (11, 2001),
 }
 _MAX_LIST = 20  # gears of a gearbox (heavy trucks have up to 18)
 _LIST_LENGTHS = {"engine.map_speed_range": 2}
@@ -630,7 +669,14 @@ def _check_electric(p: Parameters, where: str) -> None:
             f"{where}: electric.regen_speed_high = {e.regen_speed_high:g} m/s is below regen_speed_low = "
             f"{e.regen_speed_low:g}"
         )
-    if p.powertrain.type == "bev":
+    if p.hybrid.ems not in EMS:
+        raise ParameterError(f"{where}: hybrid.ems = {p.hybrid.ems!r}; expected one of {', '.join(EMS)}")
+    if p.powertrain.type == "hev_p2" and not b.soc_min < p.hybrid.soc_target < b.soc_max:
+        raise ParameterError(
+            f"{where}: hybrid.soc_target = {p.hybrid.soc_target:g} is outside the battery's window "
+            f"({b.soc_min:g}, {b.soc_max:g})"
+        )
+    if p.powertrain.type in ("bev", "hev_p2"):
         from .model.battery import CELLS
 
         if b.cell not in CELLS and not b.cell.lower().endswith(".m"):
@@ -638,6 +684,7 @@ def _check_electric(p: Parameters, where: str) -> None:
                 f"{where}: battery.cell = {b.cell!r}; expected one of {', '.join(CELLS)} or an ADVISOR "
                 "ESS_*.m file"
             )
+    if p.powertrain.type == "bev":
         if len(p.transmission.gearbox_ratios) != 1 or p.transmission.is_cvt:
             raise ParameterError(
                 f"{where}: a battery-electric car has a single reduction: transmission.gearbox_ratios must "

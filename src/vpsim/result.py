@@ -104,27 +104,29 @@ class ElectricBalance:
     """Energy bookkeeping of an electric powertrain over a run (J), by name
     (:data:`vpsim.methods.bev.ELECTRIC_TERMS`):
 
-    chemical = battery_loss + accessories + machine_loss + rotor_kinetic + driveline_loss + vehicle_kinetic
-               + aero + rolling + brake - trace_miss - unserved  (+ residual)
+    chemical (+ indicated) = battery_loss + accessories + machine_loss + rotor_kinetic + driveline_loss
+                             + vehicle_kinetic + aero + rolling + brake - trace_miss - unserved
+                             (+ friction + pumping + engine_kinetic)  (+ residual)
 
-    ``chemical`` is the energy the pack's stored charge gave (U_oc I; negative when the run charged it);
+    ``chemical`` is the energy the pack's stored charge gave (U_oc I; negative when the run charged it); a
+    hybrid's engine adds its ``indicated`` work as a source and its friction, pumping and kinetic terms;
     ``unserved`` the electric power asked beyond the pack's limits (an empty pack's accessories).
     """
 
     terms: dict
 
+    SOURCES = ("chemical", "indicated")  # a hybrid's engine is a source beside the battery
+    NEGATIVE = ("trace_miss", "unserved")
+
     @property
     def consumers(self) -> float:
         t = self.terms
-        return (
-            sum(v for k, v in t.items() if k not in ("chemical", "trace_miss", "unserved"))
-            - t.get("trace_miss", 0.0)
-            - t.get("unserved", 0.0)
-        )
+        rest = sum(v for k, v in t.items() if k not in self.SOURCES + self.NEGATIVE)
+        return rest - sum(t.get(k, 0.0) for k in self.NEGATIVE)
 
     @property
     def residual(self) -> float:
-        return self.terms["chemical"] - self.consumers
+        return sum(self.terms.get(k, 0.0) for k in self.SOURCES) - self.consumers
 
     @property
     def relative_residual(self) -> float:
@@ -141,6 +143,8 @@ class ElectricBalance:
 
 # summary keys of an electric powertrain; NaN (null in JSON, with the reason) for a car without one
 ELECTRIC_KEYS = ("electric_wh_per_km", "wall_wh_per_km", "mpge", "soc_start", "soc_end", "regen_wh")
+# a hybrid's further figures (NaN for other cars, but the charge-sustaining fuel of an engine car: its fuel)
+HYBRID_KEYS = ("fuel_l_per_100km_cs", "engine_starts")
 
 
 @dataclass(frozen=True)
@@ -477,6 +481,13 @@ class Result:
             "infeasible_throttle_s": float(self.trace_miss.infeasible_throttle_s),
             "energy_relative_residual": None if self.energy is None else float(self.energy.relative_residual),
             **{k: float(self.electric.get(k, float("nan"))) for k in ELECTRIC_KEYS},
+            "fuel_l_per_100km_cs": float(
+                self.electric.get(
+                    "fuel_l_per_100km_cs", float("nan") if self.electric else self.fuel_l_per_100km
+                )
+            ),
+            "engine_starts": self.electric.get("engine_starts"),
+            "ems": self.electric.get("ems"),
             **self.deviations.as_dict(),
         }
 
@@ -533,6 +544,16 @@ class Result:
     def __repr__(self) -> str:
         from .jsonsafe import number
 
+        if self.electric and self.fuel_kg > 0.0:  # a hybrid
+            cs = number(self.electric.get("fuel_l_per_100km_cs", float("nan")), ".3f", "fuel_l_per_100km_cs")
+            return (
+                f"Result({self.method}, {self.cycle}, {self.electric.get('ems', '')}: "
+                f"{number(self.fuel_l_per_100km, '.3f', 'fuel_l_per_100km')} L/100 km "
+                f"({cs} charge-sustaining), "
+                f"SOC {self.electric['soc_start']:.3f} -> {self.electric['soc_end']:.3f}, "
+                f"{self.electric.get('engine_starts', 0)} engine starts, {self.distance_km:.3f} km, "
+                f"{self.steps} steps, {self.cpu_time_s * 1e3:.2f} ms; {self.deviations})"
+            )
         if self.electric:
             return (
                 f"Result({self.method}{'' if self.driver is None else ' driver ' + str(self.driver)}, "

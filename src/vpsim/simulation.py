@@ -67,6 +67,8 @@ def simulate(
         params = load_parameters(params)
     if params.powertrain.type == "bev":
         return _simulate_bev(cycle, method, params, driver, mode, gears, options)
+    if params.powertrain.type == "hev_p2":
+        return _simulate_hev(cycle, method, params, driver, mode, gears, options)
     cycle, params, schedule = resolve_inputs(cycle, params, gears)
     if method == "backward":
         if driver is not None:
@@ -105,3 +107,26 @@ def _simulate_bev(cycle, method, params, driver, mode, gears, options):
     from .methods import bev
 
     return bev.run(cycle, params, method, driver=driver, mode=mode)
+
+
+def _simulate_hev(cycle, method, params, driver, mode, gears, options):
+    """The P2 hybrid (:mod:`vpsim.methods.hev`): the backward method with its energy management."""
+    if method != "backward":
+        raise VpsimError(
+            f"the hybrid runs on the backward method only in this version (asked: {method}); its forward and "
+            "inverse methods are not built yet"
+        )
+    if driver is not None:
+        raise VpsimError("the backward method tracks the cycle exactly and takes no driver")
+    if gears is not None:
+        raise VpsimError(
+            "the hybrid takes its gears from the gear rule; a schedule file is not supported yet"
+        )
+    ems = options.pop("ems", None)
+    if options:
+        raise VpsimError(f"option {sorted(options)[0]!r} does not apply to the hybrid")
+    if not isinstance(cycle, Cycle):
+        cycle = load_cycle(cycle)
+    from .methods import hev
+
+    return hev.run(cycle, params, ems=ems, mode=mode)

@@ -89,7 +89,14 @@ def _out_dir(out: str) -> Path:
     help="Forward method's integrator: rosenbrock (default, stiffly stable RODAS3) or dopri5 (the paper's "
     "ode45).",
 )
-def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, out, solver):
+@click.option(
+    "--ems",
+    type=click.Choice(["rule", "ecms", "dp"]),
+    default=None,
+    help="A hybrid's energy management (default: its hybrid.ems): rule, ecms or dp (dynamic programming, the "
+    "optimum; backward method).",
+)
+def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, out, solver, ems):
     """Simulate a vehicle on a drive cycle and report its fuel consumption."""
     from ..cycles import MIN_CONSUMPTION_DISTANCE_M, load_cycle
     from ..gears import load_schedule
@@ -113,6 +120,10 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
     if solver is not None and method != "forward":
         raise VpsimError("--solver applies to --method forward (the integrator of the dynamic model)")
     options = {} if solver is None else {"solver": solver}
+    if ems is not None:
+        if params.powertrain.type != "hev_p2":
+            raise VpsimError(f"--ems applies to a hybrid; {vehicle} is a {params.powertrain.type} car")
+        options["ems"] = ems
     result = run(cyc, method=method, params=params, driver=driver, mode=mode, gears=schedule, **options)
     summary = result.summary()
     if not cyc.distance_m >= MIN_CONSUMPTION_DISTANCE_M:  # a method's creep is no basis for L/100 km
@@ -145,7 +156,21 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         f"{method} on {result.cycle} ({result.mode} mode, vehicle {result.vehicle}"
         f"{'' if result.driver is None else ', driver ' + result.driver})"
     )
-    if result.electric:
+    if result.electric and result.fuel_kg > 0.0:  # a hybrid: fuel, charge-sustaining fuel, its battery
+        lp100 = number(summary["fuel_l_per_100km"], "8.3f", "fuel_l_per_100km")
+        click.echo(
+            f"  fuel consumption  {lp100}{' L/100 km' if _ok(lp100) else ''} "
+            f"(energy management {ems_of(summary)})"
+        )
+        cs = number(summary["fuel_l_per_100km_cs"], "8.3f", "fuel_l_per_100km_cs")
+        click.echo(
+            f"  charge-sustaining {cs}{' L/100 km (SAE J1711 net energy correction)' if _ok(cs) else ''}"
+        )
+        click.echo(
+            f"  state of charge   {summary['soc_start']:.4f} -> {summary['soc_end']:.4f}; "
+            f"{summary['engine_starts']} engine starts"
+        )
+    elif result.electric:
         _echo_electric(summary)
     else:
         lp100 = number(summary["fuel_l_per_100km"], "8.3f", "fuel_l_per_100km")
@@ -207,6 +232,10 @@ def _measured_mpg(vehicle: str, cycle: str) -> float | None:
         if _normalise(str(name)) == cycle and isinstance(mpg, int | float) and not isinstance(mpg, bool):
             return float(mpg) if mpg > 0 and math.isfinite(mpg) else None
     return None
+
+
+def ems_of(summary: dict) -> str:
+    return str(summary.get("ems") or "-")
 
 
 def _echo_electric(summary: dict) -> None:

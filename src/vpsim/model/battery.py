@@ -125,6 +125,38 @@ CELLS: dict[str, Cell] = {
         mass_kg=0.0693,
         source="LG INR21700-M50 datasheet; OCV from Chen et al. (2020), reconstructed from their figure",
     ),
+    "nmc_hev": Cell(
+        name="nmc_hev",
+        chemistry="high-power NMC/LMO pouch, 6.5 Ah (hybrid cell)",
+        capacity_ah=6.5,
+        soc=_SOC11,
+        # the NMC full-cell curve above (a hybrid cell's own is within a few tens of mV of it)
+        ocv_v=(3.00, 3.45, 3.55, 3.62, 3.68, 3.75, 3.85, 3.94, 4.03, 4.10, 4.19),
+        # power cells: about 1.5 mOhm DC mid-SOC (hybrid pouch cells of 5-6.5 Ah publish 1-2 mOhm)
+        r_discharge_ohm=(
+            0.0030,
+            0.0022,
+            0.0018,
+            0.0016,
+            0.0015,
+            0.0015,
+            0.0015,
+            0.0015,
+            0.0015,
+            0.0016,
+            0.0017,
+        ),
+        r_charge_ohm=(0.0030, 0.0022, 0.0018, 0.0016, 0.0015, 0.0015, 0.0015, 0.0016, 0.0017, 0.0018, 0.0020),
+        v_min=2.7,
+        v_max=4.2,
+        max_discharge_c=20.0,  # 10 s pulses of a hybrid cell
+        max_charge_c=15.0,
+        coulombic_efficiency=0.999,
+        mass_kg=0.20,
+        source="high-power lithium-ion pouch cells of hybrid packs (Hyundai Ioniq / Kia Niro: 1.56 kWh, "
+        "240 V, "
+        "6.5 Ah); reconstructed from their published pack figures",
+    ),
     "lfp": Cell(
         name="lfp",
         chemistry="LiFePO4 / graphite, 26650, 2.5 Ah",

@@ -199,26 +199,21 @@ def torque_for_power(p_target, t_from, w, m, e, map_speed, map_torque, map_loss)
 
 
 @equation
-def electric_point(f_demand, v, dw, ratio, soc, c, e, m, tabs):
-    """The operating point of a wheel force demand ``f_demand`` (traction + inertia, N) at speed v with
-    rotor acceleration dw: (w_m, T_m, brake force N, force missing N, current A, U_oc V, R Ohm,
-    P_machine W, at the machine's limit, at the battery's limit) by (E1)-(E3), (B1)-(B3)."""
+def machine_and_battery(t_ask, braking, v, w, soc, e, m, tabs):
+    """What the machine gives of a torque ``t_ask`` at its shaft (speed w), the battery supplying it
+    (E2), (E3), (B1)-(B3): ``braking`` (the wheels' demand is a braking one) applies the regenerative share
+    s(v); the torque is held within the envelope and cut to what the battery can give or take. Returns
+    (T_m, current A, U_oc V, R Ohm, P_machine W, at the machine's limit, at the battery's limit)."""
     soc_grid, ocv, r_dis, r_chg, map_speed, map_torque, map_loss, env_speed, env_max, env_min = tabs
-    w = vh.engine_speed(v, ratio, c)
     t_min, t_max = envelope(w, m, e, env_speed, env_max, env_min)
-    t_ask = shaft_torque(f_demand, ratio, c) + rotor_torque(dw, e)
     at_machine = 0.0
-    brake = 0.0
-    if t_ask >= 0.0:
-        t = t_ask
-        if t > t_max:
-            t = t_max
-            at_machine = 1.0
-    else:
-        t = t_ask * regen_fraction(v, e)
-        if t < t_min:
-            t = t_min
-            at_machine = 1.0
+    t = t_ask * regen_fraction(v, e) if braking and t_ask < 0.0 else t_ask
+    if t > t_max:
+        t = t_max
+        at_machine = 1.0
+    elif t < t_min:
+        t = t_min
+        at_machine = 1.0
     u_oc, r_d, r_c, i_lo, i_hi = battery_state(soc, e, soc_grid, ocv, r_dis, r_chg)
     p = machine_power(t, w, m, e, map_speed, map_torque, map_loss) + e.accessory_power
     i = pack_current(p, u_oc, r_d, r_c)
@@ -233,19 +228,26 @@ def electric_point(f_demand, v, dw, ratio, soc, c, e, m, tabs):
             i = pack_current(p, u_oc, r_d, r_c)
             i = min(max(i, i_lo), i_hi)
         # the accessories alone beyond the limit (an empty pack): the current is the limit's, the power the
-        # pack's; the rest is missing
-    # the force the wheels get from the machine; braking's rest goes to the friction brakes
-    f_machine = wheel_force_of_shaft(t - rotor_torque(dw, e), ratio, c)
-    missing = 0.0
-    if f_demand > f_machine:
-        if t_ask >= 0.0:
-            missing = f_demand - f_machine
-        else:
-            brake = 0.0
-    if f_demand < f_machine:
-        brake = f_machine - f_demand
+        # pack's; the rest is booked as unserved
     r = r_d if i >= 0.0 else r_c
-    p_machine = machine_power(t, w, m, e, map_speed, map_torque, map_loss)
+    return t, i, u_oc, r, machine_power(t, w, m, e, map_speed, map_torque, map_loss), at_machine, at_battery
+
+
+@equation
+def electric_point(f_demand, v, dw, ratio, soc, c, e, m, tabs):
+    """The operating point of a wheel force demand ``f_demand`` (traction + inertia, N) at speed v with
+    rotor acceleration dw: (w_m, T_m, brake force N, force missing N, current A, U_oc V, R Ohm,
+    P_machine W, at the machine's limit, at the battery's limit) by (E1)-(E3), (B1)-(B3)."""
+    w = vh.engine_speed(v, ratio, c)
+    t_ask = shaft_torque(f_demand, ratio, c) + rotor_torque(dw, e)
+    t, i, u_oc, r, p_machine, at_machine, at_battery = machine_and_battery(
+        t_ask, t_ask < 0.0, v, w, soc, e, m, tabs
+    )
+    # the force the wheels get from the machine: what it lacks while driving is missing, what it leaves of a
+    # braking demand the friction brakes take
+    f_machine = wheel_force_of_shaft(t - rotor_torque(dw, e), ratio, c)
+    missing = f_demand - f_machine if f_demand > f_machine else 0.0
+    brake = f_machine - f_demand if f_machine > f_demand else 0.0
     return w, t, brake, missing, i, u_oc, r, p_machine, at_machine, at_battery
 
 

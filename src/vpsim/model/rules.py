@@ -334,6 +334,19 @@ N_TERMS = len(ENERGY_TERMS)
 
 
 @inline
+def engine_powers(p_i, w_e, t_cr, fired, c, cm18=None):
+    """(indicated, friction, pumping) power (W) of the engine at intake pressure p_i, speed w_e and crank
+    torque t_cr: q_hv eta_th times the burned fuel flow of the fired cylinders (4),(7); FMEP (5) at the
+    engine's BMEP (fired or not) and PMEP (6), times the displacement's cycles per second. Their difference is
+    the crank power T_cr w_e (2)."""
+    cyc = en.cycles_per_second(w_e, c) * c.displacement  # MEP x this = power
+    indicated = fired * en.burned_fuel_flow(p_i, w_e, c) * c.fuel_heating_value * c.thermal_efficiency
+    friction = en.fmep_at_bmep(t_cr / c.mep_to_torque, w_e, c, cm18) * cyc
+    pumping = en.pmep(p_i, c) * cyc
+    return indicated, friction, pumping
+
+
+@inline
 def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired, t_acc, passed, c, cm18=None):
     """Power (W) of every energy term at one instant, in the order of :data:`ENERGY_TERMS`.
 
@@ -355,12 +368,7 @@ def powers(p_i, w_e, dw_e, t_cr, t_missing, w_wheel, v, a, brake, clutch, fired,
     road = (c.mass * vv * a, vh.aero_force(vv, c) * vv, vh.rolling_force(vv, c) * vv, brake * vv)
     if clutch == CLUTCH_OPEN:
         return (0.0, 0.0, 0.0, 0.0, 0.0, road[0], road[1], road[2], road[3], 0.0, 0.0, 0.0)
-    cyc = en.cycles_per_second(w_e, c) * c.displacement  # MEP x this = power
-    indicated = fired * en.burned_fuel_flow(p_i, w_e, c) * c.fuel_heating_value * c.thermal_efficiency
-    friction = (
-        en.fmep_at_bmep(t_cr / c.mep_to_torque, w_e, c, cm18) * cyc
-    )  # (5) at the engine's BMEP (fired or not)
-    pumping = en.pmep(p_i, c) * cyc
+    indicated, friction, pumping = engine_powers(p_i, w_e, t_cr, fired, c, cm18)
     t_asked = t_cr + t_missing - t_acc
     if clutch == CLUTCH_ENGAGED:
         engine_kinetic = c.inertia * w_e * dw_e

@@ -1,0 +1,439 @@
+"""The P2 hybrid on the backward method, with its energy management: rules, ECMS, dynamic programming.
+
+The cycle is tracked exactly, as by the engine car's backward method: each interval of the piecewise-linear
+cycle at its mean speed and constant acceleration, in the gear the schedule gives (the conventional gear rule
+of :mod:`vpsim.gears`). At each interval the management chooses the engine's state and torque
+(:mod:`vpsim.model.hybrid`); the operating point (:func:`vpsim.model.hybrid.p2_point`) gives fuel, battery
+current and every energy term; the state of charge moves on by (B3).
+
+* ``rule`` and ``ecms`` decide interval by interval from what they know then (:func:`causal_kernel`).
+* ``dp`` first computes the least fuel-to-go J_k(soc, engine state) backward over a grid of the state of
+  charge (:func:`dp_kernel`; linear interpolation between grid points; a terminal cost on any charge below
+  the start's, steep enough that the optimum sustains the charge), then drives the cycle forward from the
+  true state, choosing at each interval the control that minimises its cost plus the interpolated J_{k+1}
+  (:func:`causal_kernel` with the cost-to-go).
+
+The forward and inverse methods of the hybrid are not built yet (``vpsim.simulate`` says so).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..errors import VpsimError
+from ..model import battery as bt
+from ..model import electric as el
+from ..model import hybrid as hy
+from ..model import tables as tb
+from ..model import vehicle as vh
+from ..model._compile import kernel
+from ..model.engine import equation
+from .backward import gear_index
+
+# rows of the per-interval series
+(
+    H_T,
+    H_V,
+    H_A,
+    H_GEAR,
+    H_W,
+    H_TE,
+    H_TM,
+    H_P,
+    H_MDOT,
+    H_I,
+    H_UOC,
+    H_U,
+    H_SOC,
+    H_BRAKE,
+    H_MISS,
+    H_ON,
+    H_LIM_M,
+    H_LIM_B,
+) = range(18)
+N_ROWS = 18
+N_TERMS = len(hy.HYBRID_TERMS)
+# sums after the energy terms
+S_FUEL, S_DIST, S_STARTS, S_MISS_S, S_MAX_MISS, S_MACHINE_S, S_BATTERY_S, S_REGEN, S_ON_S = range(
+    N_TERMS, N_TERMS + 9
+)
+N_SUMS = N_TERMS + 9
+MISS_TOLERANCE_N = 1e-9
+
+
+@equation
+def _interp_soc(jnext, s_on, soc, soc0, dsoc, n):
+    """The cost-to-go J_{k+1}(soc, s_on), linear on the grid; beyond it, the end value plus a steep slope
+    (beyond the top: no gain; below the bottom: the grid's steepest slope, times 10)."""
+    x = (soc - soc0) / dsoc
+    if x <= 0.0:
+        slope = (jnext[0, s_on] - jnext[1, s_on]) / dsoc
+        return jnext[0, s_on] + 10.0 * max(slope, 0.0) * (-x * dsoc) + 1e-3 * (-x)
+    if x >= n - 1.0:
+        return jnext[n - 1, s_on]
+    j = int(x)
+    f = x - j
+    return jnext[j, s_on] * (1.0 - f) + jnext[j + 1, s_on] * f
+
+
+@kernel(_nrt=False)
+def dp_kernel(v, a, dt, ratio, c, e, m, tabs, h, levels, line_speed, line_max, line_min, soc_grid, jcost):
+    """Backward: jcost[k, i, s] the least fuel (kg) from interval k to the end at charge soc_grid[i] with the
+    engine in state s (0 off, 1 on) before it. jcost[K] is the terminal cost, filled by the caller."""
+    inv_line = tb.inverse_spacing(line_speed)
+    n = soc_grid.size
+    soc0 = soc_grid[0]
+    dsoc = soc_grid[1] - soc_grid[0]
+    for k in range(v.size - 1, -1, -1):
+        w = vh.engine_speed(v[k], ratio[k], c)
+        t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
+        runs = hy.can_run(w, c)
+        for i in range(n):
+            best0 = math.inf
+            best1 = math.inf
+            for u in range(levels + 1):
+                on = 1.0 if u > 0 else 0.0
+                if u > 0 and not runs:
+                    break
+                te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else 0.0
+                pt = hy.p2_point(v[k], a[k], ratio[k], soc_grid[i], on, te, c, e, m, tabs)
+                nxt = soc_grid[i] + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt[k]
+                s_next = 1 if u > 0 else 0
+                base = hy.ecms_cost(pt, dt[k], False, 0.0, c, h) + _interp_soc(
+                    jcost[k + 1], s_next, nxt, soc0, dsoc, n
+                )
+                c0 = base + (h.engine_start_fuel if u > 0 else 0.0)  # from off: a start
+                if c0 < best0:
+                    best0 = c0
+                if base < best1:
+                    best1 = base
+            jcost[k, i, 0] = best0
+            jcost[k, i, 1] = best1
+
+
+@kernel(_nrt=False)
+def causal_kernel(
+    time_s,
+    speed,
+    sched_t,
+    sched_gear,
+    ratios,
+    c,
+    e,
+    m,
+    tabs,
+    h,
+    ems,
+    levels,
+    line_speed,
+    line_max,
+    line_min,
+    soc_grid,
+    jcost,
+    soc_start,
+    rows,
+    sums,
+):
+    """Drive the cycle with the management ``ems`` (rule, ecms, or dp with the cost-to-go ``jcost``); fill
+    ``rows`` and the sums. Returns the final state of charge."""
+    inv_line = tb.inverse_spacing(line_speed)
+    soc = soc_start
+    on = 0.0
+    on_time = 0.0
+    j = 0
+    n_grid = soc_grid.size
+    for k in range(time_s.size - 1):
+        dt = time_s[k + 1] - time_s[k]
+        v = 0.5 * (speed[k + 1] + speed[k])
+        a = (speed[k + 1] - speed[k]) / dt
+        g, j = gear_index(time_s, k, sched_t, sched_gear, j)
+        ratio = ratios[g]
+        w = vh.engine_speed(v, ratio, c)
+        t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
+        runs = hy.can_run(w, c)
+        choice_on = 0.0
+        choice_te = 0.0
+        if ems == hy.EMS_RULE:
+            t_in = el.shaft_torque(vh.wheel_force(v, a, c), ratio, c)
+            demand = t_in * w
+            want = on
+            if on > 0.0:
+                if (
+                    demand < h.engine_off_power
+                    and on_time >= h.min_on_time
+                    and soc > h.soc_low + h.soc_hysteresis
+                ):
+                    want = 0.0
+            elif demand > h.engine_on_power or soc < h.soc_low:
+                want = 1.0
+            if want > 0.0 and runs:
+                choice_on = 1.0
+                choice_te = hy.rule_engine_torque(t_in, w, soc, t_low, t_high, h)
+        else:
+            s_factor = hy.equivalence_factor(soc, h)
+            best = math.inf
+            for u in range(levels + 1):
+                if u > 0 and not runs:
+                    break
+                o = 1.0 if u > 0 else 0.0
+                te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else 0.0
+                pt = hy.p2_point(v, a, ratio, soc, o, te, c, e, m, tabs)
+                start = u > 0 and on == 0.0
+                if ems == hy.EMS_DP:
+                    nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
+                    cost = hy.ecms_cost(pt, dt, start, 0.0, c, h) + _interp_soc(
+                        jcost[k + 1], 1 if u > 0 else 0, nxt, soc_grid[0], soc_grid[1] - soc_grid[0], n_grid
+                    )
+                else:
+                    cost = hy.ecms_cost(pt, dt, start, s_factor, c, h)
+                if cost < best:
+                    best = cost
+                    choice_on = o
+                    choice_te = te
+        pt = hy.p2_point(v, a, ratio, soc, choice_on, choice_te, c, e, m, tabs)
+        running = pt[16]
+        if running > 0.0 and on == 0.0:
+            sums[S_STARTS] += 1.0
+            sums[S_FUEL] += h.engine_start_fuel
+        on_time = on_time + dt if running > 0.0 else 0.0
+        on = running
+        missing = pt[13] if pt[13] > MISS_TOLERANCE_N else 0.0
+        terms = hy.hybrid_powers(pt, v, a, c, e)
+        for q in range(N_TERMS):
+            sums[q] += terms[q] * dt
+        sums[S_FUEL] += pt[6] * dt
+        sums[S_DIST] += (v if v > 0.0 else 0.0) * dt
+        if missing > 0.0:
+            sums[S_MISS_S] += dt
+            short = el.shaft_torque(missing, ratio, c)
+            sums[S_MAX_MISS] = max(sums[S_MAX_MISS], short)
+        sums[S_MACHINE_S] += pt[14] * dt
+        sums[S_BATTERY_S] += pt[15] * dt
+        sums[S_ON_S] += running * dt
+        if pt[11] < 0.0:
+            sums[S_REGEN] += -pt[11] * dt
+        rows[H_T, k] = 0.5 * (time_s[k + 1] + time_s[k])
+        rows[H_V, k] = v
+        rows[H_A, k] = a
+        rows[H_GEAR, k] = g + 1.0
+        rows[H_W, k] = pt[0]
+        rows[H_TE, k] = pt[3]
+        rows[H_TM, k] = pt[7]
+        rows[H_P, k] = pt[5] if running > 0.0 else math.nan
+        rows[H_MDOT, k] = pt[6]
+        rows[H_I, k] = pt[8]
+        rows[H_UOC, k] = pt[9]
+        rows[H_U, k] = pt[9] - pt[10] * pt[8]
+        rows[H_SOC, k] = soc
+        rows[H_BRAKE, k] = pt[12]
+        rows[H_MISS, k] = el.shaft_torque(missing, ratio, c)
+        rows[H_ON, k] = running
+        rows[H_LIM_M, k] = pt[14]
+        rows[H_LIM_B, k] = pt[15]
+        soc += bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
+    return soc
+
+
+# --- Python side ------------------------------------------------------------------------------------------
+
+
+def _inputs(cycle, params):
+    from ..gears import default_schedule
+    from ..model.maps import cached_engine_map
+    from ..model.record import kernel_records
+    from ..model.record import ratios as total_ratios
+
+    engine_map = cached_engine_map(params.engine)
+    schedule = default_schedule(cycle, params, engine_map)
+    e, m, tabs = el.electric_records(params)
+    return (
+        engine_map,
+        schedule,
+        kernel_records(params)[0],
+        e,
+        m,
+        tabs.astuple(),
+        hy.hybrid_record(params),
+        np.asarray(total_ratios(params.transmission), float),
+    )
+
+
+def dp_grid(params) -> np.ndarray:
+    """The DP's state-of-charge grid: ``dp_soc_points`` over ``soc_target`` +- ``dp_soc_span`` / 2, within the
+    battery's window."""
+    h, b = params.hybrid, params.battery
+    lo = max(b.soc_min, h.soc_target - 0.5 * h.dp_soc_span)
+    hi = min(b.soc_max, h.soc_target + 0.5 * h.dp_soc_span)
+    return np.linspace(lo, hi, h.dp_soc_points)
+
+
+def terminal_cost(params, grid, soc_start, e) -> np.ndarray:
+    """J_K(soc): no cost at or above the start's charge; below it, the charge's energy made fuel at a fifth of
+    the heating value, ten times over (steep enough that the optimum ends charge-sustaining)."""
+    from ..model.electric import pack_of
+    from ..model.record import kernel_records
+
+    pk = pack_of(params)
+    u_mid = float(np.interp(soc_start, pk.soc, pk.ocv_v))
+    per_soc = hy.fuel_equivalent(pk.capacity_as * u_mid, 0.2, kernel_records(params)[0])
+    deficit = np.maximum(soc_start - grid, 0.0)
+    return np.repeat((10.0 * per_soc * deficit)[:, None], 2, axis=1)
+
+
+def run(cycle, params, *, ems: str | None = None, mode: str = "realistic"):
+    """The P2 hybrid of ``params`` on ``cycle`` (backward method) with the management ``ems`` (default
+    ``params.hybrid.ems``); a :class:`vpsim.result.Result`."""
+    ems = ems or params.hybrid.ems
+    if ems not in hy.EMS_CODES:
+        raise VpsimError(f"unknown energy management {ems!r}; expected one of {', '.join(hy.EMS_CODES)}")
+    engine_map, schedule, c, e, m, tabs, h, ratios = _inputs(cycle, params)
+    t0 = time.process_time()
+    ts, vs = np.asarray(cycle.time_s, float), np.asarray(cycle.speed_mps, float)
+    n = ts.size - 1
+    soc_start = params.battery.soc_initial
+    levels = params.hybrid.torque_levels
+    lines = (engine_map.max_torque_speed, engine_map.max_torque_values, engine_map.min_torque_values)
+    grid = dp_grid(params)
+    if ems == "dp":
+        dt = np.diff(ts)
+        v = 0.5 * (vs[1:] + vs[:-1])
+        a = np.diff(vs) / dt
+        gear = schedule.gear_at(0.5 * (ts[1:] + ts[:-1])).astype(np.int64)
+        ratio = ratios[gear - 1]
+        jcost = np.empty((n + 1, grid.size, 2))
+        jcost[n] = terminal_cost(params, grid, soc_start, e)
+        dp_kernel(v, a, dt, ratio, c, e, m, tabs, h, levels, *lines, grid, jcost)
+    else:
+        jcost = np.zeros((1, 2, 2))
+    rows = np.empty((N_ROWS, n))
+    sums = np.zeros(N_SUMS)
+    soc_end = causal_kernel(
+        ts,
+        vs,
+        schedule.time_s,
+        schedule.gear,
+        ratios,
+        c,
+        e,
+        m,
+        tabs,
+        h,
+        hy.EMS_CODES[ems],
+        levels,
+        *lines,
+        grid,
+        jcost,
+        soc_start,
+        rows,
+        sums,
+    )
+    cpu = time.process_time() - t0
+    return _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu)
+
+
+_COLUMNS = {
+    "speed_mps": H_V,
+    "accel_mps2": H_A,
+    "gear": H_GEAR,
+    "engine_speed_radps": H_W,
+    "engine_torque_nm": H_TE,
+    "machine_torque_nm": H_TM,
+    "intake_pressure_pa": H_P,
+    "fuel_flow_kgps": H_MDOT,
+    "battery_current_a": H_I,
+    "open_circuit_voltage_v": H_UOC,
+    "battery_voltage_v": H_U,
+    "brake_force_n": H_BRAKE,
+    "torque_shortfall_nm": H_MISS,
+    "engine_on": H_ON,
+    "machine_at_limit": H_LIM_M,
+    "battery_at_limit": H_LIM_B,
+}
+
+
+def charge_sustaining_fuel(fuel_kg, terms, q_hv) -> tuple[float, float]:
+    """(fuel corrected for the battery's net energy change, that change relative to the fuel's energy).
+
+    SAE J1711's charge-balance rule: a net energy change within 1 % of the fuel's energy needs no correction;
+    beyond it the fuel is corrected. J1711 corrects by the slope of fuel against energy change over several
+    tests; from one run, the engine's own average efficiency over it (crank work over fuel energy) times a
+    charging path of 0.9 (machine generating and battery charging) stands for that slope, documented in
+    docs/model.md."""
+    chem = terms["chemical"]  # energy the battery gave (negative: it was charged)
+    fuel_energy = fuel_kg * q_hv
+    if fuel_energy <= 0.0:
+        return fuel_kg, math.nan
+    ratio = chem / fuel_energy
+    if abs(ratio) <= 0.01:
+        return fuel_kg, ratio
+    crank = terms["indicated"] - terms["friction"] - terms["pumping"]
+    eta = crank / fuel_energy * 0.9
+    if not eta > 0.0:
+        return math.nan, ratio
+    return fuel_kg + chem / (q_hv * eta), ratio
+
+
+def _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu):
+    from ..result import ElectricBalance, Result, TraceMiss
+
+    ts = np.asarray(cycle.time_s, float)
+    idx = np.minimum(np.arange(ts.size), n - 1)
+    series = {k: rows[j, idx].copy() for k, j in _COLUMNS.items()}
+    series["time_s"] = ts.copy()
+    series["speed_mps"] = np.asarray(cycle.speed_mps, float).copy()
+    series["reference_speed_mps"] = series["speed_mps"].copy()
+    series["soc"] = np.append(rows[H_SOC, : ts.size - 1], soc_end)
+    series["fuel_flow_used_kgps"] = series["fuel_flow_kgps"].copy()
+    for k in ("engine_on", "machine_at_limit", "battery_at_limit"):
+        series[k] = series[k] > 0.5
+    terms = {name: float(sums[q]) for q, name in enumerate(hy.HYBRID_TERMS)}
+    fuel = float(sums[S_FUEL])
+    distance = float(sums[S_DIST])
+    q_hv = params.engine.fuel_heating_value
+    fuel_cs, nec = charge_sustaining_fuel(fuel, terms, q_hv)
+    km = distance / 1e3
+    litres_cs = fuel_cs / params.simulation.fuel_density
+    electric = {
+        "electric_wh_per_km": terms["chemical"] / 3.6e3 / km if km > 1e-3 else math.nan,
+        "wall_wh_per_km": math.nan,
+        "mpge": math.nan,
+        "soc_start": float(soc_start),
+        "soc_end": float(soc_end),
+        "regen_wh": float(sums[S_REGEN]) / 3600.0,
+        "fuel_l_per_100km_cs": litres_cs / (km / 100.0) if km > 1e-3 else math.nan,
+        "net_energy_change_ratio": nec,
+        "engine_starts": int(sums[S_STARTS]),
+        "engine_on_s": float(sums[S_ON_S]),
+        "ems": ems,
+    }
+    balance = ElectricBalance(terms)  # indicated + chemical = the rest
+    trace = TraceMiss(
+        seconds=round(float(sums[S_MISS_S]), 9),
+        max_torque_shortfall_nm=float(sums[S_MAX_MISS]),
+        details={
+            "machine_at_limit_s": round(float(sums[S_MACHINE_S]), 6),
+            "battery_at_limit_s": round(float(sums[S_BATTERY_S]), 6),
+            "torque_beyond_full_load_s": round(float(sums[S_MISS_S]), 6),
+        },
+    )
+    return Result(
+        method="backward",
+        cycle=cycle.name,
+        driver=None,
+        mode=mode,
+        series=series,
+        fuel_kg=fuel,
+        distance_m=distance,
+        fuel_density_kg_per_l=params.simulation.fuel_density,
+        cpu_time_s=cpu,
+        steps=int(n),
+        trace_miss=trace,
+        energy=balance,
+        vehicle=params.name,
+        solver={"steps": int(n), "ems": ems},
+        limits={},
+        electric=electric,
+    )
