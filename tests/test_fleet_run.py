@@ -185,7 +185,8 @@ def test_fleet_cli_on_a_made_up_list(tmp_path, capsys):
     assert "13 vehicles" in text
     s, df = _check_outputs(out, ("ftp_bag2", "ftp_bag3", "hwy", "us06"))
     assert s["n_vehicles"] == 13
-    assert s["excluded"]["diesel"] == 1 and s["excluded"]["electric"] == 1
+    assert s["excluded"]["diesel"] == 1
+    assert s["excluded"]["electric, no charge-depleting UDDS or highway test"] == 1
     assert s["cycles"]["us06"]["n"] == 5 and s["cycles"]["ftp_bag2"]["n"] == 12
     assert (df["status"] != "failed").all()
     assert np.isfinite(df["error_pct"]).all()
@@ -257,7 +258,8 @@ def test_fleet_on_the_real_list(shared_dir, tmp_path, capsys):
     assert main(args) == 0
     s, df = _check_outputs(out, ("ftp_bag2", "hwy"))
     assert s["n_vehicles"] == 25
-    assert s["excluded"]["electric"] > 50 and s["excluded"]["hybrid"] > 20
+    assert s["excluded"]["hybrid"] > 20 and "electric" not in s["excluded"]  # the EVs are predicted
+    assert s["by_powertrain"]["bev"]["n_vehicles"] == 25  # --limit: the first 25 EVs too
 
 
 def test_a_manual_gets_the_drivers_shift_point(tmp_path):
