@@ -142,8 +142,19 @@ def _check_outputs(out, cycles):
     for c in cycles:
         assert tuple(s["cycles"][c]) == STAT_KEYS
     fs = s["peer"]["fastsim"]
-    assert set(s["peer"]) == {"fastsim", "fastsim_calibrated", "fastsim_calibrated_by_powertrain"}
-    assert s["peer"]["fastsim_calibrated_by_powertrain"] == {"conventional": s["peer"]["fastsim_calibrated"]}
+    assert set(s["peer"]) == {
+        "fastsim",
+        "fastsim_calibrated",
+        "fastsim_calibrated_by_powertrain",
+        "fastsim_by_powertrain",
+    }
+    for key, conventional in (
+        ("fastsim_calibrated_by_powertrain", "fastsim_calibrated"),
+        ("fastsim_by_powertrain", "fastsim"),
+    ):
+        assert set(s["peer"][key]) == {"conventional", "bev"}  # the battery-electric cars: vpsim.fleet.ev
+        assert s["peer"][key]["conventional"] == s["peer"][conventional]
+    assert s["by_powertrain"]["conventional"]["cycles"] == s["cycles"]
     for peer in (fs, s["peer"]["fastsim_calibrated"]):
         if "measured" in peer:  # FASTSim not installed: said so, nothing faked
             assert peer["measured"] is False and peer["reason"] and set(peer) == {"measured", "reason"}
