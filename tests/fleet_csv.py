@@ -179,3 +179,38 @@ def write_list(
         w.writeheader()
         w.writerows(rows)
     return path
+
+
+# made-up battery-electric cars: id, make, model, hp, etw, axle, n/v, A, B, C, (UDDS, HWY MPGe) (or kWh/100 mi
+# below 60, as some manufacturers list them)
+EVS = [
+    ("E001", "Volt&Amp", "Zip", 200, 3875, 7.05, 96.0, 30.0, 0.10, 0.017, (170.0, 140.0)),
+    ("E002", "Volt&Amp", "Zip Long", 300, 4500, 9.0, 115.0, 32.0, 0.20, 0.018, (150.0, 130.0)),
+    ("E003", "Ohm", "Glide", 400, 5000, 1.0, 110.0, 35.0, 0.25, 0.019, (22.0, 26.0)),  # kWh/100 mi
+    ("E004", "Ohm", "Hauler", 600, 6500, 9.5, 105.0, 45.0, 0.40, 0.030, (110.0, 100.0)),
+    ("E005", "Watt", "City", 150, 3500, 8.2, 112.0, 28.0, 0.15, 0.016, (180.0, 145.0)),
+    ("E006", "Watt", "Tourer", 450, 5250, 4.7, 127.0, 38.0, 0.22, 0.021, (135.0, 120.0)),
+    ("E007", "Farad", "Coupe", 500, 4750, 9.04, 108.0, 30.0, 0.18, 0.017, (160.0, 150.0)),
+]
+
+
+def ev_rows(ev, **override) -> list[dict]:
+    """The two charge-depleting tests of a made-up EV (``override``: fields of vpsim.fleet.epa.COL)."""
+    vid, make, model, hp, etw, axle, nv, a, b, c, (udds, hwy) = ev
+    car = (vid, make, model, 0.001, "", hp, "A", 1, etw, axle, nv, a, b, c, None)
+    return [
+        _row(car, "CD", "Charge Depleting UDDS", "Electricity", udds, test=f"{vid}-UDDS", **override),
+        _row(car, "CD", "Charge Depleting Highway", "Electricity", hwy, test=f"{vid}-HWY", **override),
+    ]
+
+
+def write_ev_list(path: Path, evs=EVS, **override) -> Path:
+    """The made-up conventional list without its bad rows, and the made-up EVs."""
+    write_list(path, bad_rows=False)
+    with path.open(newline="", encoding="utf-8-sig") as f:
+        header = next(csv.reader(f))
+    with path.open("a", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, fieldnames=header)
+        for ev in evs:
+            w.writerows(ev_rows(ev, **override))
+    return path

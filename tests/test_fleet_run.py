@@ -142,8 +142,19 @@ def _check_outputs(out, cycles):
     for c in cycles:
         assert tuple(s["cycles"][c]) == STAT_KEYS
     fs = s["peer"]["fastsim"]
-    assert set(s["peer"]) == {"fastsim", "fastsim_calibrated", "fastsim_calibrated_by_powertrain"}
-    assert s["peer"]["fastsim_calibrated_by_powertrain"] == {"conventional": s["peer"]["fastsim_calibrated"]}
+    assert set(s["peer"]) == {
+        "fastsim",
+        "fastsim_calibrated",
+        "fastsim_calibrated_by_powertrain",
+        "fastsim_by_powertrain",
+    }
+    for key, conventional in (
+        ("fastsim_calibrated_by_powertrain", "fastsim_calibrated"),
+        ("fastsim_by_powertrain", "fastsim"),
+    ):
+        assert set(s["peer"][key]) == {"conventional", "bev"}  # the battery-electric cars: vpsim.fleet.ev
+        assert s["peer"][key]["conventional"] == s["peer"][conventional]
+    assert s["by_powertrain"]["conventional"]["cycles"] == s["cycles"]
     for peer in (fs, s["peer"]["fastsim_calibrated"]):
         if "measured" in peer:  # FASTSim not installed: said so, nothing faked
             assert peer["measured"] is False and peer["reason"] and set(peer) == {"measured", "reason"}
@@ -185,7 +196,8 @@ def test_fleet_cli_on_a_made_up_list(tmp_path, capsys):
     assert "13 vehicles" in text
     s, df = _check_outputs(out, ("ftp_bag2", "ftp_bag3", "hwy", "us06"))
     assert s["n_vehicles"] == 13
-    assert s["excluded"]["diesel"] == 1 and s["excluded"]["electric"] == 1
+    assert s["excluded"]["diesel"] == 1
+    assert s["excluded"]["electric, no charge-depleting UDDS or highway test"] == 1
     assert s["cycles"]["us06"]["n"] == 5 and s["cycles"]["ftp_bag2"]["n"] == 12
     assert (df["status"] != "failed").all()
     assert np.isfinite(df["error_pct"]).all()
@@ -257,7 +269,8 @@ def test_fleet_on_the_real_list(shared_dir, tmp_path, capsys):
     assert main(args) == 0
     s, df = _check_outputs(out, ("ftp_bag2", "hwy"))
     assert s["n_vehicles"] == 25
-    assert s["excluded"]["electric"] > 50 and s["excluded"]["hybrid"] > 20
+    assert s["excluded"]["hybrid"] > 20 and "electric" not in s["excluded"]  # the EVs are predicted
+    assert s["by_powertrain"]["bev"]["n_vehicles"] == 25  # --limit: the first 25 EVs too
 
 
 def test_a_manual_gets_the_drivers_shift_point(tmp_path):

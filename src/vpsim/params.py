@@ -221,6 +221,9 @@ class Machine:
     kind: str = "pm"  # pm (permanent magnet) or induction
     inertia: float = 0.05  # kg m^2, the rotor
     map_file: str = ""
+    # the machine's and inverter's losses times this (1: the loss model as fitted, or the map as measured):
+    # the drive-efficiency level of a technology, fitted per class by the fleet (vpsim.fleet.ev)
+    loss_scale: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -398,6 +401,7 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "machine.base_speed": (0.0, 5000.0, False),
     "machine.max_speed": (0.0, 5000.0, False),
     "machine.inertia": (0.0, 10.0, True),
+    "machine.loss_scale": (0.0, 10.0, False),
     "electric.accessory_power": (0.0, 1.0e5, True),
     "electric.charger_efficiency": (0.0, 1.0, False),
     "electric.regen_share": (0.0, 1.0, True),

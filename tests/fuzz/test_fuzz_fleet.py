@@ -131,3 +131,52 @@ def test_a_bad_record_field_is_named_never_routed_elsewhere(tmp_path, field, val
     reasons = [r["reason"] for r in cars.excluded_rows if r["vehicle_id"] == "T004"]
     assert reasons and all(reason in r for r in reasons), reasons
     assert not any(r.startswith(("electric", "hybrid", "missing")) for r in reasons), reasons
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "reason"),
+    [
+        ("rated_hp", "", "electric, missing rated_hp"),
+        ("rated_hp", "0", "electric, implausible rated_hp"),
+        ("rated_hp", "37", "electric, implausible rated_hp: 37"),  # the Kona Electric's record
+        ("rated_hp", "1e9", "electric, implausible rated_hp"),
+        ("rated_hp", "fast", "electric, not a number: rated_hp"),
+        ("etw_lb", "", "electric, missing etw_lb"),
+        ("etw_lb", "-5", "electric, implausible etw_lb"),
+        ("target_c_lbf_per_mph2", "nan", "electric, not a number: target_c_lbf_per_mph2"),
+        ("nv_ratio", "999.9", "electric, implausible axle_ratio and nv_ratio"),  # with axle 1.00 below
+        ("axle_ratio", "x", "electric, not a number: axle_ratio"),
+        ("fe", "-3", "electric, no charge-depleting UDDS or highway test"),
+        ("fe", "1e6", "electric, implausible"),
+    ],
+)
+def test_a_bad_ev_record_is_excluded_naming_the_field(tmp_path, capsys, field, value, reason):
+    """A hostile EV record: one line naming the field, exit 2 from from-epa, never a silent fix."""
+    from fleet_csv import EVS, write_ev_list
+    from vpsim.fleet.epa import read_test_car_list
+
+    lst = write_ev_list(tmp_path / "ev.csv", evs=[EVS[2]])  # axle 1.00: its ratio comes from N/V
+    bad = _edited(lst, tmp_path / "bad.csv", "E003", field, value)
+    cars = read_test_car_list(bad)
+    assert "E003" not in {v.vehicle_id for v in cars.ev_vehicles}
+    why = [r["reason"] for r in cars.excluded_rows if r["vehicle_id"] == "E003" and r["test_number"] == ""]
+    assert len(why) == 1 and why[0].startswith(reason), why
+    code, _, err = run_cli(capsys, "vehicle", "from-epa", bad, "--id", "E003", "--out", tmp_path / "c.toml")
+    assert code == 2 and reason in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "c.toml").exists()
+
+
+def test_an_ev_with_its_tests_in_two_units_is_excluded(tmp_path):
+    from fleet_csv import EVS, ev_rows, write_list
+    from vpsim.fleet.epa import COL, read_test_car_list
+
+    rows = ev_rows(EVS[0])
+    rows[0][COL["fe"]] = 25.0  # UDDS in kWh/100 mi, the highway in MPGe: which is which is unknown
+    lst = write_list(tmp_path / "l.csv", bad_rows=False)
+    with lst.open("a", newline="", encoding="utf-8") as f:
+        with lst.open(newline="", encoding="utf-8-sig") as g:
+            header = next(csv.reader(g))
+        csv.DictWriter(f, fieldnames=header).writerows(rows)
+    cars = read_test_car_list(lst)
+    assert not cars.ev_vehicles
+    assert cars.excluded["electric, tests in two units"] == 1

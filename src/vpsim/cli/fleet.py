@@ -117,6 +117,15 @@ def fleet(
         click.echo(line)
     if not measured:
         click.echo(f"FASTSim not measured: {fs.get('reason')}")
+    bev = s["by_powertrain"]["bev"]
+    fsb = s["peer"]["fastsim_by_powertrain"]["bev"]
+    fcb = s["peer"]["fastsim_calibrated_by_powertrain"]["bev"]
+    click.echo(f"battery-electric: {bev['n_vehicles']} vehicles ({bev['status']}), MPGe")
+    for c, v in bev["cycles"].items():
+        line = f"{c:10s} {v['n']:5d} {trio(v)}"
+        if "measured" not in fsb:
+            line += f"   {trio(fcb[c])}   {trio(fsb[c])}"
+        click.echo(line)
     rep = {c: r for c, r in info.get("record_repeatability", {}).items() if r.get("rows")}
     if rep:
         beyond = "rows_beyond_12_pct_whatever_the_model"
@@ -140,7 +149,8 @@ def fleet(
         + ", ".join(f"{k} {v:.1f} s" for k, v in rt.items() if k != "total_s")
     )
     click.echo(
-        f"wrote {out}/vehicles.csv, summary.json, run.json, report.md, excluded.csv, technology.json, figures"
+        f"wrote {out}/vehicles.csv, vehicles_ev.csv, summary.json, run.json, report.md, excluded.csv, "
+        "technology.json, figures"
     )
 
 

@@ -134,6 +134,13 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
     summary["measured_error_pct"] = (
         100.0 * (summary["fuel_economy_mpg"] / measured - 1.0) if measured is not None else float("nan")
     )
+    measured_mpge = None
+    if result.electric:  # a battery-electric vehicle file's record: MPGe per test
+        measured_mpge = _measured_mpg(vehicle, result.cycle, "measured_mpge")
+        summary["measured_mpge"] = measured_mpge
+        summary["measured_error_pct"] = (
+            100.0 * (summary["mpge"] / measured_mpge - 1.0) if measured_mpge is not None else float("nan")
+        )
     written = []
     if out:
         # an undefined sample (intake pressure with the engine decoupled, say) is an empty cell, never nan/inf
@@ -172,6 +179,12 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         )
     elif result.electric:
         _echo_electric(summary)
+        if measured_mpge is not None:
+            err = number(summary["measured_error_pct"], "+.1f", "measured_error_pct")
+            click.echo(
+                f"  measured          {measured_mpge:8.1f} MPGe (the record's test on this cycle); "
+                f"predicted {err}{' %' if _ok(err) else ''}"
+            )
     else:
         lp100 = number(summary["fuel_l_per_100km"], "8.3f", "fuel_l_per_100km")
         click.echo(f"  fuel consumption  {lp100}{' L/100 km' if _ok(lp100) else ''}")
@@ -210,10 +223,11 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         click.echo(f"  wrote {p}")
 
 
-def _measured_mpg(vehicle: str, cycle: str) -> float | None:
+def _measured_mpg(vehicle: str, cycle: str, table: str = "measured_mpg") -> float | None:
     """The fuel economy the certification record measured on ``cycle``, from the record block a vehicle file
-    of ``vpsim vehicle from-epa`` carries (its test names: ftp_bag2, ftp_bag3, hwy for hwfet, us06); None
-    for a preset, another file, or a cycle the record has no test on."""
+    of ``vpsim vehicle from-epa`` carries (its test names: ftp_bag2, ftp_bag3, hwy for hwfet, us06; a
+    battery-electric file's ``measured_mpge``: udds, hwy); None for a preset, another file, or a cycle the
+    record has no test on."""
     from ..cycles import _normalise
 
     path = Path(vehicle)
@@ -222,7 +236,7 @@ def _measured_mpg(vehicle: str, cycle: str) -> float | None:
     from ..fleet.vehicle import read_record_block
 
     try:
-        tests = read_record_block(path).get("record", {}).get("measured_mpg", {})
+        tests = read_record_block(path).get("record", {}).get(table, {})
     except VpsimError as exc:  # an edited comment block: the run stands, the comparison is left out, said so
         click.echo(f"vpsim: note: no measurement to compare with: {exc}", err=True)
         return None

@@ -45,6 +45,9 @@ def from_epa(file, vehicle_id, config, out, technology):
     _not_an_input(out, file, technology)
     cars = read_test_car_list(file)
     rec = cars.find(vehicle_id, config)
+    if getattr(rec, "powertrain", "conventional") == "bev":
+        _from_epa_bev(rec, file, out, technology)
+        return
     tech, note = None, ""
     if technology:
         check_complete(Path(technology).parent, Path(technology).name)
@@ -83,3 +86,34 @@ def _not_an_input(out, *inputs) -> None:
     for name in inputs:
         if name and Path(name).resolve() == target:
             raise VpsimError(f"--out {out}: that is an input of this command ({name}); choose another file")
+
+
+def _from_epa_bev(rec, file, out, technology) -> None:
+    """A battery-electric record's vehicle file (:mod:`vpsim.fleet.ev`); ``technology``: a fleet run's
+    technology.json, its battery-electric fit on all vehicles."""
+    from ..fleet import ev
+    from ..fleet.report import check_complete
+    from ..textio import printable
+
+    tech, note = None, ""
+    if technology:
+        check_complete(Path(technology).parent, Path(technology).name)
+        try:
+            fit = json.loads(Path(technology).read_text())["bev"]["all_vehicles"][ev.CLASSES[0]]
+            tech = {k: float(fit[k]) for k in ev.TECH_PARAMS}
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise VpsimError(
+                f"{technology}: not a technology.json of vpsim fleet with a battery-electric fit ({exc})"
+            ) from None
+        note = f"fleet fit (bev class, all vehicles) from {Path(technology).name}"
+    params = ev.ev_parameters(rec, technology=tech)
+    Path(out).write_text(ev.ev_vehicle_toml(rec, params, source=Path(file).name, technology_note=note))
+    meas = ", ".join(f"{c} {v:.1f} MPGe" for c, v in rec.measured_mpge.items())
+    m = params.machine
+    click.echo(
+        printable(
+            f"wrote {out}: {rec.make} {rec.model} ({rec.key}), battery-electric, {rec.mass_kg:.0f} kg, "
+            f"{m.rated_power / 1e3:.0f} kW, reduction {params.transmission.final_drive:.3g} on "
+            f"{params.vehicle.wheel_radius:.3f} m wheels; measured {meas or 'nothing usable'}"
+        )
+    )

@@ -118,7 +118,7 @@ GROUPINGS = ("family", "manufacturer", "record")
 DEFAULT_GROUPING = "family"
 
 
-def vehicle_groups(vehicles, by: str = DEFAULT_GROUPING) -> dict[str, str]:
+def vehicle_groups(vehicles, by: str = DEFAULT_GROUPING, labels=None) -> dict[str, str]:
     """The group of each record (key -> label) that cross-validation holds out together.
 
     * ``record``: every record on its own (the folds of earlier versions);
@@ -127,6 +127,9 @@ def vehicle_groups(vehicles, by: str = DEFAULT_GROUPING) -> dict[str, str]:
       (:func:`vpsim.fleet.vehicle.model_inputs`), joined transitively: a vehicle is never predicted from
       its own twin, sibling configuration or the same car with another transmission;
     * ``manufacturer``: every record of a manufacturer (leave-one-manufacturer-out).
+
+    ``labels`` (record -> labels): the family labels of another kind of record (the battery-electric
+    records': :func:`vpsim.fleet.ev.family_labels`); default the conventional ones above.
     """
     if by not in GROUPINGS:
         raise ValueError(f"unknown grouping {by!r}; expected one of {', '.join(GROUPINGS)}")
@@ -150,9 +153,8 @@ def vehicle_groups(vehicles, by: str = DEFAULT_GROUPING) -> dict[str, str]:
         if ra != rb:
             parent[max(ra, rb)] = min(ra, rb)
 
-    first: dict[tuple, str] = {}
-    for v in vehicles:
-        for label in (
+    def conventional(v):
+        return (
             ("vehicle", v.vehicle_id),
             (
                 "family",
@@ -162,7 +164,11 @@ def vehicle_groups(vehicles, by: str = DEFAULT_GROUPING) -> dict[str, str]:
                 v.cylinders,
             ),
             ("inputs", model_inputs(v)),
-        ):
+        )
+
+    first: dict[tuple, str] = {}
+    for v in vehicles:
+        for label in (labels or conventional)(v):
             if label in first:
                 join(first[label], v.key)
             else:

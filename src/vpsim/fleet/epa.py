@@ -16,7 +16,9 @@ Exclusion rules (a vehicle excluded is counted under its reason; the first rule 
 ==============================  ==============================================================================
 reason                          rule
 ==============================  ==============================================================================
-``electric``                    a test on ``Electricity`` and no gasoline test, or displacement 0 and none
+``electric, <why>``             a test on ``Electricity`` and no gasoline test, or displacement 0 and none:
+                                a battery-electric car, read by :mod:`vpsim.fleet.ev` (``ev_vehicles``);
+                                excluded only for the reason it gives
 ``plug-in hybrid``              a charge-depleting (``CD``) or electricity test beside gasoline tests
 ``fuel cell``                   a test on hydrogen
 ``diesel``                      a test on diesel fuel
@@ -249,11 +251,14 @@ class TestCarList:
     excluded: Counter  # reason -> number of vehicles
     excluded_rows: list[dict]  # one dict per excluded vehicle or skipped/implausible test row
     n_rows: int
+    ev_vehicles: list = field(default_factory=list)  # battery-electric records (vpsim.fleet.ev.EVRecord)
 
-    def find(self, vehicle_id: str, configuration: int | None = None) -> VehicleRecord:
+    def find(self, vehicle_id: str, configuration: int | None = None):
+        """The conventional record (:class:`VehicleRecord`) or battery-electric one
+        (:class:`vpsim.fleet.ev.EVRecord`) of a test vehicle; one-line error if none or several."""
         hits = [
             v
-            for v in self.vehicles
+            for v in [*self.vehicles, *self.ev_vehicles]
             if v.vehicle_id == vehicle_id and (configuration is None or v.configuration == configuration)
         ]
         if len(hits) == 1:
@@ -349,13 +354,18 @@ def read_test_car_list(path: str | Path) -> TestCarList:
         if kind is not None and kind.split(":")[0] == "plug-in hybrid":
             model_kind[_model_key(groups[key][0])] = "plug-in hybrid"
     vehicles: list[VehicleRecord] = []
+    ev_vehicles: list = []
     excluded: Counter = Counter()
     for (vid, cfg), tests in groups.items():
         kind = kinds[(vid, cfg)]
         if (kind is None or kind.startswith("mild hybrid")) and _model_key(tests[0]) in model_kind:
             other = model_kind[_model_key(tests[0])]
             kind = f"{other}: another test vehicle of this model is a {other}"
-        if kind is not None:
+        if kind == "electric":  # a battery-electric car: its own reader (vpsim.fleet.ev)
+            from .ev import ev_vehicle
+
+            rec, reason, test_rows = ev_vehicle(vid, cfg, tests)
+        elif kind is not None:
             rec, reason, test_rows = None, kind, []
         else:
             rec, reason, test_rows = _vehicle(vid, cfg, tests)
@@ -363,9 +373,11 @@ def read_test_car_list(path: str | Path) -> TestCarList:
         if rec is None:
             excluded[reason.split(":")[0]] += 1
             excluded_rows.append(_excl(tests[0], reason, test=False))
+        elif kind == "electric":
+            ev_vehicles.append(rec)
         else:
             vehicles.append(rec)
-    return TestCarList(str(path), vehicles, excluded, excluded_rows, len(rows))
+    return TestCarList(str(path), vehicles, excluded, excluded_rows, len(rows), ev_vehicles)
 
 
 def _excl(r: dict, reason: str, *, test: bool) -> dict:

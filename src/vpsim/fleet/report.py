@@ -37,7 +37,10 @@ CSV_COLUMNS = (
     "fold",
     "status",
 )
-SUMMARY_KEYS = ("n_vehicles", "excluded", "held_out", "cycles", "peer", "validation")  # exactly these
+# exactly these; ``n_vehicles`` and ``cycles`` are the conventional fleet's, ``by_powertrain`` has both
+SUMMARY_KEYS = ("n_vehicles", "excluded", "held_out", "cycles", "peer", "validation", "by_powertrain")
+POWERTRAINS = ("conventional", "bev")
+EV_CYCLES = ("udds", "hwy")
 STAT_KEYS = ("n", "median_error_pct", "median_abs_error_pct", "p90_abs_error_pct")
 FIGURES = ("predicted_vs_measured.png", "error_histograms.png", "error_by_group.png", "worst_vehicles.png")
 N_WORST = 20
@@ -85,6 +88,29 @@ def summary(run) -> dict:
         out["peer"]["fastsim"] = missing
         out["peer"]["fastsim_calibrated"] = dict(missing)
         out["peer"]["fastsim_calibrated_by_powertrain"] = {"conventional": dict(missing)}
+    out["peer"]["fastsim_by_powertrain"] = {"conventional": out["peer"]["fastsim"]}
+    ev = run.ev_frame()
+    ev_ok = ev[np.isfinite(ev["error_pct"].to_numpy(float))]
+    out["by_powertrain"] = {
+        "conventional": {"n_vehicles": out["n_vehicles"], "cycles": out["cycles"]},
+        "bev": {
+            "n_vehicles": int(ev_ok.drop_duplicates(["vehicle_id", "configuration"]).shape[0]),
+            "status": run.ev.get("status", "not run"),
+            "cycles": {c: error_stats(ev_ok[ev_ok["cycle"] == c]["error_pct"]) for c in EV_CYCLES},
+        },
+    }
+    for key, col in (
+        ("fastsim_by_powertrain", "fastsim"),
+        ("fastsim_calibrated_by_powertrain", "fastsim_calibrated"),
+    ):
+        if run.peer.get("available") and len(ev_ok):
+            both = ev_ok[np.isfinite(ev_ok[f"{col}_error_pct"].to_numpy(float))]
+            out["peer"][key]["bev"] = {
+                c: error_stats(both[both["cycle"] == c][f"{col}_error_pct"]) for c in EV_CYCLES
+            }
+        else:
+            why = run.peer.get("reason", "not run") if not run.peer.get("available") else run.ev.get("status")
+            out["peer"][key]["bev"] = {"measured": False, "reason": why or "no electric vehicle predicted"}
     return out
 
 
@@ -98,6 +124,30 @@ def validation(run) -> dict:
         "groups": run.n_groups,
         "tuned_on_this_list": [dict(t) for t in TUNED_ON_THIS_LIST],
     }
+
+
+def _ev():
+    from . import ev
+
+    return ev
+
+
+def ev_technology_bounds(run) -> dict:
+    """As :func:`technology_bounds`, for the battery-electric class's fits."""
+    ev = _ev()
+    out = {}
+    fits = {
+        **run.ev.get("technology", {}),
+        **{f"all.{c}": t for c, t in run.ev.get("technology_all", {}).items()},
+    }
+    for name, t in fits.items():
+        hits = ev.on_bounds(t)
+        if hits:
+            out[name] = {
+                p: {"bound": side, "value": t[p], "reason": ev.BOUND_REASONS.get((p, side), "")}
+                for p, side in hits.items()
+            }
+    return out
 
 
 def technology_bounds(run) -> dict:
@@ -482,8 +532,44 @@ def _axes_grid(n, ncols=2, size=(5.2, 4.2)):
     return fig, axes
 
 
-def figure_predicted_vs_measured(df, cycles, peer: bool):
-    fig, axes = _axes_grid(len(cycles))
+def figure_predicted_vs_measured(df, cycles, peer: bool, ev=None):
+    """One panel per conventional cycle (mpg) and, with battery-electric rows ``ev``, one per EV test
+    (MPGe: green diamonds)."""
+    ev_cycles = [c for c in EV_CYCLES if ev is not None and (ev["cycle"] == c).any()]
+    fig, axes = _axes_grid(len(cycles) + len(ev_cycles))
+    for ax, c in zip(axes[len(cycles) :], ev_cycles, strict=False):
+        sub = ev[(ev["cycle"] == c) & np.isfinite(ev["predicted_mpge"].to_numpy(float))]
+        vals = np.concatenate([sub["measured_mpge"], sub["predicted_mpge"]])
+        lo, hi = (0.9 * vals.min(), 1.05 * vals.max()) if vals.size else (0, 1)
+        if peer and np.isfinite(sub["fastsim_calibrated_mpge"].to_numpy(float)).any():
+            ax.scatter(
+                sub["measured_mpge"],
+                sub["fastsim_calibrated_mpge"],
+                s=14,
+                marker="s",
+                c="tab:orange",
+                alpha=0.45,
+                label="FASTSim 3.1 BEV, calibrated",
+            )
+        ax.scatter(
+            sub["measured_mpge"],
+            sub["predicted_mpge"],
+            s=22,
+            marker="D",
+            c="tab:green",
+            alpha=0.75,
+            label="vpsim BEV",
+        )
+        x = np.array([lo, hi])
+        ax.plot(x, x, "k-", lw=0.8)
+        ax.plot(x, 1.1 * x, "k:", lw=0.7)
+        ax.plot(x, 0.9 * x, "k:", lw=0.7, label="±10 %")
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(lo, hi)
+        ax.set_title(f"battery-electric, {c} (n = {len(sub)})")
+        ax.set_xlabel("measured MPGe (unadjusted)")
+        ax.set_ylabel("predicted MPGe (out of fold)")
+        ax.legend(fontsize=7, loc="upper left")
     for ax, c in zip(axes, cycles, strict=False):
         sub = df[(df["cycle"] == c) & np.isfinite(df["predicted_mpg"])]
         lo = 0.9 * min(sub["measured_mpg"].min(), sub["predicted_mpg"].min()) if len(sub) else 0
@@ -529,7 +615,9 @@ def figure_predicted_vs_measured(df, cycles, peer: bool):
         ax.set_xlabel("measured mpg")
         ax.set_ylabel("predicted mpg (out of fold)")
         ax.legend(fontsize=7, loc="upper left")
-    fig.suptitle("Predicted against measured fuel economy, 2022 EPA test cars")
+    fig.suptitle(
+        "Predicted against measured fuel economy (MPGe for the battery-electric cars), EPA test cars"
+    )
     return fig
 
 
@@ -674,6 +762,7 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
     df = run.frame()
     cols = list(CSV_COLUMNS) + [c for c in df.columns if c not in CSV_COLUMNS]
     df[cols].to_csv(out / "vehicles.csv", index=False)
+    run.ev_frame().to_csv(out / "vehicles_ev.csv", index=False)
     import pandas as pd
 
     pd.DataFrame(
@@ -688,6 +777,14 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
                 "search_bounds": {k: list(v) for k, v in cal.search_bounds().items()},
                 "on_search_bound": technology_bounds(run),
                 "peer_fastsim_calibrated_out_of_fold": run.peer_technology,
+                "bev": {
+                    "parameters": list(_ev().TECH_PARAMS),
+                    "out_of_fold": run.ev.get("technology", {}),
+                    "all_vehicles": run.ev.get("technology_all", {}),
+                    "search_bounds": {k: list(v) for k, v in _ev().search_bounds().items()},
+                    "on_search_bound": ev_technology_bounds(run),
+                    "peer_fastsim_calibrated_out_of_fold": run.ev.get("peer_technology", {}),
+                },
             },
             indent=2,
         )
@@ -700,7 +797,7 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
     peer = bool(run.peer.get("available"))
     w = worst(df, inputs=_inputs(run))
     figs = {
-        "predicted_vs_measured.png": figure_predicted_vs_measured(df, run.cycles, peer),
+        "predicted_vs_measured.png": figure_predicted_vs_measured(df, run.cycles, peer, run.ev_frame()),
         "error_histograms.png": figure_histograms(df, run.cycles, peer),
         "error_by_group.png": figure_by_group(df, run.cycles),
         "worst_vehicles.png": figure_worst(w),
@@ -746,6 +843,69 @@ def _repeatability_md(rep: dict, cycles) -> list[str]:
             + ", ".join(f"{m:g}" for m in wg["measured_mpg"])
             + f" mpg (+{wg['spread_pct']:.0f} %) |"
         )
+    return L
+
+
+def _powertrain_md(run, s) -> list[str]:
+    """The table per powertrain (conventional cycles in mpg, battery-electric tests in MPGe) and the
+    battery-electric class's technology."""
+    ev = _ev()
+    fs, fc = s["peer"]["fastsim_by_powertrain"], s["peer"]["fastsim_calibrated_by_powertrain"]
+
+    def trio(v):
+        if not v or v.get("measured") is False:
+            return "not measured"
+        return (
+            f"{_fmt(v.get('median_error_pct'))} / {_fmt(v.get('median_abs_error_pct'), '.1f')} / "
+            f"{_fmt(v.get('p90_abs_error_pct'), '.1f')} %"
+        )
+
+    L = [
+        "",
+        "## Errors per powertrain",
+        "",
+        "Median / median abs / p90 abs error, out of fold. Conventional cars: mpg on the cycles above; "
+        "battery-electric cars (`vpsim.fleet.ev`): unadjusted MPGe of the charge-depleting UDDS and highway "
+        "tests, the class `bev` with its own technology (`machine.loss_scale`, `electric.accessory_power`) "
+        "fitted on the same kind of folds (EV families held out together). FASTSim: its BEV "
+        "(`vpsim.fleet.peer_bev`) on the same records.",
+        "",
+        "| powertrain | test | n | vpsim | FASTSim calibrated | FASTSim defaults |",
+        "|---|---|---|---|---|---|",
+    ]
+    for pt in POWERTRAINS:
+        b = s["by_powertrain"][pt]
+        for c, v in b["cycles"].items():
+            L.append(
+                f"| {pt} | {c} | {v['n']} | {trio(v)} | {trio(fc.get(pt, {}).get(c, fc.get(pt)))} | "
+                f"{trio(fs.get(pt, {}).get(c, fs.get(pt)))} |"
+            )
+    bev = s["by_powertrain"]["bev"]
+    L += ["", f"Battery-electric vehicles predicted: {bev['n_vehicles']} ({bev['status']})."]
+    if run.ev.get("technology"):
+        L += [
+            "",
+            f"Battery-electric technology per fold ({run.ev['folds']} folds of {run.ev['groups']} EV groups; "
+            "search bounds: "
+            + ", ".join(f"`{k}` {lo:g}-{hi:g}" for k, (lo, hi) in ev.search_bounds().items())
+            + "):",
+            "",
+            "| fold.class | machine loss scale | accessories, W | training rows | on a bound |",
+            "|---|---|---|---|---|",
+        ]
+        for k, t in {
+            **run.ev["technology"],
+            **{f"all.{c}": t for c, t in run.ev["technology_all"].items()},
+        }.items():
+            hits = ev.on_bounds(t)
+            L.append(
+                f"| {k} | {t[ev.TECH_PARAMS[0]]:.2f} | {t[ev.TECH_PARAMS[1]]:.0f} | {t['n_train']} | "
+                + (", ".join(f"{p.split('.')[1]} {side}" for p, side in hits.items()) or "–")
+                + " |"
+            )
+        reasons = {(p, side) for t in run.ev["technology"].values() for p, side in ev.on_bounds(t).items()}
+        for p, side in sorted(reasons):
+            L.append(f"\n`{p}` on its {side} bound: the bound stays: {ev.BOUND_REASONS.get((p, side), '')}.")
     return L
 
 
@@ -827,6 +987,7 @@ def markdown(run, s, info, df, w, command: str) -> str:
         "",
         "![error histograms](error_histograms.png)",
     ]
+    L += _powertrain_md(run, s)
     L += _repeatability_md(info.get("record_repeatability", {}), run.cycles)
     L += _manufacturers_md(info.get("between_manufacturers", {}), s, run.cycles)
     L += [

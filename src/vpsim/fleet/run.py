@@ -41,6 +41,36 @@ from .epa import TestCarList, VehicleRecord, mpg_from_l_per_100km, read_test_car
 from .vehicle import GEAR_RULE, MANUAL_GEAR_RULE, gear_rule  # noqa: F401 (the fleet's rules)
 
 METHODS = ("backward", "forward")
+EV_CHUNK = 8  # battery-electric vehicles per unit of work (each runs 44 grid points per test)
+EV_COLUMNS = (
+    "vehicle_id",
+    "configuration",
+    "make",
+    "model",
+    "manufacturer",
+    "cycle",
+    "measured_mpge",
+    "predicted_mpge",
+    "error_pct",
+    "fold",
+    "status",
+    "rated_power_kw",
+    "test_mass_kg",
+    "power_to_mass_w_per_kg",
+    "final_drive",
+    "wheel_radius_m",
+    "ratio_rule",
+    "battery_strings",
+    "machine_loss_scale",
+    "accessory_power_w",
+    "trace_miss_s",
+    "fastsim_mpge",
+    "fastsim_error_pct",
+    "fastsim_status",
+    "fastsim_calibrated_mpge",
+    "fastsim_calibrated_error_pct",
+    "detail",
+)
 MODE = "extended"
 CHUNK = 64  # vehicles per unit of work
 FORWARD_DRIVER = "2"  # the stiffer preset PI driver (a = 1 s): the test driver follows the trace closely
@@ -63,11 +93,19 @@ class FleetRun:
     grouping: str = cal.DEFAULT_GROUPING  # what cross-validation holds out together (calibrate.GROUPINGS)
     n_groups: int = 0
     peer_technology: dict = field(default_factory=dict)  # the calibrated FASTSim's, "fold<k>.<class>"
+    # the battery-electric records (vpsim.fleet.ev): rows, their technology and folds (_run_evs)
+    ev: dict = field(default_factory=dict)
 
     def frame(self):
         import pandas as pd
 
         return pd.DataFrame(self.rows)
+
+    def ev_frame(self):
+        """One row per battery-electric vehicle x test (``udds``, ``hwy``): MPGe measured and predicted."""
+        import pandas as pd
+
+        return pd.DataFrame(self.ev.get("rows", []), columns=EV_COLUMNS)
 
 
 def _vehicle_class(rec: VehicleRecord) -> str:
@@ -401,6 +439,11 @@ def run_fleet(
                     for (f, cls), t in sorted(peer_tech.items())
                 }
             timings["peer_calibrated_s"] = time.perf_counter() - t0
+        # 6. the battery-electric records: the same procedure with the class "bev" (vpsim.fleet.ev)
+        t0 = time.perf_counter()
+        evs = cars.ev_vehicles if limit is None else cars.ev_vehicles[:limit]
+        ev_out = _run_evs(evs, folds, group_by, executor, peer_state, progress, timings)
+        timings["ev_s"] = time.perf_counter() - t0
     rows = []
     for v, cs in work:
         for c in cs:
@@ -442,7 +485,188 @@ def run_fleet(
         grouping=group_by,
         n_groups=n_groups,
         peer_technology=peer_technology,
+        ev=ev_out,
     )
+
+
+def _rounded(t: dict) -> dict:
+    return {k: (round(x, 6) if isinstance(x, float) else x) for k, x in t.items()}
+
+
+def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings) -> dict:
+    """The battery-electric records on their two tests: technology of the class ``bev`` fitted out of fold
+    exactly as the conventional classes' (folds of :func:`vpsim.fleet.calibrate.assign_folds` over the EV
+    families, :func:`~vpsim.fleet.calibrate.per_fold_and_class`), then one backward run per vehicle and
+    test at its fold's technology; FASTSim's BEV (:mod:`vpsim.fleet.peer_bev`) on the same records, with
+    its defaults and calibrated on the same folds. Returns ``rows``, ``technology`` ("fold<k>.bev"),
+    ``technology_all``, ``folds``, ``groups``, ``peer_technology`` and ``status`` ("ok" or why not run)."""
+    from . import ev as evm
+    from . import peer_bev as pb
+
+    out = {"rows": [], "technology": {}, "technology_all": {}, "folds": 0, "groups": 0}
+    out.update(peer_technology={}, status="ok", n_records=len(evs))
+    evs = [v for v in evs if any(c in v.measured_mpge for c in evm.EV_CYCLES)]
+    if not evs:
+        out["status"] = "no battery-electric record with a charge-depleting UDDS or highway test"
+        return out
+    groups = cal.vehicle_groups(evs, group_by, labels=evm.family_labels)
+    n_groups = len(set(groups.values()))
+    k = n_groups if group_by == "manufacturer" else folds
+    if n_groups < max(k, 2):
+        out["status"] = (
+            f"{len(evs)} battery-electric vehicle(s) in {n_groups} group(s): too few for {k} folds"
+        )
+        return out
+    fold_of = cal.assign_folds([v.key for v in evs], k, groups=groups)
+    out.update(folds=k, groups=n_groups, fold_of=fold_of, group_of=groups)
+    work = [(v, tuple(c for c in evm.EV_CYCLES if c in v.measured_mpge)) for v in evs]
+    chunks = [work[i : i + EV_CHUNK] for i in range(0, len(work), EV_CHUNK)]
+    t0 = time.perf_counter()
+    grid_rows: list[dict] = []
+    for i, part in enumerate(executor.map(evm.grid_chunk, chunks)):
+        grid_rows += part
+        _progress(
+            "electric: technology grid, vehicles", min((i + 1) * EV_CHUNK, len(work)), len(work), t0, progress
+        )
+    by_key = {v.key: v for v in evs}
+    ok = [r for r in grid_rows if r["log_wall"] is not None]
+    failed = {(r["key"], r["cycle"]): r["error"] for r in grid_rows if r["log_wall"] is None}
+    if not ok:
+        out["status"] = "no battery-electric vehicle could be simulated: " + grid_rows[0]["error"]
+        return out
+    grid = np.stack([r["log_wall"] for r in ok])
+    meas = np.array([math.log(evm.wall_wh_per_km(by_key[r["key"]].measured_mpge[r["cycle"]])) for r in ok])
+    vfold = np.array([fold_of[r["key"]] for r in ok])
+    vclass = np.full(len(ok), evm.CLASSES[0], dtype=object)
+    tech = cal.per_fold_and_class(lambda rows: evm.fit(grid[rows], meas[rows]), vfold, vclass, k, evm.CLASSES)
+    params_all, loss_all = evm.fit(grid, meas)
+    out["technology"] = {f"fold{f}.{c}": _rounded(t) for (f, c), t in sorted(tech.items())}
+    out["technology_all"] = {
+        evm.CLASSES[0]: _rounded({**params_all, "train_loss": loss_all, "n_train": len(ok)})
+    }
+    items = [
+        (v, c, tech[(fold_of[v.key], evm.CLASSES[0])])
+        for v, cs in work
+        for c in cs
+        if (v.key, c) not in failed
+    ]
+    preds: dict = {}
+    for part in executor.map(
+        evm.predict_chunk, [items[i : i + 4 * EV_CHUNK] for i in range(0, len(items), 4 * EV_CHUNK)]
+    ):
+        for r in part:
+            preds[(r["key"], r["cycle"])] = r
+    timings["ev_vpsim_s"] = time.perf_counter() - t0
+    peer_rows: dict = {}
+    peer_cal_rows: dict = {}
+    if peer_state.get("available"):
+        t0 = time.perf_counter()
+        pitems = [(evm.peer_row(v), evm.PEER_CYCLE[c]) for v, cs in work for c in cs]
+        pch = [pitems[i : i + 2 * EV_CHUNK] for i in range(0, len(pitems), 2 * EV_CHUNK)]
+        for part in executor.map(pb.bev_peer_chunk, pch):
+            for r in part:
+                peer_rows[(r["key"], r["cycle"])] = r
+        cal_rows: list[dict] = []
+        done = 0
+        for part in executor.map(pb.bev_calibration_chunk, pch):
+            cal_rows += part
+            done += len(part)
+            _progress("electric: FASTSim calibration runs", done, len(pitems), t0, progress)
+        okp = [r for r in cal_rows if r["log_wh_per_km"] is not None]
+        if okp:
+            key_of = {pb._key(evm.peer_row(v)): v for v in evs}
+            cycle_of = {p: c for c, p in evm.PEER_CYCLE.items()}
+            ptech = pb.calibrate_bev_peer(
+                np.stack([r["log_wh_per_km"] for r in okp]),
+                np.array(
+                    [
+                        math.log(evm.wall_wh_per_km(key_of[r["key"]].measured_mpge[cycle_of[r["cycle"]]]))
+                        for r in okp
+                    ]
+                ),
+                np.array([fold_of[key_of[r["key"]].key] for r in okp]),
+                k,
+            )
+            citems = [
+                (evm.peer_row(v), evm.PEER_CYCLE[c], _peer_tech(ptech[(fold_of[v.key], pb.BEV_CLASSES[0])]))
+                for v, cs in work
+                for c in cs
+            ]
+            cch = [citems[i : i + 2 * EV_CHUNK] for i in range(0, len(citems), 2 * EV_CHUNK)]
+            for part in executor.map(pb.bev_peer_chunk, cch):
+                for r in part:
+                    peer_cal_rows[(r["key"], r["cycle"])] = r
+            out["peer_technology"] = {f"fold{f}.{c}": _rounded(t) for (f, c), t in sorted(ptech.items())}
+        timings["ev_peer_s"] = time.perf_counter() - t0
+    rows = []
+    for v, cs in work:
+        t = tech[(fold_of[v.key], evm.CLASSES[0])]
+        for c in cs:
+            meas_c = v.measured_mpge[c]
+            row = {
+                "vehicle_id": v.vehicle_id,
+                "configuration": v.configuration,
+                "make": v.make,
+                "model": v.model,
+                "manufacturer": v.manufacturer,
+                "cycle": c,
+                "measured_mpge": round(meas_c, 4),
+                "predicted_mpge": math.nan,
+                "error_pct": math.nan,
+                "fold": fold_of[v.key],
+                "status": "ok",
+                "rated_power_kw": round(v.rated_power_kw, 2),
+                "test_mass_kg": round(v.mass_kg, 1),
+                "power_to_mass_w_per_kg": round(1e3 * v.rated_power_kw / v.mass_kg, 2),
+                "final_drive": round(v.final_drive, 4),
+                "wheel_radius_m": round(v.wheel_radius_m, 4),
+                "ratio_rule": v.ratio_rule,
+                "battery_strings": evm.pack_strings(v.rated_power_kw * 1e3),
+                "machine_loss_scale": t[evm.TECH_PARAMS[0]],
+                "accessory_power_w": t[evm.TECH_PARAMS[1]],
+                "trace_miss_s": math.nan,
+                "fastsim_mpge": math.nan,
+                "fastsim_error_pct": math.nan,
+                "fastsim_status": "not run",
+                "fastsim_calibrated_mpge": math.nan,
+                "fastsim_calibrated_error_pct": math.nan,
+                "detail": "",
+            }
+            pred = preds.get((v.key, c))
+            err = failed.get((v.key, c)) or (pred or {}).get("error") or ("" if pred else "not run")
+            if err:
+                row["status"], row["detail"] = "failed", err
+            else:
+                row["predicted_mpge"] = round(pred["mpge"], 4)
+                row["error_pct"] = round(100.0 * (pred["mpge"] / meas_c - 1.0), 4)
+                row["trace_miss_s"] = pred["trace_miss_s"]
+                if pred["trace_miss_s"] > 0:
+                    row["status"] = "trace_miss"
+                    row["detail"] = (
+                        f"the machine or battery cannot give the trace's power for {pred['trace_miss_s']:g} s"
+                    )
+            pkey = (pb._key(evm.peer_row(v)), evm.PEER_CYCLE[c])
+            for col, src in (("fastsim", peer_rows), ("fastsim_calibrated", peer_cal_rows)):
+                pr = src.get(pkey)
+                if pr is None:
+                    continue
+                mpge = pr.get("mpge", math.nan)
+                if math.isfinite(mpge):
+                    row[f"{col}_mpge"] = round(mpge, 4)
+                    row[f"{col}_error_pct"] = round(100.0 * (mpge / meas_c - 1.0), 4)
+                if col == "fastsim":
+                    row["fastsim_status"] = pr.get("peer_error") or (
+                        "trace_miss" if pr.get("trace_miss") else "ok"
+                    )
+            rows.append(row)
+    out["rows"] = rows
+    return out
+
+
+def _peer_tech(t: dict) -> dict:
+    from .peer_bev import BEV_PEER_PARAMS
+
+    return {k: t[k] for k in BEV_PEER_PARAMS}
 
 
 def _log_l100(mpg: float) -> float:

@@ -174,4 +174,22 @@ TUNED_ON_THIS_LIST: tuple[dict, ...] = (
         "where": "src/vpsim/fleet/epa.py: read_test_car_list",
         "how": "Added after the RAV4 Prime's gasoline-only test vehicle ran as a conventional car at -25 % on US06 (cfd8bc1); 12 more vehicles excluded.",
     },
+    {
+        "name": "KWH_PER_100MI_BELOW",
+        "value": 60.0,
+        "where": "src/vpsim/fleet/peer_bev.py: KWH_PER_100MI_BELOW",
+        "how": "Unit rule on measured values: set after seeing that 16 EV records of the list under FE_UNIT MPG hold 17-38 (kWh/100 mi) while no 2022 EV tests below 60 MPGe (54b25b6); no comparison of errors.",
+    },
+    {
+        "name": "MPGE_RANGE",
+        "value": [40.0, 300.0],
+        "where": "src/vpsim/fleet/ev.py: MPGE_RANGE",
+        "how": "Filters EV tests by their measured outcome (the list's 82-191 MPGe well inside); set when the EV reader was written, before any vpsim EV result; no comparison recorded.",
+    },
+    {
+        "name": "MIN_POWER_W_PER_KG",
+        "value": 30.0,
+        "where": "src/vpsim/fleet/ev.py: MIN_POWER_W_PER_KG",
+        "how": "Set after reading the Kona Electric's and Niro EV's 37/38 hp (15 W/kg) in the list's fields, before any vpsim EV result; those two also fall below the general 40 hp bound.",
+    },
 )

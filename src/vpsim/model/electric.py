@@ -270,20 +270,26 @@ def rotor_mass(ratio, driving, c, e):
 
 
 def machine_spec(params):
-    """The :class:`vpsim.model.machine.MachineSpec` of ``params.machine`` (the scalable loss model)."""
+    """The :class:`vpsim.model.machine.MachineSpec` of ``params.machine`` (the scalable loss model, its
+    coefficients times ``machine.loss_scale``)."""
     p = params.machine
+    coefficients = None
+    if p.loss_scale != 1.0:  # machine.loss_scale: every loss term times the scale
+        base = mc.DEFAULT_COEFFICIENTS[p.kind].as_dict()
+        coefficients = mc.LossCoefficients(**{k: v * p.loss_scale for k, v in base.items()})
     return mc.MachineSpec(
         rated_power_w=p.rated_power,
         base_speed_radps=p.base_speed,
         max_speed_radps=p.max_speed,
         kind=p.kind,
+        coefficients=coefficients,
         inertia_kgm2=p.inertia,
     )
 
 
 def _measured_tables(params):
     """(loss map speed, torque, loss; envelope speed, max, min) of a measured machine, scaled to nothing:
-    the file's own machine; empty arrays without a map file."""
+    the file's own machine, its losses times ``machine.loss_scale``; empty arrays without a map file."""
     empty = np.array([0.0, 1.0])  # a table the kernels never read (two nodes keep its spacing finite)
     if not params.machine.map_file:
         return empty, empty, np.zeros((2, 2)), empty, empty, empty
@@ -293,7 +299,7 @@ def _measured_tables(params):
     return (
         mm.speed_grid,
         mm.torque_grid,
-        mm._loss_table,
+        mm._loss_table * params.machine.loss_scale,
         mm.envelope_speed,
         mm.max_torque,
         mm.min_torque,
