@@ -25,7 +25,7 @@ import time
 GROUPS = {  # two of about equal length (60 s on a 2-core machine)
     "rosenbrock": "forward method (Rosenbrock, the default solver) and its batch",
     "others": "backward and inverse methods, their batch, the maps, the forward method's Dormand-Prince and "
-    "the battery-electric car",
+    "the battery-electric and hybrid cars",
 }
 
 
@@ -83,6 +83,7 @@ KERNEL_MODULES = (
     "vpsim.methods.forward",
     "vpsim.methods.inverse",
     "vpsim.methods.bev",
+    "vpsim.methods.hev",
 )
 
 
@@ -124,6 +125,8 @@ def run_group(group: str) -> None:
             vpsim.simulate(cycle, method="forward", mode=mode, solver="dopri5")
         for method in ("backward", "forward", "inverse"):  # the battery-electric car
             vpsim.simulate(cycle, method=method, params="bev")
+        for ems in ("ecms", "dp"):  # the hybrid (rule and ecms share one kernel)
+            vpsim.simulate(cycle, method="backward", params="hev_p2", ems=ems)
     elif group == "rosenbrock":
         for mode in ("paper", "realistic"):
             vpsim.simulate(cycle, method="forward", mode=mode)

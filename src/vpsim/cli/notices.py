@@ -29,6 +29,7 @@ KERNELS = {
     "vpsim.methods._fdm_dopri5": ("forward method's Dormand-Prince integrator", "20-50 s"),
     "vpsim.methods.inverse": ("inverse kernels", "10-20 s"),
     "vpsim.methods.bev": ("battery-electric kernels", "3-8 s"),
+    "vpsim.methods.hev": ("hybrid kernels", "5-15 s"),
 }
 _MODEL = ("vpsim.model.engine", "vpsim.model.tables", "vpsim.methods.backward")  # maps and gear rule too
 METHOD_MODULES = {
