@@ -276,7 +276,9 @@ def pack_strings(rated_power_w: float) -> int:
 
 def machine_speeds(rec: EVRecord) -> tuple[float, float]:
     """(base speed, max speed) in rad/s of the module's rule."""
-    w_max = rec.final_drive * TOP_SPEED_MPH * MPH_TO_MPS / rec.wheel_radius_m
+    from ..model.electric import machine_speed_for
+
+    w_max = machine_speed_for(TOP_SPEED_MPH * MPH_TO_MPS, rec.final_drive, rec.wheel_radius_m)
     return w_max / SPEED_RATIO, w_max
 
 

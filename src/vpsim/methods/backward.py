@@ -43,6 +43,7 @@ from ..model.maps import (
 )
 from ..model.record import kernel_records
 from ..model.record import ratios as total_ratios
+from ..model.tables import gear_index
 from ..result import EnergyBalance, Result, TraceMiss, limits_of
 
 # how the fuel flow of an operating point is found
@@ -58,17 +59,6 @@ A_FUEL = rules.N_TERMS
 A_DIST, A_MISS_S, A_MAX_SHORT, A_DEFICIT = A_FUEL + 1, A_FUEL + 2, A_FUEL + 3, A_FUEL + 4
 N_ACC = A_FUEL + 5
 MISS_TOLERANCE_NM = 1e-9  # a shortfall below this is rounding, not a trace miss
-
-
-@inline
-def gear_index(time_s, k, sched_t, sched_gear, j):
-    """Index (0-based) of the gear engaged on interval k (the schedule held right-continuously), and the
-    schedule position to start the next search from."""
-    m = sched_t.size
-    while j < m and sched_t[j] <= time_s[k]:
-        j += 1
-    idx = min(max(j - 1, 0), m - 1)
-    return sched_gear[idx] - 1, j
 
 
 @inline

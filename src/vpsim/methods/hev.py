@@ -31,7 +31,7 @@ from ..model import tables as tb
 from ..model import vehicle as vh
 from ..model._compile import kernel
 from ..model.engine import equation
-from .backward import gear_index
+from ..model.tables import gear_index
 
 # rows of the per-interval series
 (

@@ -393,3 +393,8 @@ def kinetic_power(v, a, c):
 def ratio_for_speed(machine_speed, vehicle_speed, wheel_radius):
     """i = w r / v: the total ratio at which vehicle speed v turns the machine at w   (14),(17)."""
     return machine_speed * wheel_radius / vehicle_speed
+
+
+def machine_speed_for(vehicle_speed, ratio, wheel_radius):
+    """w = i v / r: the machine's speed at vehicle speed v through total ratio i   (14),(17)."""
+    return ratio * vehicle_speed / wheel_radius

@@ -114,3 +114,14 @@ def bilinear(xg, yg, table, x, y):
     out = np.empty(xs.size)
     _bilinear_loop(np.array(xg, float), np.array(yg, float), np.array(table, dtype=float), xs, ys, out)
     return out.reshape(x.shape) if x.ndim else float(out[0])
+
+
+@inline
+def gear_index(time_s, k, sched_t, sched_gear, j):
+    """Index (0-based) of the gear engaged on interval k (the schedule held right-continuously), and the
+    schedule position to start the next search from."""
+    m = sched_t.size
+    while j < m and sched_t[j] <= time_s[k]:
+        j += 1
+    idx = min(max(j - 1, 0), m - 1)
+    return sched_gear[idx] - 1, j
