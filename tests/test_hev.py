@@ -77,8 +77,10 @@ def test_summary_keys_for_every_powertrain(runs):
 
 
 def test_the_hybrid_refuses_what_it_cannot_do_yet():
-    with pytest.raises(VpsimError, match="backward method only"):
+    with pytest.raises(VpsimError, match="forward method is not built yet"):
         vpsim.simulate("udds", "forward", HEV)
+    with pytest.raises(VpsimError, match="backward method only"):
+        vpsim.simulate("udds", "inverse", HEV, ems="dp")
     with pytest.raises(VpsimError, match="unknown energy management"):
         vpsim.simulate("udds", "backward", HEV, ems="magic")
     with pytest.raises(ParameterError, match="hybrid.soc_target"):
@@ -94,3 +96,15 @@ def test_a_battery_too_small_is_counted_not_hidden():
     assert s["battery_at_limit_s"] > 0
     assert abs(r.energy.relative_residual) < 1e-12
     assert np.all(np.isfinite(r.to_dataframe()["soc"]))
+
+
+@pytest.mark.parametrize("cycle", ["udds", "hwfet", "us06"])
+def test_inverse_method_within_3_percent_of_backward(runs, cycle):
+    """The smoothing driver's trajectory (driver 2) with the same management and operating point: the
+    charge-sustaining fuel within 3 % of the backward method's, the balance closed, the speed followed."""
+    for ems in ("rule", "ecms"):
+        inv = vpsim.simulate(cycle, "inverse", HEV, ems=ems)
+        back = runs[cycle, ems].electric["fuel_l_per_100km_cs"]
+        assert inv.electric["fuel_l_per_100km_cs"] == pytest.approx(back, rel=0.03)
+        assert abs(inv.energy.relative_residual) < 1e-12
+        assert inv.method == "inverse" and inv.summary()["speed_not_followed_s"] <= 2.0

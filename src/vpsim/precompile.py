@@ -127,6 +127,7 @@ def run_group(group: str) -> None:
             vpsim.simulate(cycle, method=method, params="bev")
         for ems in ("ecms", "dp"):  # the hybrid (rule and ecms share one kernel)
             vpsim.simulate(cycle, method="backward", params="hev_p2", ems=ems)
+        vpsim.simulate(cycle, method="inverse", params="hev_p2")
     elif group == "rosenbrock":
         for mode in ("paper", "realistic"):
             vpsim.simulate(cycle, method="forward", mode=mode)

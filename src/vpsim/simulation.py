@@ -111,12 +111,12 @@ def _simulate_bev(cycle, method, params, driver, mode, gears, options):
 
 def _simulate_hev(cycle, method, params, driver, mode, gears, options):
     """The P2 hybrid (:mod:`vpsim.methods.hev`): the backward method with its energy management."""
-    if method != "backward":
+    if method == "forward":
         raise VpsimError(
-            f"the hybrid runs on the backward method only in this version (asked: {method}); its forward and "
-            "inverse methods are not built yet"
+            "the hybrid runs on the backward and inverse methods in this version; its forward method is not "
+            "built yet"
         )
-    if driver is not None:
+    if method == "backward" and driver is not None:
         raise VpsimError("the backward method tracks the cycle exactly and takes no driver")
     if gears is not None:
         raise VpsimError(
@@ -129,4 +129,8 @@ def _simulate_hev(cycle, method, params, driver, mode, gears, options):
         cycle = load_cycle(cycle)
     from .methods import hev
 
+    if method == "inverse":
+        driver = "2" if driver is None else str(driver)
+        params.driver(driver)  # validates
+        return hev.run_inverse(cycle, params, driver=driver, ems=ems, mode=mode)
     return hev.run(cycle, params, ems=ems, mode=mode)

@@ -45,6 +45,7 @@ from ..errors import VpsimError
 
 __all__ = [
     "SmoothingDriver",
+    "inverse_grid",
     "bump_kernel",
     "bump_kernel_cdf",
     "bump_kernel_moment",
@@ -449,3 +450,12 @@ def _bump1_scalar(s: float, derivative: int) -> float:
     if derivative == 1:
         return g * h
     return g * (h * h - (6.0 * s * s + 2.0) / x**3)
+
+
+def inverse_grid(time_s, max_step: float) -> np.ndarray:
+    """The points an inverse method evaluates the smoothed cycle at: the cycle's samples, each interval split
+    into equal parts at most ``max_step`` long (the electric and hybrid cars' inverse methods)."""
+    time_s = np.asarray(time_s, float)
+    parts = np.maximum(1, np.ceil(np.diff(time_s) / max_step - 1e-12).astype(np.int64))
+    pieces = [np.linspace(time_s[k], time_s[k + 1], parts[k] + 1)[:-1] for k in range(time_s.size - 1)]
+    return np.concatenate([*pieces, time_s[-1:]])

@@ -316,14 +316,6 @@ def _forward(time_s, speed, params):
     return rows, sums, steps
 
 
-def inverse_grid(time_s, max_step):
-    """The inverse method's grid: the cycle's samples, each interval split into equal parts at most
-    ``max_step`` long."""
-    parts = np.maximum(1, np.ceil(np.diff(time_s) / max_step - 1e-12).astype(np.int64))
-    pieces = [np.linspace(time_s[k], time_s[k + 1], parts[k] + 1)[:-1] for k in range(time_s.size - 1)]
-    return np.concatenate([*pieces, time_s[-1:]])
-
-
 def run(cycle, params, method: str = "backward", *, driver: str | None = None, mode: str = "realistic"):
     """The battery-electric car of ``params`` on ``cycle`` with ``method``; a :class:`vpsim.result.Result`."""
     t_start = time.process_time()
@@ -336,10 +328,10 @@ def run(cycle, params, method: str = "backward", *, driver: str | None = None, m
         steps = dt.size
         at_samples = _per_sample(rows, ts, vs, soc_end)
     elif method == "inverse":
-        from ..drivers.smoothing import SmoothingDriver
+        from ..drivers.smoothing import SmoothingDriver, inverse_grid
 
         a_half = params.driver(driver or "2").inverse_a
-        grid = inverse_grid(ts, params.simulation.inverse_max_step)
+        grid = inverse_grid(ts, params.simulation.inverse_max_step)  # (drivers.smoothing)
         mid = 0.5 * (grid[1:] + grid[:-1])
         sm = SmoothingDriver(ts, vs, a_half)
         v_mid, a_mid, _ = sm.evaluate(mid)

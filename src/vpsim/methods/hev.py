@@ -13,7 +13,8 @@ current and every energy term; the state of charge moves on by (B3).
   true state, choosing at each interval the control that minimises its cost plus the interpolated J_{k+1}
   (:func:`causal_kernel` with the cost-to-go).
 
-The forward and inverse methods of the hybrid are not built yet (``vpsim.simulate`` says so).
+The inverse method (:func:`run_inverse`) drives the smoothing driver's trajectory with the same management
+and operating point; the forward method of the hybrid is not built yet (``vpsim.simulate`` says so).
 """
 
 from __future__ import annotations
@@ -437,3 +438,70 @@ def _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu):
         limits={},
         electric=electric,
     )
+
+
+def run_inverse(cycle, params, *, driver: str = "2", ems: str | None = None, mode: str = "realistic"):
+    """The P2 hybrid on the inverse method: the smoothing driver's trajectory v_d(t) (34)-(35), sampled on
+    :func:`vpsim.drivers.smoothing.inverse_grid`, driven by the same management and operating point as the
+    backward method (each grid interval at its mean speed and constant acceleration, to second order in the
+    step the smoothed trajectory's). The engine's fuel depends on its intake pressure and speed only, which
+    the torque fixes through the BQM (19); the manifold's dynamics set the throttle that holds that pressure,
+    which this method does not compute (so it does not check the throttle's range, as the engine car's
+    inverse method does). Gears follow the cycle's schedule."""
+    from ..cycles import Cycle
+    from ..drivers.smoothing import SmoothingDriver, inverse_grid
+
+    ems = ems or params.hybrid.ems
+    if ems == "dp":
+        raise VpsimError(
+            "the dynamic programming management runs on the backward method only (a known cycle)"
+        )
+    a = params.driver(driver).inverse_a
+    ts, vs = np.asarray(cycle.time_s, float), np.asarray(cycle.speed_mps, float)
+    grid = inverse_grid(ts, params.simulation.inverse_max_step)
+    smooth = np.maximum(SmoothingDriver(ts, vs, a).evaluate(grid)[0], 0.0)
+    engine_map, schedule, c, e, m, tabs, h, ratios = _inputs(cycle, params)
+    t0 = time.process_time()
+    n = grid.size - 1
+    rows = np.empty((N_ROWS, n))
+    sums = np.zeros(N_SUMS)
+    lines = (engine_map.max_torque_speed, engine_map.max_torque_values, engine_map.min_torque_values)
+    soc_end = causal_kernel(
+        grid,
+        smooth,
+        schedule.time_s,
+        schedule.gear,
+        ratios,
+        c,
+        e,
+        m,
+        tabs,
+        h,
+        hy.EMS_CODES[ems],
+        params.hybrid.torque_levels,
+        *lines,
+        dp_grid(params),
+        np.zeros((1, 2, 2)),
+        params.battery.soc_initial,
+        rows,
+        sums,
+    )
+    cpu = time.process_time() - t0
+    starts = np.searchsorted(grid, ts[:-1])  # the grid intervals that start at the cycle's samples
+    r = _result(
+        Cycle(cycle.name, ts, vs),
+        params,
+        ems,
+        mode,
+        rows[:, starts],
+        sums,
+        params.battery.soc_initial,
+        soc_end,
+        ts.size - 1,
+        cpu,
+    )
+    series = dict(r.series)
+    series["speed_mps"] = smooth[np.searchsorted(grid, ts)]  # the samples are grid points
+    import dataclasses
+
+    return dataclasses.replace(r, method="inverse", driver=driver, series=series, steps=int(n))
