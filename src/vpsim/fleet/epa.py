@@ -185,8 +185,37 @@ def coastdown_record(a_n, b_n_per_mps, c_n_per_mps2, mass_kg=0.0):
 BOOST_SPECIFIC_POWER_KW_PER_L = 75.0
 
 
+class CertificationRecord:
+    """What every certification record derives from its fields (record units in, SI out): key, rated power,
+    test mass, road load. Subclassed by the conventional and the battery-electric record."""
+
+    @property
+    def key(self) -> str:
+        return f"{self.vehicle_id}#{self.configuration}"
+
+    @property
+    def rated_power_kw(self) -> float:
+        return self.rated_hp * HP_TO_KW
+
+    @property
+    def mass_kg(self) -> float:
+        return self.etw_lb * LB_TO_KG
+
+    @property
+    def road_load_si(self) -> tuple[float, float, float]:
+        """Target road load (A, B, C) in N, N/(m/s), N/(m/s)^2."""
+        return (
+            self.target_a_lbf * LBF_TO_N,
+            lbf_per_mph_to_si(self.target_b_lbf_per_mph),
+            lbf_per_mph2_to_si(self.target_c_lbf_per_mph2),
+        )
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
 @dataclass(frozen=True)
-class VehicleRecord:
+class VehicleRecord(CertificationRecord):
     """What the certification record says about one test vehicle (record units, as in the list)."""
 
     vehicle_id: str
@@ -214,32 +243,8 @@ class VehicleRecord:
     n_tests: dict[str, int] = field(default_factory=dict)
 
     @property
-    def key(self) -> str:
-        return f"{self.vehicle_id}#{self.configuration}"
-
-    @property
-    def rated_power_kw(self) -> float:
-        return self.rated_hp * HP_TO_KW
-
-    @property
     def specific_power_kw_per_l(self) -> float:
         return self.rated_power_kw / self.displacement_l
-
-    @property
-    def mass_kg(self) -> float:
-        return self.etw_lb * LB_TO_KG
-
-    @property
-    def road_load_si(self) -> tuple[float, float, float]:
-        """Target road load (A, B, C) in N, N/(m/s), N/(m/s)^2."""
-        return (
-            self.target_a_lbf * LBF_TO_N,
-            lbf_per_mph_to_si(self.target_b_lbf_per_mph),
-            lbf_per_mph2_to_si(self.target_c_lbf_per_mph2),
-        )
-
-    def as_dict(self) -> dict:
-        return asdict(self)
 
 
 @dataclass

@@ -41,12 +41,17 @@ have 150 kW; the record's figure is not their machine's, and no figure is invent
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..textio import printable
-from .epa import HP_TO_KW, LB_TO_KG, LBF_TO_N, MPH_TO_MPS, lbf_per_mph2_to_si, lbf_per_mph_to_si
+from .epa import (
+    HP_TO_KW,
+    LB_TO_KG,
+    MPH_TO_MPS,
+    CertificationRecord,
+)
 
 BASE_PRESET = "bev"
 EV_FUEL = "Electricity"
@@ -88,7 +93,7 @@ BOUND_REASONS = {
 
 
 @dataclass(frozen=True)
-class EVRecord:
+class EVRecord(CertificationRecord):
     """What the certification record says about one battery-electric test vehicle (record units)."""
 
     vehicle_id: str
@@ -114,29 +119,6 @@ class EVRecord:
     n_tests: dict[str, int] = field(default_factory=dict)
 
     powertrain = "bev"
-
-    @property
-    def key(self) -> str:
-        return f"{self.vehicle_id}#{self.configuration}"
-
-    @property
-    def rated_power_kw(self) -> float:
-        return self.rated_hp * HP_TO_KW
-
-    @property
-    def mass_kg(self) -> float:
-        return self.etw_lb * LB_TO_KG
-
-    @property
-    def road_load_si(self) -> tuple[float, float, float]:
-        return (
-            self.target_a_lbf * LBF_TO_N,
-            lbf_per_mph_to_si(self.target_b_lbf_per_mph),
-            lbf_per_mph2_to_si(self.target_c_lbf_per_mph2),
-        )
-
-    def as_dict(self) -> dict:
-        return asdict(self)
 
 
 def _harmonic(xs):
@@ -396,25 +378,16 @@ def ev_vehicle_toml(rec: EVRecord, params, source: str = "", technology_note: st
             lines.append(f"regen_speed_high = {_toml_value(flat['electric.regen_speed_high'])}")
         lines.append("")
     del w_b, w_max
-    rl = {
-        "a_n": a,
-        "b_n_per_mps": b,
-        "c_n_per_mps2": c,
-        "a_lbf": rec.target_a_lbf,
-        "b_lbf_per_mph": rec.target_b_lbf_per_mph,
-        "c_lbf_per_mph2": rec.target_c_lbf_per_mph2,
-    }
-    record = {k: v for k, v in rec.as_dict().items() if k not in ("measured_mpge", "n_tests")}
-    record["powertrain"] = "bev"
-    record["rated_power_kw"] = rec.rated_power_kw
-    block = ["[road_load]  # target coast-down road load F = A + B v + C v^2"]
-    block += [f"{k} = {_toml_value(v)}" for k, v in rl.items()]
-    block += ["", "[record]  # the certification record (record units)"]
-    block += [
-        f"{k} = {_toml_value(v)}" for k, v in record.items() if not (isinstance(v, float) and math.isnan(v))
-    ]
-    block += ["", "[record.measured_mpge]  # unadjusted, charge-depleting UDDS and highway tests"]
-    block += [f"{k} = {_toml_value(v)}" for k, v in rec.measured_mpge.items()]
+    from .vehicle import record_block
+
+    block = record_block(
+        rec,
+        (a, b, c),
+        "measured_mpge",
+        rec.measured_mpge,
+        "unadjusted, charge-depleting UDDS and highway tests",
+        {"powertrain": "bev"},
+    )
     lines.append(RECORD_BEGIN)
     lines += [("# " + x) if x else "#" for x in block]
     lines.append(RECORD_END)

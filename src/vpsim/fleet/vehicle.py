@@ -521,24 +521,7 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
             val = _toml_value(list(v) if isinstance(v, tuple) else v)
             lines.append(f"{f} = {val}" + (f"  # {note}" if note else ""))
         lines.append("")
-    rl = {
-        "a_n": a,
-        "b_n_per_mps": b,
-        "c_n_per_mps2": c,
-        "a_lbf": rec.target_a_lbf,
-        "b_lbf_per_mph": rec.target_b_lbf_per_mph,
-        "c_lbf_per_mph2": rec.target_c_lbf_per_mph2,
-    }
-    record = {k: v for k, v in rec.as_dict().items() if k not in ("measured_mpg", "n_tests")}
-    record["rated_power_kw"] = rec.rated_power_kw
-    block = ["[road_load]  # target coast-down road load F = A + B v + C v^2"]
-    block += [f"{k} = {_toml_value(v)}" for k, v in rl.items()]
-    block += ["", "[record]  # the certification record (record units)"]
-    block += [
-        f"{k} = {_toml_value(v)}" for k, v in record.items() if not (isinstance(v, float) and math.isnan(v))
-    ]
-    block += ["", "[record.measured_mpg]"]
-    block += [f"{k} = {_toml_value(v)}" for k, v in rec.measured_mpg.items()]
+    block = record_block(rec, (a, b, c), "measured_mpg", rec.measured_mpg, "", {})
     for key, d in params.drivers.items():
         lines.append(
             f"[drivers.{key}]  # the preset's driver {key}, K_p and K_i scaled with A_max (scaled_drivers)"
@@ -551,6 +534,33 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
     lines += [("# " + x) if x else "#" for x in block]
     lines.append(RECORD_END)
     return "\n".join(lines) + "\n"
+
+
+def record_block(rec, road_load_si, measured_key: str, measured: dict, measured_note: str, extra: dict):
+    """The lines of a vehicle file's certification-record block (commented out by the caller): the road load
+    in SI and record units, the record's fields (``extra`` added), its measurements under
+    ``[record.<measured_key>]``."""
+    a, b, c = road_load_si
+    rl = {
+        "a_n": a,
+        "b_n_per_mps": b,
+        "c_n_per_mps2": c,
+        "a_lbf": rec.target_a_lbf,
+        "b_lbf_per_mph": rec.target_b_lbf_per_mph,
+        "c_lbf_per_mph2": rec.target_c_lbf_per_mph2,
+    }
+    record = {k: v for k, v in rec.as_dict().items() if k not in (measured_key, "n_tests")}
+    record.update(extra)
+    record["rated_power_kw"] = rec.rated_power_kw
+    block = ["[road_load]  # target coast-down road load F = A + B v + C v^2"]
+    block += [f"{k} = {_toml_value(v)}" for k, v in rl.items()]
+    block += ["", "[record]  # the certification record (record units)"]
+    block += [
+        f"{k} = {_toml_value(v)}" for k, v in record.items() if not (isinstance(v, float) and math.isnan(v))
+    ]
+    block += ["", f"[record.{measured_key}]" + (f"  # {measured_note}" if measured_note else "")]
+    block += [f"{k} = {_toml_value(v)}" for k, v in measured.items()]
+    return block
 
 
 def read_record_block(path: str | Path) -> dict:
