@@ -118,20 +118,7 @@ def interval_kernel(t_mid, v, a, dt, ratio, soc0, c, e, m, tabs, rows, sums):
             sums[S_MAX_MISS] = max(sums[S_MAX_MISS], short)
         sums[S_MACHINE_S] += at_m * dt[k]
         sums[S_BATTERY_S] += at_b * dt[k]
-        rows[P_T, k] = t_mid[k]
-        rows[P_V, k] = vk
-        rows[P_A, k] = a[k]
-        rows[P_W, k] = w
-        rows[P_TM, k] = t
-        rows[P_BRAKE, k] = brake
-        rows[P_MISS, k] = short
-        rows[P_I, k] = i
-        rows[P_UOC, k] = u_oc
-        rows[P_U, k] = u_oc - r * i
-        rows[P_SOC, k] = soc
-        rows[P_PT, k] = p_t
-        rows[P_LIM_M, k] = at_m
-        rows[P_LIM_B, k] = at_b
+        _store(rows, k, t_mid[k], vk, a[k], w, t, brake, short, i, u_oc, r, soc, p_t, at_m, at_b)
         soc += bt.soc_rate(i, e.capacity_as, e.coulombic_efficiency) * dt[k]
     return soc
 
@@ -232,20 +219,27 @@ def _sample(rows, j, t, v, v_ref, xi, soc, kp, ki, ratio, c, e, m, tabs):
     acc, w, tm, brake, i, u_oc, r, p_m, at_m, at_b = _forward_point(
         v, xi, soc, v_ref, kp, ki, ratio, c, e, m, tabs
     )
-    rows[P_T, j] = t
-    rows[P_V, j] = v
-    rows[P_A, j] = acc
-    rows[P_W, j] = w
-    rows[P_TM, j] = tm
-    rows[P_BRAKE, j] = brake
-    rows[P_MISS, j] = 0.0
-    rows[P_I, j] = i
-    rows[P_UOC, j] = u_oc
-    rows[P_U, j] = u_oc - r * i
-    rows[P_SOC, j] = soc
-    rows[P_PT, j] = el.pack_power(i, u_oc, r, r)
-    rows[P_LIM_M, j] = at_m
-    rows[P_LIM_B, j] = at_b
+    _store(rows, j, t, v, acc, w, tm, brake, 0.0, i, u_oc, r, soc, el.pack_power(i, u_oc, r, r), at_m, at_b)
+
+
+@equation
+def _store(rows, k, t, v, a, w, tm, brake, short, i, u_oc, r, soc, p_t, at_m, at_b):
+    """One row of the series: time, speed, acceleration, machine speed and torque, brake force, torque
+    short, battery current, voltages, state of charge, terminal power, the limit flags."""
+    rows[P_T, k] = t
+    rows[P_V, k] = v
+    rows[P_A, k] = a
+    rows[P_W, k] = w
+    rows[P_TM, k] = tm
+    rows[P_BRAKE, k] = brake
+    rows[P_MISS, k] = short
+    rows[P_I, k] = i
+    rows[P_UOC, k] = u_oc
+    rows[P_U, k] = u_oc - r * i
+    rows[P_SOC, k] = soc
+    rows[P_PT, k] = p_t
+    rows[P_LIM_M, k] = at_m
+    rows[P_LIM_B, k] = at_b
 
 
 # --- Python side ------------------------------------------------------------------------------------------
