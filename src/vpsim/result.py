@@ -608,7 +608,7 @@ class Result:
                 [("fuel_flow_kgps", 1e3, "model"), ("fuel_flow_used_kgps", 1e3, "with idle floor")],
             ),
         ]
-        if self.electric:  # a single reduction: no gear to show
+        if self.electric and df["gear"].nunique() == 1:  # a single reduction: no gear to show
             panels = [p for p in panels if p[0] not in ("gear", "gearbox ratio")]
         panels = [
             (lab, [c for c in cs if c[0] in df and np.any(np.isfinite(df[c[0]].to_numpy(float)))])
@@ -657,12 +657,19 @@ class Result:
             if any(c[2] for c in curves) and len(curves) > 1 or ax is axes[0]:
                 ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.0, 0.5))
         axes[-1].set_xlabel("time (s)")
-        figure = (
-            f"{number(self.electric['electric_wh_per_km'], '.1f', 'electric_wh_per_km')} Wh/km (battery), "
-            f"{number(self.electric['mpge'], '.1f', 'mpge')} MPGe"
-            if self.electric
-            else f"{number(self.fuel_l_per_100km, '.2f', 'fuel_l_per_100km')} L/100 km"
-        )
+        if self.electric and self.fuel_kg > 0.0:  # a hybrid
+            cs = self.electric.get("fuel_l_per_100km_cs", float("nan"))
+            figure = (
+                f"{number(self.fuel_l_per_100km, '.2f', 'fuel_l_per_100km')} L/100 km, "
+                f"{number(cs, '.2f', 'fuel_l_per_100km_cs')} charge-sustaining ({self.electric.get('ems')})"
+            )
+        elif self.electric:
+            figure = (
+                f"{number(self.electric['electric_wh_per_km'], '.1f', 'electric_wh_per_km')} Wh/km "
+                f"(battery), {number(self.electric['mpge'], '.1f', 'mpge')} MPGe"
+            )
+        else:
+            figure = f"{number(self.fuel_l_per_100km, '.2f', 'fuel_l_per_100km')} L/100 km"
         axes[0].set_title(
             f"{self.method}{'' if self.driver is None else ' driver ' + str(self.driver)} on {self.cycle} "
             f"({self.mode}): {figure}",

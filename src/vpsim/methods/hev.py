@@ -54,8 +54,9 @@ from ..model.tables import gear_index
     H_ON,
     H_LIM_M,
     H_LIM_B,
-) = range(18)
-N_ROWS = 18
+    H_TCR,
+) = range(19)
+N_ROWS = 19
 N_TERMS = len(hy.HYBRID_TERMS)
 # sums after the energy terms
 S_FUEL, S_DIST, S_STARTS, S_MISS_S, S_MAX_MISS, S_MACHINE_S, S_BATTERY_S, S_REGEN, S_ON_S = range(
@@ -234,6 +235,7 @@ def causal_kernel(
         rows[H_ON, k] = running
         rows[H_LIM_M, k] = pt[14]
         rows[H_LIM_B, k] = pt[15]
+        rows[H_TCR, k] = pt[4]
         soc += bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
     return soc
 
@@ -339,8 +341,9 @@ _COLUMNS = {
     "speed_mps": H_V,
     "accel_mps2": H_A,
     "gear": H_GEAR,
-    "engine_speed_radps": H_W,
+    "machine_speed_radps": H_W,
     "engine_torque_nm": H_TE,
+    "crank_torque_nm": H_TCR,
     "machine_torque_nm": H_TM,
     "intake_pressure_pa": H_P,
     "fuel_flow_kgps": H_MDOT,
@@ -387,9 +390,10 @@ def _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu):
     series["speed_mps"] = np.asarray(cycle.speed_mps, float).copy()
     series["reference_speed_mps"] = series["speed_mps"].copy()
     series["soc"] = np.append(rows[H_SOC, : ts.size - 1], soc_end)
-    series["fuel_flow_used_kgps"] = series["fuel_flow_kgps"].copy()
     for k in ("engine_on", "machine_at_limit", "battery_at_limit"):
         series[k] = series[k] > 0.5
+    # the engine turns with the input shaft while it runs, and stands still while its clutch is open
+    series["engine_speed_radps"] = np.where(series["engine_on"], series["machine_speed_radps"], 0.0)
     terms = {name: float(sums[q]) for q, name in enumerate(hy.HYBRID_TERMS)}
     fuel = float(sums[S_FUEL])
     distance = float(sums[S_DIST])
