@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 from _fuzz import run_cli
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: the made-up list
 from fleet_csv import write_list  # noqa: E402
@@ -180,3 +182,58 @@ def test_an_ev_with_its_tests_in_two_units_is_excluded(tmp_path):
     cars = read_test_car_list(lst)
     assert not cars.ev_vehicles
     assert cars.excluded["electric, tests in two units"] == 1
+
+
+@pytest.mark.parametrize(
+    ("edits", "reason"),
+    [
+        ({"target_a_lbf": "1", "target_b_lbf_per_mph": "-3"}, "implausible road load"),  # < 0 from 1 mph on
+        ({"target_a_lbf": "5", "target_b_lbf_per_mph": "-1"}, "implausible road load"),  # < 0 in the middle
+        ({"rated_hp": "40", "etw_lb": "9000"}, "implausible rated_hp: 40 hp at etw_lb 9000"),  # 7 W/kg
+        ({"rated_hp": "1600", "etw_lb": "1500"}, "implausible rated_hp: 1600 hp at etw_lb 1500"),  # 1754 W/kg
+    ],
+)
+@pytest.mark.parametrize("vehicle_id", ["T004", "E001"])
+def test_a_record_whose_fields_do_not_fit_together_is_excluded(tmp_path, capsys, edits, reason, vehicle_id):
+    """Each field plausible on its own, the record not: a road load that turns negative below the US06's top
+    speed, a test weight the rated power could never move (or a rocket). One line naming the fields, values
+    and what was expected; never run as ok."""
+    from fleet_csv import EVS, write_ev_list
+    from vpsim.fleet.epa import read_test_car_list
+
+    lst = write_ev_list(tmp_path / "list.csv", evs=[EVS[0]])
+    for i, (field, value) in enumerate(edits.items()):
+        lst = _edited(lst, tmp_path / f"bad{i}.csv", vehicle_id, field, value)
+    cars = read_test_car_list(lst)
+    assert vehicle_id not in {v.vehicle_id for v in [*cars.vehicles, *cars.ev_vehicles]}
+    rows = cars.excluded_rows
+    why = [r["reason"] for r in rows if r["vehicle_id"] == vehicle_id and r["test_number"] == ""]
+    assert len(why) == 1 and reason in why[0] and "expected" in why[0], why
+    out = tmp_path / "c.toml"
+    code, _, err = run_cli(capsys, "vehicle", "from-epa", lst, "--id", vehicle_id, "--out", out)
+    assert code == 2 and reason in err
+    assert not (tmp_path / "c.toml").exists()
+
+
+@settings(max_examples=300)
+@given(
+    a=st.floats(1.0, 200.0),
+    b=st.floats(-3.0, 3.0),
+    c=st.floats(0.005, 0.15),
+)
+def test_the_road_load_check_agrees_with_the_road_load_at_every_speed(a, b, c):
+    """road_load_problem is None exactly when A + B v + C v^2 > 0 from 0 to the US06's top speed."""
+    import numpy as np
+
+    from vpsim.fleet.cycles import fleet_cycle
+    from vpsim.fleet.epa import MPH_TO_MPS, ROAD_LOAD_TOP_SPEED_MPH, road_load_problem
+
+    top = fleet_cycle("us06").speed_mps.max() / MPH_TO_MPS
+    assert abs(top - ROAD_LOAD_TOP_SPEED_MPH) < 0.05
+    v = np.linspace(0.0, ROAD_LOAD_TOP_SPEED_MPH, 2001)
+    f = a + b * v + c * v * v
+    problem = road_load_problem(a, b, c)
+    if f.min() > 1e-6:
+        assert problem is None
+    elif f.min() < -1e-6:
+        assert problem is not None and problem.startswith("implausible road load")
