@@ -237,3 +237,80 @@ def test_the_road_load_check_agrees_with_the_road_load_at_every_speed(a, b, c):
         assert problem is None
     elif f.min() < -1e-6:
         assert problem is not None and problem.startswith("implausible road load")
+
+
+def _technology(path: Path, **changes) -> Path:
+    """A technology.json as a fleet run writes it (its fitted tables only), ``changes`` to every class."""
+    import json
+
+    fit = {
+        "engine.thermal_efficiency": 0.4,
+        "engine.friction_coefficient": 1.0,
+        "engine.accessory_power": 500,
+    }
+    bev = {"machine.loss_scale": 0.4, "electric.accessory_power": 300.0}
+    conv = {k: v for k, v in changes.items() if k in fit}
+    ev = {k: v for k, v in changes.items() if k in bev}
+    data = {
+        "all_vehicles": {c: {**fit, **conv} for c in ("na", "boosted", "high_output")},
+        "bev": {"all_vehicles": {"bev": {**bev, **ev}}},
+    }
+    path.write_text(json.dumps(data))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("vehicle_id", "field", "value", "expect"),
+    [
+        ("T004", "engine.thermal_efficiency", 1.0, "outside (0, 1)"),
+        ("T004", "engine.thermal_efficiency", 1.5, "outside (0, 1)"),
+        ("T004", "engine.thermal_efficiency", 0.6, "not below 0.6"),
+        ("T004", "engine.thermal_efficiency", True, "true is not a number"),
+        ("T004", "engine.friction_coefficient", False, "false is not a number"),
+        ("T004", "engine.thermal_efficiency", "0.4", "is not a number"),
+        ("T004", "engine.thermal_efficiency", None, "is not a number"),
+        ("T004", "engine.thermal_efficiency", 1e400, "not a finite number"),  # json.dumps writes Infinity
+        ("T004", "engine.accessory_power", -5, "outside the plausible range"),
+        ("E001", "machine.loss_scale", True, "true is not a number"),
+        ("E001", "electric.accessory_power", [1], "is not a number"),
+    ],
+)
+def test_a_technology_file_value_is_a_number_in_range(tmp_path, capsys, vehicle_id, field, value, expect):
+    """An efficiency of 1 or more, or a boolean, from a technology.json is refused with one line naming the
+    file and field; nothing is written."""
+    from fleet_csv import EVS, write_ev_list
+
+    lst = write_ev_list(tmp_path / "list.csv", evs=[EVS[0]])
+    tech = _technology(tmp_path / "technology.json", **{field: value})
+    car = tmp_path / "c.toml"
+    args = ["vehicle", "from-epa", lst, "--id", vehicle_id, "--out", car, "--technology", tech]
+    code, _, err = run_cli(capsys, *args)
+    if value == 1e400:
+        expect = "Infinity is not a JSON number"
+    assert code == 2 and expect in err and str(tech) in err, err
+    assert not car.exists()
+
+
+def test_a_technology_file_in_range_is_used(tmp_path, capsys):
+    lst = write_list(tmp_path / "list.csv")
+    tech = _technology(tmp_path / "technology.json", **{"engine.thermal_efficiency": 0.45})
+    car = tmp_path / "c.toml"
+    code, _, _ = run_cli(
+        capsys, "vehicle", "from-epa", lst, "--id", "T004", "--out", car, "--technology", tech
+    )
+    assert code == 0 and load_parameters(car).engine.thermal_efficiency == 0.45
+
+
+@pytest.mark.parametrize("sep", [";", "\t"])
+def test_a_list_saved_with_semicolons_or_tabs_reads_as_the_commas(tmp_path, sep):
+    from vpsim.fleet.epa import read_test_car_list
+
+    lst = write_list(tmp_path / "list.csv")
+    with lst.open(newline="", encoding="utf-8-sig") as f:
+        rows = list(csv.reader(f))
+    other = tmp_path / "other.csv"
+    with other.open("w", newline="", encoding="utf-8") as f:
+        csv.writer(f, delimiter=sep).writerows(rows)
+    a, b = read_test_car_list(lst), read_test_car_list(other)
+    assert [v.as_dict() for v in a.vehicles] == [v.as_dict() for v in b.vehicles] and a.vehicles
+    assert a.excluded == b.excluded

@@ -48,6 +48,10 @@ reason                          rule
 ``no usable test``              no FTP, HWY or US06 test on certification gasoline with a plausible value
 ==============================  ==============================================================================
 
+The list is a CSV file as the EPA publishes it (``,``), or saved with ``;`` or tab between fields (a
+spreadsheet's export); the header line tells which (:func:`list_separator`). A FIFO or a device is refused
+before it is opened.
+
 Each excluded vehicle, and each skipped or implausible test row, is also listed with a one-line reason
 (:attr:`TestCarList.excluded_rows`); a bad row never stops the reading.
 """
@@ -62,7 +66,7 @@ from pathlib import Path
 
 from ..errors import VpsimError
 from ..model import vehicle as vh
-from ..textio import printable
+from ..textio import check_regular_file, printable
 from ..units import LITRES_PER_GALLON, METRES_PER_MILE, MPH_TO_MPS, mpg_from_l_per_100km
 
 # --- unit conversions (exact definitions) -------------------------------------------------------------------
@@ -343,15 +347,27 @@ def _text(x) -> str:
     return str(x).strip()
 
 
+SEPARATORS = (",", ";", "\t")  # as every CSV vpsim reads (README): the header line tells which
+
+
+def list_separator(path: Path) -> str:
+    """The field separator of a list: whichever of ``,``, ``;`` and tab its header line holds most of (the
+    EPA's column names hold none of them); ``,`` for a header without any."""
+    with path.open("rb") as fh:
+        head = fh.readline(1 << 16)
+    counts = {sep: head.count(sep.encode()) for sep in SEPARATORS}
+    best = max(SEPARATORS, key=lambda sep: counts[sep])
+    return best if counts[best] > 0 else ","
+
+
 def read_test_car_list(path: str | Path) -> TestCarList:
     """Read the list at ``path``; errors about the file itself are one line, bad rows are excluded."""
     import pandas as pd
 
-    path = Path(path)
-    if not path.exists():
-        raise VpsimError(f"{path}: no such file")
+    path = check_regular_file(path, VpsimError, "CSV test car list")  # before pandas opens a FIFO or device
+    sep = list_separator(path)
     try:
-        df = pd.read_csv(path, encoding="utf-8-sig", dtype=str, keep_default_na=False)
+        df = pd.read_csv(path, sep=sep, encoding="utf-8-sig", dtype=str, keep_default_na=False)
     except (UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise VpsimError(f"{path}: not a readable CSV test car list ({msg})") from None
