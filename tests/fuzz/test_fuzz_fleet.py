@@ -301,6 +301,27 @@ def test_a_technology_file_in_range_is_used(tmp_path, capsys):
     assert code == 0 and load_parameters(car).engine.thermal_efficiency == 0.45
 
 
+@pytest.mark.parametrize("mpg", ["0.001", "1e9", "-3", "nan", "inf", "true", '"28"', "2" * 400])
+def test_an_edited_measurement_is_no_comparison(tmp_path, capsys, mpg):
+    """A record block's measured mpg outside the certification reader's 5-150 mpg: the run stands, without
+    a comparison (never an error of +2,872,153 %), and a note says why."""
+    import json
+
+    lst = write_list(tmp_path / "list.csv")
+    car = tmp_path / "car.toml"
+    assert run_cli(capsys, "vehicle", "from-epa", lst, "--id", "T004", "--out", car)[0] == 0
+    text = car.read_text()
+    assert "\n# ftp_bag2 = " in text
+    start = text.index("\n# ftp_bag2 = ") + len("\n# ftp_bag2 = ")
+    car.write_text(text[:start] + mpg + text[text.index("\n", start) :])
+    code, out, err = run_cli(capsys, "simulate", "--vehicle", car, "--cycle", "ftp_bag2", "--json")
+    assert code == 0
+    summary = json.loads(out)
+    assert summary["measured_mpg"] is None and summary["measured_error_pct"] is None
+    if mpg not in ("true", '"28"'):
+        assert "no measurement to compare with" in err
+
+
 @pytest.mark.parametrize("sep", [";", "\t"])
 def test_a_list_saved_with_semicolons_or_tabs_reads_as_the_commas(tmp_path, sep):
     from vpsim.fleet.epa import read_test_car_list
