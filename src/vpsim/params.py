@@ -352,6 +352,10 @@ MIN_VEHICLE_MASS_KG = 50.0
 # indicated (the fleet's search stops at 0.54, vpsim.fleet.calibrate.EFFICIENCY_AXIS)
 MAX_THERMAL_EFFICIENCY = 0.6
 
+# a coast-down road load (vehicle.road_load_a/b/c) may not push the car: A + B v + C v^2 >= 0 from rest to the
+# US06's top speed (35.9 m/s, 80.3 mph), the fastest of the standard cycles
+ROAD_LOAD_CHECK_SPEED = 36.0
+
 # Plausible ranges (SI). A value outside is rejected with a hint, which catches unit-scale slips such as a
 # bore given in millimetres. Bounds are (low, high, low_inclusive).
 _RANGES: dict[str, tuple[float, float, bool]] = {
@@ -620,6 +624,18 @@ def validate(p: Parameters, where: str = "parameters") -> None:
                 hint = f" (in kg; {MIN_VEHICLE_MASS_KG:g} kg is the lightest vehicle vpsim simulates)"
             raise ParameterError(
                 f"{where}: {key} = {v:g} is outside the plausible range {_fmt_range(key)}{hint}"
+            )
+    veh = p.vehicle
+    a, b, c = veh.road_load_a, veh.road_load_b, veh.road_load_c
+    if a != 0.0 or b != 0.0 or c != 0.0:  # a coast-down road load F = A + B v + C v^2 replaces the physics
+        top = ROAD_LOAD_CHECK_SPEED
+        speeds = [0.0, top] + ([-b / (2.0 * c)] if c > 0.0 and 0.0 < -b / (2.0 * c) < top else [])
+        v = min(speeds, key=lambda x: a + b * x + c * x * x)  # where the parabola is lowest on [0, top]
+        f = a + b * v + c * v * v
+        if f < 0.0:
+            raise ParameterError(
+                f"{where}: vehicle.road_load_a/b/c = {a:g}, {b:g}, {c:g} give a road load of {f:.4g} N at "
+                f"{v:.4g} m/s; expected A + B v + C v^2 >= 0 from 0 to {top:g} m/s (the US06's top speed)"
             )
     cut = p.simulation.fuel_cutoff_speed
     if 0.0 < cut < IDLE_CHECK_SPEED:

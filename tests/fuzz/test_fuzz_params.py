@@ -323,3 +323,61 @@ def test_what_the_new_bounds_still_accept(tmp_path, text):
 
 def test_a_single_reduction_bev_still_loads():
     assert load_parameters("bev").transmission.gearbox_ratios == (1.0,)
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("[vehicle]\nroad_load_a = 5\nroad_load_b = -3\nroad_load_c = 0.05\n", "give a road load of"),
+        (
+            "[vehicle]\nroad_load_a = 0\nroad_load_b = -1\nroad_load_c = 0.5\n",
+            "from 0 to 36 m/s",
+        ),
+    ],
+)
+def test_a_road_load_that_pushes_the_car_is_refused(tmp_path, text, match):
+    with pytest.raises(ParameterError, match=match):
+        load_parameters(_write(tmp_path, text))
+
+
+@settings(max_examples=60)
+@given(
+    data=st.lists(
+        st.tuples(
+            st.floats(0.5, 4.0),  # gear 2
+            st.floats(0.5, 4.0),  # gear 3
+            st.floats(0.0, 300.0),  # road load A
+            st.floats(-20.0, 10.0),  # B
+            st.floats(0.0, 1.0),  # C
+        ),
+        min_size=1,
+        max_size=6,
+    )
+)
+def test_batch_variants_are_refused_exactly_when_one_of_them_is(data):
+    """The batch's vectorised checks of coupled fields (descending gears, a road load >= 0) agree with each
+    variant's own parameter check: a bad combination is never found only mid-run."""
+    import numpy as np
+
+    from vpsim.batch import validate_variants, variant_parameters
+
+    params = load_parameters("hofman2011")
+    names = [
+        "transmission.gearbox_ratios[2]",
+        "transmission.gearbox_ratios[3]",
+        "vehicle.road_load_a",
+        "vehicle.road_load_b",
+        "vehicle.road_load_c",
+    ]
+    values = np.array(data, dtype=float)
+    any_bad = False
+    for row in values:
+        try:
+            variant_parameters(params, names, row)
+        except ParameterError:
+            any_bad = True
+    if any_bad:
+        with pytest.raises(ParameterError, match=r"^variant \d+: "):
+            validate_variants(params, names, values)
+    else:
+        validate_variants(params, names, values)
