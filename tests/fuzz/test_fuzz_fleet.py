@@ -335,3 +335,16 @@ def test_a_list_saved_with_semicolons_or_tabs_reads_as_the_commas(tmp_path, sep)
     a, b = read_test_car_list(lst), read_test_car_list(other)
     assert [v.as_dict() for v in a.vehicles] == [v.as_dict() for v in b.vehicles] and a.vehicles
     assert a.excluded == b.excluded
+
+
+def test_a_record_with_a_pushing_road_load_is_listed_in_excluded_csv_never_run(tmp_path, capsys):
+    lst = _edited(write_list(tmp_path / "list.csv"), tmp_path / "a.csv", "T004", "target_a_lbf", "1")
+    lst = _edited(lst, tmp_path / "b.csv", "T004", "target_b_lbf_per_mph", "-3")
+    out = tmp_path / "fleet"
+    args = ["fleet", lst, "--out", out, "--no-peer", "--quiet", "--cycles", "hwy", "--folds", "3"]
+    assert run_cli(capsys, *args)[0] == 0
+    with (out / "excluded.csv").open(newline="") as f:
+        why = [r["reason"] for r in csv.DictReader(f) if r["vehicle_id"] == "T004"]
+    assert len(why) == 1 and why[0].startswith("implausible road load: target_a_lbf 1,"), why
+    with (out / "vehicles.csv").open(newline="") as f:
+        assert "T004" not in {r["vehicle_id"] for r in csv.DictReader(f)}

@@ -340,7 +340,7 @@ def test_a_road_load_that_pushes_the_car_is_refused(tmp_path, text, match):
         load_parameters(_write(tmp_path, text))
 
 
-@settings(max_examples=60)
+@settings(max_examples=30)
 @given(
     data=st.lists(
         st.tuples(
