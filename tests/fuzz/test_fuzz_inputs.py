@@ -102,3 +102,15 @@ def test_read_json_answers_every_text_with_one_line(tmp_path, text):
     with pytest.raises(VpsimError) as exc:
         read_json(path, VpsimError)
     assert "\n" not in str(exc.value) and str(path) in str(exc.value)
+
+
+def test_an_unreadable_list_is_one_line(tmp_path, capsys, monkeypatch):
+    import pandas as pd
+
+    def denied(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    lst = write_list(tmp_path / "list.csv")
+    monkeypatch.setattr(pd, "read_csv", denied)  # as a file without read permission (root reads any)
+    code, _, err = run_cli(capsys, "vehicle", "from-epa", lst, "--id", "T004", "--out", tmp_path / "c.toml")
+    assert code == 2 and "cannot read (Permission denied)" in err

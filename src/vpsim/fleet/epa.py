@@ -365,9 +365,11 @@ def read_test_car_list(path: str | Path) -> TestCarList:
     import pandas as pd
 
     path = check_regular_file(path, VpsimError, "CSV test car list")  # before pandas opens a FIFO or device
-    sep = list_separator(path)
     try:
+        sep = list_separator(path)
         df = pd.read_csv(path, sep=sep, encoding="utf-8-sig", dtype=str, keep_default_na=False)
+    except OSError as exc:  # permission denied, an I/O error
+        raise VpsimError(f"{path}: cannot read ({exc.strerror or exc})") from None
     except (UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise VpsimError(f"{path}: not a readable CSV test car list ({msg})") from None
