@@ -191,7 +191,7 @@ def test_whole_engine_check_of_all_variants_agrees_with_each_engine_alone(params
     cols = {
         "engine.friction_coefficient": rng.uniform(1.0, 10.0, n),
         "engine.boost_layout": rng.uniform(0.5, 3.0, n),
-        "engine.thermal_efficiency": rng.uniform(0.3, 0.9, n),
+        "engine.thermal_efficiency": rng.uniform(0.3, 0.59, n),  # below the ceiling 0.6
         "engine.air_charge_slope": rng.uniform(0.8, 1.5, n),
         "engine.air_charge_intercept": rng.uniform(-9e4, 5e4, n),
         "engine.max_throttle_area": 10.0 ** rng.uniform(-5.5, -3.0, n),

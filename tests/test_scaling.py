@@ -299,6 +299,8 @@ def test_calibration_recovers_known_parameters(params) -> None:
         calibrate(meas, params, parameters=("bore_mm",))
     with pytest.raises(VpsimError, match="increasing"):
         calibrate(meas, params, bounds={"thermal_efficiency": (0.5, 0.3)})
+    with pytest.raises(VpsimError, match=r"must lie in \(0, 0.6\)"):  # no engine reaches 0.6 or more
+        calibrate(meas, params, bounds={"thermal_efficiency": (0.3, 1.0)})
     with pytest.raises(VpsimError, match="data must be"):
         calibrate(meas, params, data="both")
 

@@ -234,10 +234,13 @@ def validate_variants(params: Parameters, names: list[str], values: np.ndarray) 
     """Check every variant through :meth:`Parameters.with_changes`; errors name the variant row.
 
     The per-field checks are intervals, so each column is validated at its smallest and largest value (and
-    every value for whole-number fields); the checks that couple fields (A_min < A_max, and the engine as a
-    whole: :func:`vpsim.params.engine_check_figures`) are then applied to every row, vectorised.
+    every value for whole-number fields); the checks that couple fields (A_min < A_max, a stepped gearbox's
+    descending ratios, a road load that stays >= 0 up to the US06's top speed, and the engine as a whole:
+    :func:`vpsim.params.engine_check_figures`) are then applied to every row, vectorised.
     """
     n = values.shape[0]
+    gear_cols = [j for j, nm in enumerate(names) if _GEAR_RE.match(nm)]
+    road_cols = [j for j, nm in enumerate(names) if _canonical(nm).startswith("vehicle.road_load_")]
     for j, name in enumerate(names):
         sec, fld, gear = _split(name, params)
         if _canonical(name) == "transmission.cvt_ratio_step" or (
@@ -255,12 +258,34 @@ def validate_variants(params: Parameters, names: list[str], values: np.ndarray) 
             frac = np.flatnonzero(col != np.round(col))
             rows += [int(frac[0])] if frac.size else []
         rows += [int(np.argmin(col)), int(np.argmax(col))]
+        # fields checked together (the gears' order, the road load's A, B, C) go with their partners
+        group = gear_cols if j in gear_cols else road_cols if j in road_cols else [j]
         for i in rows:
-            _check_row(params, names, values, i, only=j)
+            _check_row(params, names, values, i, only=group)
     if any(_canonical(n) in ("engine.min_throttle_area", "engine.max_throttle_area") for n in names):
         lo = _column(params, names, values, "engine.min_throttle_area")
         hi = _column(params, names, values, "engine.max_throttle_area")
         bad = np.flatnonzero(~(lo < hi))
+        if bad.size:
+            _check_row(params, names, values, int(bad[0]))
+    if gear_cols and not params.transmission.is_cvt:  # a stepped gearbox's ratios descend (params.validate)
+        ratios = np.tile(np.asarray(params.transmission.gearbox_ratios, float), (n, 1))
+        for j in gear_cols:
+            ratios[:, _split(names[j], params)[2] - 1] = values[:, j]
+        bad = np.flatnonzero(~np.all(np.diff(ratios, axis=1) < 0.0, axis=1))
+        if bad.size:
+            _check_row(params, names, values, int(bad[0]))
+    if road_cols:
+        # the coast-down road load may not push the car up to the US06's top speed (params.validate)
+        from .params import ROAD_LOAD_CHECK_SPEED
+
+        a, b, c = (_column(params, names, values, f"vehicle.road_load_{k}") for k in "abc")
+        top = ROAD_LOAD_CHECK_SPEED
+        with np.errstate(divide="ignore", invalid="ignore"):
+            vertex = np.where(c > 0.0, np.clip(-b / (2.0 * c), 0.0, top), 0.0)
+        lowest = np.minimum.reduce([a, a + b * top + c * top * top, a + b * vertex + c * vertex * vertex])
+        used = (a != 0.0) | (b != 0.0) | (c != 0.0)
+        bad = np.flatnonzero(used & (lowest < 0.0))
         if bad.size:
             _check_row(params, names, values, int(bad[0]))
     if any(n.startswith("engine.") for n in names):
@@ -303,7 +328,7 @@ def variant_parameters(params: Parameters, names: list[str], row) -> Parameters:
 
 
 def _check_row(params, names, values, i, only=None):
-    sel = range(len(names)) if only is None else [only]
+    sel = range(len(names)) if only is None else [only] if isinstance(only, int) else only
     try:
         variant_parameters(params, [names[j] for j in sel], [values[i, j] for j in sel])
     except ParameterError as exc:

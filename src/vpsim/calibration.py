@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from .errors import VpsimError
+from .params import MAX_THERMAL_EFFICIENCY
 
 DEFAULT_PARAMETERS = ("thermal_efficiency", "friction_coefficient")
 
@@ -171,6 +172,11 @@ def calibrate(
         a, b = bnds[n]
         if not a < b:
             raise VpsimError(f"bounds for {n!r} must be increasing, got ({a}, {b})")
+        if n == "thermal_efficiency" and not 0.0 < a < b < MAX_THERMAL_EFFICIENCY:
+            raise VpsimError(
+                f"bounds for 'thermal_efficiency' ({a}, {b}) must lie in (0, {MAX_THERMAL_EFFICIENCY:g}): no "
+                "engine converts more of its fuel's heat (vpsim.params.MAX_THERMAL_EFFICIENCY)"
+            )
         lo.append(float(a))
         hi.append(float(b))
     x0 = np.clip([float(getattr(eng, n)) for n in names], lo, hi)

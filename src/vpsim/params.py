@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import math
 import numbers
 import tomllib
@@ -38,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ParameterError
-from .textio import check_path, read_text
+from .textio import check_path, printable, read_text
 from .units import FIELD_DIMENSIONS, to_si
 
 PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l", "bev", "hev_p2")
@@ -343,10 +344,22 @@ MACHINE_KINDS = ("pm", "induction")
 _ATTR_ALIASES = {"lambda": "lambda_"}  # TOML name -> attribute
 _FIELD_NAMES = {v: k for k, v in _ATTR_ALIASES.items()}
 
+# the lightest road vehicle vpsim simulates: a 50 kg frame carries no driver, engine or battery (the lightest
+# quadricycles weigh some 350 kg); below it a mass is a unit slip (tonnes for kg) or an injection (1 mg)
+MIN_VEHICLE_MASS_KG = 50.0
+# no engine converts more of its fuel's heat than this: the air-standard Otto cycle at a 14:1 compression
+# ratio (gamma 1.35) reaches 1 - 14^-0.35 = 0.60, the best production gasoline engines about 0.45-0.50
+# indicated (the fleet's search stops at 0.54, vpsim.fleet.calibrate.EFFICIENCY_AXIS)
+MAX_THERMAL_EFFICIENCY = 0.6
+
+# a coast-down road load (vehicle.road_load_a/b/c) may not push the car: A + B v + C v^2 >= 0 from rest to the
+# US06's top speed (35.9 m/s, 80.3 mph), the fastest of the standard cycles
+ROAD_LOAD_CHECK_SPEED = 36.0
+
 # Plausible ranges (SI). A value outside is rejected with a hint, which catches unit-scale slips such as a
 # bore given in millimetres. Bounds are (low, high, low_inclusive).
 _RANGES: dict[str, tuple[float, float, bool]] = {
-    "vehicle.mass": (0.0, 1.0e5, False),
+    "vehicle.mass": (MIN_VEHICLE_MASS_KG, 1.0e5, True),
     "vehicle.frontal_area": (0.0, 50.0, False),
     "vehicle.drag_coefficient": (0.0, 3.0, False),
     "vehicle.rolling_resistance": (0.0, 0.5, True),
@@ -542,6 +555,34 @@ def _describe(typ: str, key: str = "") -> str:
     return {"int": "whole number", "float": "number", "str": "text"}.get(typ, "number")
 
 
+def check_field(key: str, value: Any, where: str) -> float:
+    """One number for field ``key`` (``"engine.thermal_efficiency"``) read from outside a parameter file (a
+    fleet's technology.json), as a float; :class:`ParameterError` (one line) if it is not a number (true and
+    false are not numbers), not finite, or outside the field's range (as :func:`validate` checks it)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        try:  # as the file wrote it (true, null, "0.4"), not Python's True/None
+            shown = printable(json.dumps(value))
+        except (TypeError, ValueError):
+            shown = _short(value)
+        shown = shown if len(shown) <= 40 else shown[:37] + "..."
+        raise ParameterError(f"{where}: {key} = {shown} is not a number")
+    v = float(value)
+    if not math.isfinite(v):
+        raise ParameterError(f"{where}: {key} = {v} is not a finite number")
+    if key in _EFFICIENCIES and not 0.0 < v < 1.0:
+        raise ParameterError(f"{where}: {key} = {v:g} is outside (0, 1); an efficiency is a fraction below 1")
+    if key == "engine.thermal_efficiency" and not v < MAX_THERMAL_EFFICIENCY:
+        raise ParameterError(
+            f"{where}: {key} = {v:g} is not below {MAX_THERMAL_EFFICIENCY:g}, the ideal Otto cycle's at 14:1 "
+            "compression"
+        )
+    if key in _RANGES:
+        lo, hi, inc = _RANGES[key]
+        if not ((v >= lo if inc else v > lo) and v <= hi):
+            raise ParameterError(f"{where}: {key} = {v:g} is outside the plausible range {_fmt_range(key)}")
+    return v
+
+
 def validate(p: Parameters, where: str = "parameters") -> None:
     """Check that every value is physical and plausibly in SI units; raise :class:`ParameterError` if not."""
     flat = p.flat()
@@ -554,6 +595,12 @@ def validate(p: Parameters, where: str = "parameters") -> None:
         v = flat[key]
         if not 0.0 < v <= 1.0:
             raise ParameterError(f"{where}: {key} = {v:g} is outside (0, 1]; an efficiency is a fraction")
+    if not p.engine.thermal_efficiency < MAX_THERMAL_EFFICIENCY:
+        raise ParameterError(
+            f"{where}: engine.thermal_efficiency = {p.engine.thermal_efficiency:g} is not below "
+            f"{MAX_THERMAL_EFFICIENCY:g}, the ideal Otto cycle's at 14:1 compression; real engines reach "
+            "0.45-0.50"
+        )
     for key, (lo, hi) in _INT_RANGES.items():
         v = flat[key]
         if isinstance(v, bool) or not isinstance(v, int):
@@ -571,10 +618,24 @@ def validate(p: Parameters, where: str = "parameters") -> None:
                 hint = f" (values are in metres: did you mean {v / 1000:g}?)"
             elif key == "engine.intake_manifold_volume" and v > 0.1:
                 hint = f" (values are in m^3: did you mean {v / 1000:g}?)"
-            elif v <= lo and lo == 0.0:
+            elif v <= 0.0 <= lo:
                 hint = " (it must be positive)"
+            elif key == "vehicle.mass" and v < lo:
+                hint = f" (in kg; {MIN_VEHICLE_MASS_KG:g} kg is the lightest vehicle vpsim simulates)"
             raise ParameterError(
                 f"{where}: {key} = {v:g} is outside the plausible range {_fmt_range(key)}{hint}"
+            )
+    veh = p.vehicle
+    a, b, c = veh.road_load_a, veh.road_load_b, veh.road_load_c
+    if a != 0.0 or b != 0.0 or c != 0.0:  # a coast-down road load F = A + B v + C v^2 replaces the physics
+        top = ROAD_LOAD_CHECK_SPEED
+        speeds = [0.0, top] + ([-b / (2.0 * c)] if c > 0.0 and 0.0 < -b / (2.0 * c) < top else [])
+        v = min(speeds, key=lambda x: a + b * x + c * x * x)  # where the parabola is lowest on [0, top]
+        f = a + b * v + c * v * v
+        if f < 0.0:
+            raise ParameterError(
+                f"{where}: vehicle.road_load_a/b/c = {a:g}, {b:g}, {c:g} give a road load of {f:.4g} N at "
+                f"{v:.4g} m/s; expected A + B v + C v^2 >= 0 from 0 to {top:g} m/s (the US06's top speed)"
             )
     cut = p.simulation.fuel_cutoff_speed
     if 0.0 < cut < IDLE_CHECK_SPEED:
@@ -592,6 +653,15 @@ def validate(p: Parameters, where: str = "parameters") -> None:
         if not 0.0 < g <= 20.0:
             raise ParameterError(f"{where}: transmission.gearbox_ratios[{i}] = {g:g} is outside (0, 20]")
     tr = p.transmission
+    ratios = tr.gearbox_ratios
+    if not tr.is_cvt:  # a stepped gearbox: first gear the largest ratio (a single reduction is one ratio)
+        for i in range(1, len(ratios)):
+            if not ratios[i] < ratios[i - 1]:
+                raise ParameterError(
+                    f"{where}: transmission.gearbox_ratios[{i + 1}] = {ratios[i]:g} is not below gear "
+                    f"{i}'s {ratios[i - 1]:g}; a stepped gearbox lists its ratios from first gear down "
+                    f"(descending), got {list(ratios)}"
+                )
     if tr.is_cvt and tr.shift_point_speed > 0.0:
         raise ParameterError(
             f"{where}: transmission.shift_point_speed = {tr.shift_point_speed:g} m/s is a stepped gearbox's "

@@ -1,13 +1,15 @@
 """Reading the text files users give vpsim: UTF-8 (with or without BOM) only, any newline convention.
 
 Every failure is the caller's error class with one line naming the file (and the line where it applies):
-missing file, dangling symbolic link, symbolic-link loop, a folder or a device instead of a file, a file too
-large, binary (NUL bytes), UTF-16 or other non-UTF-8 text.
+missing file, dangling symbolic link, symbolic-link loop, a folder, a FIFO or a device instead of a file
+(refused before it is opened: opening a FIFO blocks), a file too large, binary (NUL bytes), UTF-16 or other
+non-UTF-8 text; for JSON also nesting beyond Python's recursion limit.
 """
 
 from __future__ import annotations
 
 import errno
+import json
 import stat
 from pathlib import Path
 from typing import Any
@@ -44,6 +46,50 @@ def short_name(text: Any, limit: int = 120) -> str:
     return s if len(s) <= limit else s[: limit - 3] + "..."
 
 
+def check_regular_file(path: Any, error: type[Exception], what: str = "file") -> Path:
+    """``path`` as a Path, after checking (without opening it) that it names a regular file: one-line
+    ``error`` for a missing file, a dangling link, a link loop, a folder, or a FIFO or a device (``/dev/zero``
+    never ends, a FIFO blocks the reader until someone writes). For readers that open files themselves
+    (pandas)."""
+    path = check_path(path, error, what)
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        if path.is_symlink():
+            raise error(f"{path}: dangling symbolic link (its target does not exist)") from None
+        raise error(f"{path}: no such file") from None
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise error(f"{path}: symbolic link loop (too many levels of symbolic links)") from None
+        raise error(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise error(f"{path}: is a folder, expected a {what}")
+    if not stat.S_ISREG(st.st_mode):
+        raise error(f"{path}: not a regular file (a FIFO, socket or device), expected a {what}")
+    return path
+
+
+def read_json(path: Any, error: type[Exception], *, limit: int = MAX_TEXT_BYTES, what: str = "JSON file"):
+    """The parsed JSON of a UTF-8 file (:func:`read_text`'s checks); one-line ``error`` for invalid JSON,
+    ``NaN``/``Infinity`` (not JSON), or arrays and objects nested too deeply (Python's recursion limit)."""
+    path = check_path(path, error, what)
+    text = read_text(path, error, limit=limit, what=what)
+
+    def no_constant(token: str) -> Any:
+        raise error(f"{path}: {token} is not a JSON number")
+
+    try:
+        return json.loads(text, parse_constant=no_constant)
+    except json.JSONDecodeError as exc:
+        raise error(f"{path}:{exc.lineno}: not valid JSON ({exc.msg})") from None
+    except RecursionError:
+        raise error(f"{path}: not valid JSON (arrays or objects nested too deeply)") from None
+    except ValueError as exc:  # an integer literal of more than 4300 digits
+        if isinstance(exc, error):
+            raise
+        raise error(f"{path}: not valid JSON ({printable(exc)[:200]})") from None
+
+
 def read_text(path: Path, error: type[Exception], *, limit: int = MAX_TEXT_BYTES, what: str = "file") -> str:
     """The text of a UTF-8 file (with or without BOM; CRLF/CR newlines become LF); one-line ``error``
     when it is missing, a folder, a symlink loop, unreadable, too large, binary or not UTF-8."""
@@ -53,7 +99,7 @@ def read_text(path: Path, error: type[Exception], *, limit: int = MAX_TEXT_BYTES
         if stat.S_ISDIR(st.st_mode):
             raise IsADirectoryError
         if not stat.S_ISREG(st.st_mode):  # a FIFO or a device would block or never end
-            raise error(f"{path}: not a regular file, expected a {what}")
+            raise error(f"{path}: not a regular file (a FIFO, socket or device), expected a {what}")
         if st.st_size > limit:
             raise error(f"{path}: file is {st.st_size} bytes, more than the {limit}-byte limit for a {what}")
         with path.open("rb") as fh:
@@ -92,4 +138,12 @@ def decode_text(raw: bytes, where: Any, error: type[Exception]) -> str:
     return text.replace("\r\n", "\n").replace("\r", "\n")
 
 
-__all__ = ["MAX_TEXT_BYTES", "check_path", "decode_text", "read_text", "short_name"]
+__all__ = [
+    "MAX_TEXT_BYTES",
+    "check_path",
+    "check_regular_file",
+    "decode_text",
+    "read_json",
+    "read_text",
+    "short_name",
+]

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 from _fuzz import run_cli
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: the made-up list
 from fleet_csv import write_list  # noqa: E402
@@ -180,3 +182,169 @@ def test_an_ev_with_its_tests_in_two_units_is_excluded(tmp_path):
     cars = read_test_car_list(lst)
     assert not cars.ev_vehicles
     assert cars.excluded["electric, tests in two units"] == 1
+
+
+@pytest.mark.parametrize(
+    ("edits", "reason"),
+    [
+        ({"target_a_lbf": "1", "target_b_lbf_per_mph": "-3"}, "implausible road load"),  # < 0 from 1 mph on
+        ({"target_a_lbf": "5", "target_b_lbf_per_mph": "-1"}, "implausible road load"),  # < 0 in the middle
+        ({"rated_hp": "40", "etw_lb": "9000"}, "implausible rated_hp: 40 hp at etw_lb 9000"),  # 7 W/kg
+        ({"rated_hp": "1600", "etw_lb": "1500"}, "implausible rated_hp: 1600 hp at etw_lb 1500"),  # 1754 W/kg
+    ],
+)
+@pytest.mark.parametrize("vehicle_id", ["T004", "E001"])
+def test_a_record_whose_fields_do_not_fit_together_is_excluded(tmp_path, capsys, edits, reason, vehicle_id):
+    """Each field plausible on its own, the record not: a road load that turns negative below the US06's top
+    speed, a test weight the rated power could never move (or a rocket). One line naming the fields, values
+    and what was expected; never run as ok."""
+    from fleet_csv import EVS, write_ev_list
+    from vpsim.fleet.epa import read_test_car_list
+
+    lst = write_ev_list(tmp_path / "list.csv", evs=[EVS[0]])
+    for i, (field, value) in enumerate(edits.items()):
+        lst = _edited(lst, tmp_path / f"bad{i}.csv", vehicle_id, field, value)
+    cars = read_test_car_list(lst)
+    assert vehicle_id not in {v.vehicle_id for v in [*cars.vehicles, *cars.ev_vehicles]}
+    rows = cars.excluded_rows
+    why = [r["reason"] for r in rows if r["vehicle_id"] == vehicle_id and r["test_number"] == ""]
+    assert len(why) == 1 and reason in why[0] and "expected" in why[0], why
+    out = tmp_path / "c.toml"
+    code, _, err = run_cli(capsys, "vehicle", "from-epa", lst, "--id", vehicle_id, "--out", out)
+    assert code == 2 and reason in err
+    assert not (tmp_path / "c.toml").exists()
+
+
+@settings(max_examples=300)
+@given(
+    a=st.floats(1.0, 200.0),
+    b=st.floats(-3.0, 3.0),
+    c=st.floats(0.005, 0.15),
+)
+def test_the_road_load_check_agrees_with_the_road_load_at_every_speed(a, b, c):
+    """road_load_problem is None exactly when A + B v + C v^2 > 0 from 0 to the US06's top speed."""
+    import numpy as np
+
+    from vpsim.fleet.cycles import fleet_cycle
+    from vpsim.fleet.epa import MPH_TO_MPS, ROAD_LOAD_TOP_SPEED_MPH, road_load_problem
+
+    top = fleet_cycle("us06").speed_mps.max() / MPH_TO_MPS
+    assert abs(top - ROAD_LOAD_TOP_SPEED_MPH) < 0.05
+    v = np.linspace(0.0, ROAD_LOAD_TOP_SPEED_MPH, 2001)
+    f = a + b * v + c * v * v
+    problem = road_load_problem(a, b, c)
+    if f.min() > 1e-6:
+        assert problem is None
+    elif f.min() < -1e-6:
+        assert problem is not None and problem.startswith("implausible road load")
+
+
+def _technology(path: Path, **changes) -> Path:
+    """A technology.json as a fleet run writes it (its fitted tables only), ``changes`` to every class."""
+    import json
+
+    fit = {
+        "engine.thermal_efficiency": 0.4,
+        "engine.friction_coefficient": 1.0,
+        "engine.accessory_power": 500,
+    }
+    bev = {"machine.loss_scale": 0.4, "electric.accessory_power": 300.0}
+    conv = {k: v for k, v in changes.items() if k in fit}
+    ev = {k: v for k, v in changes.items() if k in bev}
+    data = {
+        "all_vehicles": {c: {**fit, **conv} for c in ("na", "boosted", "high_output")},
+        "bev": {"all_vehicles": {"bev": {**bev, **ev}}},
+    }
+    path.write_text(json.dumps(data))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("vehicle_id", "field", "value", "expect"),
+    [
+        ("T004", "engine.thermal_efficiency", 1.0, "outside (0, 1)"),
+        ("T004", "engine.thermal_efficiency", 1.5, "outside (0, 1)"),
+        ("T004", "engine.thermal_efficiency", 0.6, "not below 0.6"),
+        ("T004", "engine.thermal_efficiency", True, "true is not a number"),
+        ("T004", "engine.friction_coefficient", False, "false is not a number"),
+        ("T004", "engine.thermal_efficiency", "0.4", "is not a number"),
+        ("T004", "engine.thermal_efficiency", None, "is not a number"),
+        ("T004", "engine.thermal_efficiency", 1e400, "not a finite number"),  # json.dumps writes Infinity
+        ("T004", "engine.accessory_power", -5, "outside the plausible range"),
+        ("E001", "machine.loss_scale", True, "true is not a number"),
+        ("E001", "electric.accessory_power", [1], "is not a number"),
+    ],
+)
+def test_a_technology_file_value_is_a_number_in_range(tmp_path, capsys, vehicle_id, field, value, expect):
+    """An efficiency of 1 or more, or a boolean, from a technology.json is refused with one line naming the
+    file and field; nothing is written."""
+    from fleet_csv import EVS, write_ev_list
+
+    lst = write_ev_list(tmp_path / "list.csv", evs=[EVS[0]])
+    tech = _technology(tmp_path / "technology.json", **{field: value})
+    car = tmp_path / "c.toml"
+    args = ["vehicle", "from-epa", lst, "--id", vehicle_id, "--out", car, "--technology", tech]
+    code, _, err = run_cli(capsys, *args)
+    if value == 1e400:
+        expect = "Infinity is not a JSON number"
+    assert code == 2 and expect in err and str(tech) in err, err
+    assert not car.exists()
+
+
+def test_a_technology_file_in_range_is_used(tmp_path, capsys):
+    lst = write_list(tmp_path / "list.csv")
+    tech = _technology(tmp_path / "technology.json", **{"engine.thermal_efficiency": 0.45})
+    car = tmp_path / "c.toml"
+    code, _, _ = run_cli(
+        capsys, "vehicle", "from-epa", lst, "--id", "T004", "--out", car, "--technology", tech
+    )
+    assert code == 0 and load_parameters(car).engine.thermal_efficiency == 0.45
+
+
+@pytest.mark.parametrize("mpg", ["0.001", "1e9", "-3", "nan", "inf", "true", '"28"', "2" * 400])
+def test_an_edited_measurement_is_no_comparison(tmp_path, capsys, mpg):
+    """A record block's measured mpg outside the certification reader's 5-150 mpg: the run stands, without
+    a comparison (never an error of +2,872,153 %), and a note says why."""
+    import json
+
+    lst = write_list(tmp_path / "list.csv")
+    car = tmp_path / "car.toml"
+    assert run_cli(capsys, "vehicle", "from-epa", lst, "--id", "T004", "--out", car)[0] == 0
+    text = car.read_text()
+    assert "\n# ftp_bag2 = " in text
+    start = text.index("\n# ftp_bag2 = ") + len("\n# ftp_bag2 = ")
+    car.write_text(text[:start] + mpg + text[text.index("\n", start) :])
+    code, out, err = run_cli(capsys, "simulate", "--vehicle", car, "--cycle", "ftp_bag2", "--json")
+    assert code == 0
+    summary = json.loads(out)
+    assert summary["measured_mpg"] is None and summary["measured_error_pct"] is None
+    if mpg not in ("true", '"28"'):
+        assert "no measurement to compare with" in err
+
+
+@pytest.mark.parametrize("sep", [";", "\t"])
+def test_a_list_saved_with_semicolons_or_tabs_reads_as_the_commas(tmp_path, sep):
+    from vpsim.fleet.epa import read_test_car_list
+
+    lst = write_list(tmp_path / "list.csv")
+    with lst.open(newline="", encoding="utf-8-sig") as f:
+        rows = list(csv.reader(f))
+    other = tmp_path / "other.csv"
+    with other.open("w", newline="", encoding="utf-8") as f:
+        csv.writer(f, delimiter=sep).writerows(rows)
+    a, b = read_test_car_list(lst), read_test_car_list(other)
+    assert [v.as_dict() for v in a.vehicles] == [v.as_dict() for v in b.vehicles] and a.vehicles
+    assert a.excluded == b.excluded
+
+
+def test_a_record_with_a_pushing_road_load_is_listed_in_excluded_csv_never_run(tmp_path, capsys):
+    lst = _edited(write_list(tmp_path / "list.csv"), tmp_path / "a.csv", "T004", "target_a_lbf", "1")
+    lst = _edited(lst, tmp_path / "b.csv", "T004", "target_b_lbf_per_mph", "-3")
+    out = tmp_path / "fleet"
+    args = ["fleet", lst, "--out", out, "--no-peer", "--quiet", "--cycles", "hwy", "--folds", "3"]
+    assert run_cli(capsys, *args)[0] == 0
+    with (out / "excluded.csv").open(newline="") as f:
+        why = [r["reason"] for r in csv.DictReader(f) if r["vehicle_id"] == "T004"]
+    assert len(why) == 1 and why[0].startswith("implausible road load: target_a_lbf 1,"), why
+    with (out / "vehicles.csv").open(newline="") as f:
+        assert "T004" not in {r["vehicle_id"] for r in csv.DictReader(f)}

@@ -58,7 +58,7 @@ CASES = [
     ("[engine]\nmap_speed_range = [650, 50]\n", "must be increasing"),
     ("[engine]\nmap_speed_range = [50]\n", "is not a list of 2"),
     ("[engine]\nmap_speed_range = 650\n", "is not a list of 2"),
-    ("[engine]\nfuel_heating_value = 1.5e8\nthermal_efficiency = 1.0\nlambda = 0.6\n", "full-load BMEP"),
+    ("[engine]\nfuel_heating_value = 1.5e8\nthermal_efficiency = 0.55\nlambda = 0.6\n", "full-load BMEP"),
     ("[engine]\nfriction_coefficient = 10\nboost_layout = 10\n", "motoring BMEP"),
     # structure
     ("vehicle = 3\n", "[vehicle] must be a table"),
@@ -77,6 +77,16 @@ CASES = [
     ("[vehicle\n", "not valid TOML"),
     ("a = " + "[" * 3000 + "]" * 3000 + "\n", "not valid TOML"),
     ("[vehicle]\nmass = 1\nmass = 2\n", "not valid TOML"),
+    # a stepped gearbox lists first gear first: ascending or repeated ratios are a typo (or reversed list)
+    (
+        "[transmission]\ngearbox_ratios = [0.70, 0.89, 1.12, 1.76, 3.38]\n",
+        "gearbox_ratios[2] = 0.89 is not below",
+    ),
+    ("[transmission]\ngearbox_ratios = [3.38, 1.76, 1.76, 0.70]\n", "gearbox_ratios[3] = 1.76 is not below"),
+    ("[engine]\nthermal_efficiency = 1.0\n", "engine.thermal_efficiency = 1 is not below 0.6"),
+    ("[engine]\nthermal_efficiency = 0.6\n", "engine.thermal_efficiency = 0.6 is not below 0.6"),
+    ("[vehicle]\nmass = 1e-6\n", "vehicle.mass = 1e-06 is outside the plausible range [50, 100000] (in kg"),
+    ('[vehicle]\nmass = { value = 1, unit = "mg" }\n', "vehicle.mass"),
 ]
 
 
@@ -297,3 +307,77 @@ def test_random_parameter_files_are_valid_or_one_line(tmp_path, entries):
                 continue
             assert not isinstance(x, bool) and math.isfinite(x), (key, x)
     assert 0.04e-3 <= params.engine.displacement <= 16e-3
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "[transmission]\ngearbox_ratios = [2.6, 0.4]\ncvt_ratio_step = 0.02\n",  # a CVT's [launch, overdrive]
+        "[transmission]\ngearbox_ratios = [3.9]\n",  # one ratio
+        "[vehicle]\nmass = 50\n[engine]\nthermal_efficiency = 0.59\n",  # the limits themselves
+    ],
+)
+def test_what_the_new_bounds_still_accept(tmp_path, text):
+    load_parameters(_write(tmp_path, text))
+
+
+def test_a_single_reduction_bev_still_loads():
+    assert load_parameters("bev").transmission.gearbox_ratios == (1.0,)
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("[vehicle]\nroad_load_a = 5\nroad_load_b = -3\nroad_load_c = 0.05\n", "give a road load of"),
+        (
+            "[vehicle]\nroad_load_a = 0\nroad_load_b = -1\nroad_load_c = 0.5\n",
+            "from 0 to 36 m/s",
+        ),
+    ],
+)
+def test_a_road_load_that_pushes_the_car_is_refused(tmp_path, text, match):
+    with pytest.raises(ParameterError, match=match):
+        load_parameters(_write(tmp_path, text))
+
+
+@settings(max_examples=30)
+@given(
+    data=st.lists(
+        st.tuples(
+            st.floats(0.5, 4.0),  # gear 2
+            st.floats(0.5, 4.0),  # gear 3
+            st.floats(0.0, 300.0),  # road load A
+            st.floats(-20.0, 10.0),  # B
+            st.floats(0.0, 1.0),  # C
+        ),
+        min_size=1,
+        max_size=6,
+    )
+)
+def test_batch_variants_are_refused_exactly_when_one_of_them_is(data):
+    """The batch's vectorised checks of coupled fields (descending gears, a road load >= 0) agree with each
+    variant's own parameter check: a bad combination is never found only mid-run."""
+    import numpy as np
+
+    from vpsim.batch import validate_variants, variant_parameters
+
+    params = load_parameters("hofman2011")
+    names = [
+        "transmission.gearbox_ratios[2]",
+        "transmission.gearbox_ratios[3]",
+        "vehicle.road_load_a",
+        "vehicle.road_load_b",
+        "vehicle.road_load_c",
+    ]
+    values = np.array(data, dtype=float)
+    any_bad = False
+    for row in values:
+        try:
+            variant_parameters(params, names, row)
+        except ParameterError:
+            any_bad = True
+    if any_bad:
+        with pytest.raises(ParameterError, match=r"^variant \d+: "):
+            validate_variants(params, names, values)
+    else:
+        validate_variants(params, names, values)

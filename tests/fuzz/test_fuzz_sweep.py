@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import pandas as pd
 import pytest
 from _fuzz import run_cli
@@ -254,3 +256,21 @@ def test_random_specs_are_valid_or_one_line(tmp_path, top, params):
     assert 1 <= spec.n_designs <= 5_000_000
     if spec.n_designs <= 1000:
         assert len(spec.designs()) == spec.n_designs + (1 if spec.baseline else 0)
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this system")
+def test_a_fifo_in_the_output_folder_does_not_block_a_resume(capsys, tmp_path):
+    """A sweep record or result part that is a FIFO: one line or a damaged part, never a read that blocks."""
+    pytest.importorskip("pyarrow")
+    assert _sweep(capsys, tmp_path, "--format", "parquet")[0] == 0
+    out = tmp_path / "o"
+    parts = sorted((out / "results.parquet").glob("part-*.parquet"))
+    assert parts
+    parts[0].unlink()
+    os.mkfifo(parts[0])
+    _sweep(capsys, tmp_path, "--format", "parquet", "--resume")  # recomputed, or refused in one line
+    parts[0].unlink(missing_ok=True)
+    (out / "sweep.json").unlink()
+    os.mkfifo(out / "sweep.json")
+    code, _, err = _sweep(capsys, tmp_path, "--format", "parquet", "--resume")
+    assert code == 2 and "sweep.json" in err and "not a regular file" in err

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import click
@@ -227,7 +226,9 @@ def _measured_mpg(vehicle: str, cycle: str, table: str = "measured_mpg") -> floa
     """The fuel economy the certification record measured on ``cycle``, from the record block a vehicle file
     of ``vpsim vehicle from-epa`` carries (its test names: ftp_bag2, ftp_bag3, hwy for hwfet, us06; a
     battery-electric file's ``measured_mpge``: udds, hwy); None for a preset, another file, or a cycle the
-    record has no test on."""
+    record has no test on, and None with a note for a value outside the certification reader's plausible range
+    (5-150 mpg, :data:`vpsim.fleet.epa.PLAUSIBLE`; 40-300 MPGe, :data:`vpsim.fleet.ev.MPGE_RANGE`): an edited
+    0.001 mpg gives no comparison, never an error of millions of percent."""
     from ..cycles import _normalise
 
     path = Path(vehicle)
@@ -236,15 +237,29 @@ def _measured_mpg(vehicle: str, cycle: str, table: str = "measured_mpg") -> floa
     from ..fleet.vehicle import read_record_block
 
     try:
-        tests = read_record_block(path).get("record", {}).get(table, {})
+        record = read_record_block(path).get("record", {})
+        tests = record.get(table, {}) if isinstance(record, dict) else {}
     except VpsimError as exc:  # an edited comment block: the run stands, the comparison is left out, said so
         click.echo(f"vpsim: note: no measurement to compare with: {exc}", err=True)
         return None
     if not isinstance(tests, dict):
         return None
+    from ..fleet.epa import PLAUSIBLE
+    from ..fleet.ev import MPGE_RANGE
+    from ..textio import printable
+
+    lo, hi = MPGE_RANGE if table == "measured_mpge" else PLAUSIBLE["mpg"]
     for name, mpg in tests.items():
         if _normalise(str(name)) == cycle and isinstance(mpg, int | float) and not isinstance(mpg, bool):
-            return float(mpg) if mpg > 0 and math.isfinite(mpg) else None
+            if lo <= mpg <= hi:  # (nan is not)
+                return float(mpg)
+            click.echo(
+                f"vpsim: note: no measurement to compare with: {path}: record.{table}.{printable(name)[:40]} "
+                f"= {printable(mpg)[:40]} is outside the plausible [{lo:g}, {hi:g}] (the certification "
+                "reader's range)",
+                err=True,
+            )
+            return None
     return None
 
 

@@ -39,9 +39,18 @@ reason                          rule
                                 (:func:`implied_hwy_efficiency`)
 ``missing <field>``             a field the mapping needs is empty
 ``implausible <field>``         a field is outside its plausible range (:data:`PLAUSIBLE`)
+``implausible road load``       the target road load A + B v + C v^2 is not positive at every speed from 0 to
+                                the US06's top speed (:func:`road_load_problem`): a car that would be pushed
+                                by the air
+``implausible rated_hp``        rated power per kilogram of test weight outside :data:`POWER_TO_MASS_W_PER_KG`
+                                (:func:`power_to_mass_problem`)
 ``transmission type other``     transmission code ``OT``
 ``no usable test``              no FTP, HWY or US06 test on certification gasoline with a plausible value
 ==============================  ==============================================================================
+
+The list is a CSV file as the EPA publishes it (``,``), or saved with ``;`` or tab between fields (a
+spreadsheet's export); the header line tells which (:func:`list_separator`). A FIFO or a device is refused
+before it is opened.
 
 Each excluded vehicle, and each skipped or implausible test row, is also listed with a one-line reason
 (:attr:`TestCarList.excluded_rows`); a bad row never stops the reading.
@@ -57,7 +66,7 @@ from pathlib import Path
 
 from ..errors import VpsimError
 from ..model import vehicle as vh
-from ..textio import printable
+from ..textio import check_regular_file, printable
 from ..units import LITRES_PER_GALLON, METRES_PER_MILE, MPH_TO_MPS, mpg_from_l_per_100km
 
 # --- unit conversions (exact definitions) -------------------------------------------------------------------
@@ -181,6 +190,48 @@ def coastdown_record(a_n, b_n_per_mps, c_n_per_mps2, mass_kg=0.0):
     )
 
 
+# the speeds the fleet's cycles reach: 0 to the US06's top speed (80.3 mph, 35.9 m/s); a road load must stay
+# positive over all of them (vpsim.fleet.cycles.fleet_cycle("us06") has this top speed; a test checks it)
+ROAD_LOAD_TOP_SPEED_MPH = 80.3
+
+# rated power per kg of equivalent test weight, set from published figures before it was compared with any
+# record: the weakest cars sold in the US have about 50 W/kg (Mitsubishi Mirage: 78 hp, 2,500 lb test
+# weight, 51 W/kg), the strongest about 500 W/kg (Bugatti Chiron: 1,479 hp, about 4,750 lb, 512 W/kg); the
+# band leaves room either side. The EV reader's lower bound is the same (vpsim.fleet.ev.MIN_POWER_W_PER_KG).
+POWER_TO_MASS_W_PER_KG = (30.0, 600.0)
+
+
+def road_load_problem(a_lbf: float, b_lbf_per_mph: float, c_lbf_per_mph2: float) -> str | None:
+    """Why the coast-down road load F = A + B v + C v^2 (record units) is not physical, or None: it must be
+    positive at every speed from 0 to :data:`ROAD_LOAD_TOP_SPEED_MPH` (its minimum there is at an end or at
+    v = -B / 2C)."""
+    top = ROAD_LOAD_TOP_SPEED_MPH
+    speeds = [0.0, top]
+    if c_lbf_per_mph2 > 0.0 and 0.0 < -b_lbf_per_mph / (2.0 * c_lbf_per_mph2) < top:
+        speeds.append(-b_lbf_per_mph / (2.0 * c_lbf_per_mph2))
+    v = min(speeds, key=lambda x: a_lbf + b_lbf_per_mph * x + c_lbf_per_mph2 * x * x)
+    f = a_lbf + b_lbf_per_mph * v + c_lbf_per_mph2 * v * v
+    if f > 0.0:
+        return None
+    return (
+        f"implausible road load: target_a_lbf {a_lbf:g}, target_b_lbf_per_mph {b_lbf_per_mph:g}, "
+        f"target_c_lbf_per_mph2 {c_lbf_per_mph2:g} give {f:.4g} lbf at {v:.4g} mph; expected a positive "
+        f"road load from 0 to {top:g} mph"
+    )
+
+
+def power_to_mass_problem(rated_hp: float, etw_lb: float) -> str | None:
+    """Why the rated power does not fit the test weight (:data:`POWER_TO_MASS_W_PER_KG`), or None."""
+    w_per_kg = rated_hp * HP_TO_KW * 1e3 / (etw_lb * LB_TO_KG)
+    lo, hi = POWER_TO_MASS_W_PER_KG
+    if lo <= w_per_kg <= hi:
+        return None
+    return (
+        f"implausible rated_hp: {rated_hp:g} hp at etw_lb {etw_lb:g} is {w_per_kg:.0f} W/kg of test weight, "
+        f"expected {lo:g} to {hi:g} W/kg (the weakest to the strongest cars on sale)"
+    )
+
+
 # boosted or naturally aspirated: the list has no column for it
 BOOST_SPECIFIC_POWER_KW_PER_L = 75.0
 
@@ -301,15 +352,29 @@ def _text(x) -> str:
     return str(x).strip()
 
 
+SEPARATORS = (",", ";", "\t")  # as every CSV vpsim reads (README): the header line tells which
+
+
+def list_separator(path: Path) -> str:
+    """The field separator of a list: whichever of ``,``, ``;`` and tab its header line holds most of (the
+    EPA's column names hold none of them); ``,`` for a header without any."""
+    with path.open("rb") as fh:
+        head = fh.readline(1 << 16)
+    counts = {sep: head.count(sep.encode()) for sep in SEPARATORS}
+    best = max(SEPARATORS, key=lambda sep: counts[sep])
+    return best if counts[best] > 0 else ","
+
+
 def read_test_car_list(path: str | Path) -> TestCarList:
     """Read the list at ``path``; errors about the file itself are one line, bad rows are excluded."""
     import pandas as pd
 
-    path = Path(path)
-    if not path.exists():
-        raise VpsimError(f"{path}: no such file")
+    path = check_regular_file(path, VpsimError, "CSV test car list")  # before pandas opens a FIFO or device
     try:
-        df = pd.read_csv(path, encoding="utf-8-sig", dtype=str, keep_default_na=False)
+        sep = list_separator(path)
+        df = pd.read_csv(path, sep=sep, encoding="utf-8-sig", dtype=str, keep_default_na=False)
+    except OSError as exc:  # permission denied, an I/O error
+        raise VpsimError(f"{path}: cannot read ({exc.strerror or exc})") from None
     except (UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise VpsimError(f"{path}: not a readable CSV test car list ({msg})") from None
@@ -539,6 +604,11 @@ def _vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[VehicleRecord | Non
         problem = _field_problem(name, first[name], first["not_a_number"])
         if problem:
             return None, problem, test_rows
+    problem = road_load_problem(
+        first["target_a_lbf"], first["target_b_lbf_per_mph"], first["target_c_lbf_per_mph2"]
+    ) or power_to_mass_problem(first["rated_hp"], first["etw_lb"])
+    if problem:
+        return None, problem, test_rows
     code = first["transmission_code"].upper()
     kind = TRANSMISSION_KIND.get(code)
     if kind is None:
@@ -595,10 +665,14 @@ __all__ = [
     "LB_TO_KG",
     "MPH_TO_MPS",
     "PLAUSIBLE",
+    "POWER_TO_MASS_W_PER_KG",
+    "ROAD_LOAD_TOP_SPEED_MPH",
     "TestCarList",
     "VehicleRecord",
     "lbf_per_mph2_to_si",
     "lbf_per_mph_to_si",
     "mpg_from_l_per_100km",
+    "power_to_mass_problem",
     "read_test_car_list",
+    "road_load_problem",
 ]

@@ -35,7 +35,9 @@ What is read (one vehicle per ``Test Vehicle ID`` + ``Test Veh Configuration #``
 Exclusions (one reason per vehicle, ``electric, <what>: <detail>``): no charge-depleting UDDS or highway
 test; the tests in two units; a missing or implausible field; a rated power below
 :data:`MIN_POWER_W_PER_KG` of test mass (the Kona Electric's and Niro EV's 37 and 38 hp, 15 W/kg: those cars
-have 150 kW; the record's figure is not their machine's, and no figure is invented for them).
+have 150 kW; the record's figure is not their machine's, and no figure is invented for them) or above the
+conventional cars' band :data:`vpsim.fleet.epa.POWER_TO_MASS_W_PER_KG`; a road load A + B v + C v^2 that is
+not positive at every speed up to the US06's top speed (:func:`vpsim.fleet.epa.road_load_problem`).
 """
 
 from __future__ import annotations
@@ -160,7 +162,7 @@ def reduction(axle: float, nv: float) -> tuple[float, float, str] | str:
 def ev_vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[EVRecord | None, str, list[dict]]:
     """(record or None, exclusion reason, excluded test rows) of one electric vehicle's parsed test rows
     (:func:`vpsim.fleet.epa.read_test_car_list`'s rows)."""
-    from .epa import _excl, _field_problem
+    from .epa import _excl, _field_problem, power_to_mass_problem, road_load_problem
 
     test_rows: list[dict] = []
     values: dict[str, list[float]] = {c: [] for c in EV_CYCLES}
@@ -200,10 +202,16 @@ def ev_vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[EVRecord | None, 
     if w_per_kg < MIN_POWER_W_PER_KG:
         return (
             None,
-            f"electric, implausible rated_hp: {first['rated_hp']:g} hp is {w_per_kg:.0f} W/kg of test "
-            f"weight, below the {MIN_POWER_W_PER_KG:g} W/kg of any car on sale",
+            f"electric, implausible rated_hp: {first['rated_hp']:g} hp at etw_lb {first['etw_lb']:g} is "
+            f"{w_per_kg:.0f} W/kg of test weight, expected at least the {MIN_POWER_W_PER_KG:g} W/kg of any "
+            "car on sale",
             test_rows,
         )
+    problem = power_to_mass_problem(first["rated_hp"], first["etw_lb"]) or road_load_problem(
+        first["target_a_lbf"], first["target_b_lbf_per_mph"], first["target_c_lbf_per_mph2"]
+    )
+    if problem:
+        return None, f"electric, {problem}", test_rows
     for name in ("axle_ratio", "nv_ratio"):
         text = first["not_a_number"].get(name)
         if text is not None:

@@ -384,9 +384,14 @@ def ev_records(csv_path, report: dict | None = None):
     ``unpaired`` (a list of (vehicle, why))."""
     import pandas as pd
 
-    from .epa import HP_TO_KW, LB_TO_KG, LBF_TO_N, lbf_per_mph2_to_si, lbf_per_mph_to_si
+    from ..errors import VpsimError
+    from ..textio import check_regular_file
+    from .epa import HP_TO_KW, LB_TO_KG, LBF_TO_N, lbf_per_mph2_to_si, lbf_per_mph_to_si, list_separator
 
-    df = pd.read_csv(csv_path, encoding="utf-8-sig", dtype=str, keep_default_na=False)
+    csv_path = check_regular_file(csv_path, VpsimError, "CSV test car list")
+    df = pd.read_csv(
+        csv_path, sep=list_separator(csv_path), encoding="utf-8-sig", dtype=str, keep_default_na=False
+    )
     df.columns = [c.strip() for c in df.columns]
     ev = df[(df["Test Fuel Type Description"].str.strip() == EV_FUEL)]
     ev = ev[ev["Test Procedure Description"].str.strip().isin(EV_TESTS)]

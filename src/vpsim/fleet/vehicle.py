@@ -567,7 +567,9 @@ def read_record_block(path: str | Path) -> dict:
     """The commented certification-record block of a TOML written by :func:`vehicle_toml` ({} if none)."""
     import tomllib
 
-    text = Path(path).read_text()
+    from ..textio import read_text
+
+    text = read_text(Path(path), VpsimError, what="vehicle file")
     if RECORD_BEGIN not in text:
         return {}
     inner = text.split(RECORD_BEGIN, 1)[1].split(RECORD_END, 1)[0]
@@ -576,6 +578,10 @@ def read_record_block(path: str | Path) -> dict:
         return tomllib.loads(body)
     except tomllib.TOMLDecodeError as exc:
         raise VpsimError(f"{path}: the certification-record block is not valid TOML ({exc})") from None
+    except RecursionError:
+        raise VpsimError(
+            f"{path}: the certification-record block is not valid TOML (arrays or tables nested too deeply)"
+        ) from None
 
 
 __all__ = [

@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..textio import read_json
 from .spec import SpecError
 
 PARQUET_NAME = "results.parquet"
@@ -540,6 +541,9 @@ def _verify_parts(folder: Path) -> tuple[list[Path], list[tuple[Path, str]]]:
     good: list[Path] = []
     damaged: list[tuple[Path, str]] = []
     for part in sorted(folder.glob("part-*.parquet")):
+        if not part.is_file():  # a FIFO would block the read, a device never end
+            damaged.append((part, "not a regular file"))
+            continue
         try:
             data = part.read_bytes()
         except OSError as exc:
@@ -548,9 +552,9 @@ def _verify_parts(folder: Path) -> tuple[list[Path], list[tuple[Path, str]]]:
         side = _sidecar(part)
         if side.exists():
             try:
-                rec = json.loads(side.read_text())
+                rec = read_json(side, SpecError, what="checksum record")
                 ok = isinstance(rec, dict) and all(k in rec for k in ("rows", "bytes", "sha256"))
-            except (OSError, ValueError):
+            except SpecError:  # unreadable, not JSON, nested too deeply, a FIFO
                 ok = False
             if not ok:
                 damaged.append((part, "its checksum record is unreadable"))
@@ -671,9 +675,11 @@ def arrow_schema(schema: dict[str, str]):
 
 def _read_meta(path: Path) -> dict:
     try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError, RecursionError) as exc:
-        raise SpecError(f"{path}: cannot read the sweep's record ({_reason(exc)})") from None
+        meta = read_json(path, SpecError, what="sweep record")
+    except SpecError as exc:  # (a FIFO or device is refused before it is opened)
+        raise SpecError(
+            f"{path}: cannot read the sweep's record ({str(exc).removeprefix(f'{path}: ')})"
+        ) from None
     if not isinstance(meta, dict) or not isinstance(meta.get("schema", {}), dict):
         raise SpecError(f"{path}: the sweep's record is not a JSON object with a schema; use another --out")
     if meta.get("format") not in (None, *FORMATS):
