@@ -82,18 +82,28 @@ def _interp_soc(jnext, s_on, soc, soc0, dsoc, n):
 
 
 @kernel(_nrt=False)
-def dp_kernel(v, a, dt, ratio, c, e, m, tabs, h, levels, line_speed, line_max, line_min, soc_grid, jcost):
+def dp_kernel(
+    v, a, dt, ratio, c, e, m, tabs, h, levels, line_speed, line_max, line_min, soc_grid, jcost, packs
+):
     """Backward: jcost[k, i, s] the least fuel (kg) from interval k to the end at charge soc_grid[i] with the
-    engine in state s (0 off, 1 on) before it. jcost[K] is the terminal cost, filled by the caller."""
+    engine in state s (0 off, 1 on) before it. jcost[K] is the terminal cost, filled by the caller; ``packs``
+    (grid points x 5) is room for the pack's state at each grid charge."""
     inv_line = tb.inverse_spacing(line_speed)
     n = soc_grid.size
     soc0 = soc_grid[0]
     dsoc = soc_grid[1] - soc_grid[0]
+    # the pack's state at each grid charge, once for the whole cycle
+    for i in range(n):
+        st = el.battery_state(soc_grid[i], e, tabs[0], tabs[1], tabs[2], tabs[3])
+        for q in range(5):
+            packs[i, q] = st[q]
     for k in range(v.size - 1, -1, -1):
         w = vh.engine_speed(v[k], ratio[k], c)
         t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
         runs = hy.can_run(w, c)
+        interval = hy.p2_interval(v[k], a[k], ratio[k], c, e, m, tabs)
         for i in range(n):
+            battery = (packs[i, 0], packs[i, 1], packs[i, 2], packs[i, 3], packs[i, 4])
             best0 = math.inf
             best1 = math.inf
             for u in range(levels + 1):
@@ -101,7 +111,7 @@ def dp_kernel(v, a, dt, ratio, c, e, m, tabs, h, levels, line_speed, line_max, l
                 if u > 0 and not runs:
                     break
                 te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else 0.0
-                pt = hy.p2_point(v[k], a[k], ratio[k], soc_grid[i], on, te, c, e, m, tabs)
+                pt = hy.p2_choice(interval, battery, on, te, c, e, m, tabs)
                 nxt = soc_grid[i] + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt[k]
                 s_next = 1 if u > 0 else 0
                 base = hy.ecms_cost(pt, dt[k], False, 0.0, c, h) + _interp_soc(
@@ -112,6 +122,8 @@ def dp_kernel(v, a, dt, ratio, c, e, m, tabs, h, levels, line_speed, line_max, l
                     best0 = c0
                 if base < best1:
                     best1 = base
+                if u > 0 and hy.higher_torques_dominated(pt, battery):
+                    break
             jcost[k, i, 0] = best0
             jcost[k, i, 1] = best1
 
@@ -156,6 +168,9 @@ def causal_kernel(
         w = vh.engine_speed(v, ratio, c)
         t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
         runs = hy.can_run(w, c)
+        # what the interval and the charge fix, once for all the choices
+        interval = hy.p2_interval(v, a, ratio, c, e, m, tabs)
+        battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
         choice_on = 0.0
         choice_te = 0.0
         if ems == hy.EMS_RULE:
@@ -182,7 +197,7 @@ def causal_kernel(
                     break
                 o = 1.0 if u > 0 else 0.0
                 te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else 0.0
-                pt = hy.p2_point(v, a, ratio, soc, o, te, c, e, m, tabs)
+                pt = hy.p2_choice(interval, battery, o, te, c, e, m, tabs)
                 start = u > 0 and on == 0.0
                 if ems == hy.EMS_DP:
                     nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
@@ -195,7 +210,9 @@ def causal_kernel(
                     best = cost
                     choice_on = o
                     choice_te = te
-        pt = hy.p2_point(v, a, ratio, soc, choice_on, choice_te, c, e, m, tabs)
+                if u > 0 and hy.higher_torques_dominated(pt, battery):
+                    break
+        pt = hy.p2_choice(interval, battery, choice_on, choice_te, c, e, m, tabs)
         running = pt[16]
         if running > 0.0 and on == 0.0:
             sums[S_STARTS] += 1.0
@@ -243,14 +260,15 @@ def causal_kernel(
 # --- Python side ------------------------------------------------------------------------------------------
 
 
-def _inputs(cycle, params):
+def _inputs(cycle, params, schedule=None):
     from ..gears import default_schedule
     from ..model.maps import cached_engine_map
     from ..model.record import kernel_records
     from ..model.record import ratios as total_ratios
 
     engine_map = cached_engine_map(params.engine)
-    schedule = default_schedule(cycle, params, engine_map)
+    if schedule is None:
+        schedule = default_schedule(cycle, params, engine_map)
     e, m, tabs = el.electric_records(params)
     return (
         engine_map,
@@ -286,13 +304,15 @@ def terminal_cost(params, grid, soc_start, e) -> np.ndarray:
     return np.repeat((10.0 * per_soc * deficit)[:, None], 2, axis=1)
 
 
-def run(cycle, params, *, ems: str | None = None, mode: str = "realistic"):
+def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", schedule=None):
     """The P2 hybrid of ``params`` on ``cycle`` (backward method) with the management ``ems`` (default
-    ``params.hybrid.ems``); a :class:`vpsim.result.Result`."""
+    ``params.hybrid.ems``); a :class:`vpsim.result.Result`. ``schedule``: the gear rule's schedule of this
+    cycle and car (:func:`vpsim.gears.default_schedule`) if already at hand (a benchmark's prepared inputs,
+    as the engine car's backward method takes them); derived here otherwise."""
     ems = ems or params.hybrid.ems
     if ems not in hy.EMS_CODES:
         raise VpsimError(f"unknown energy management {ems!r}; expected one of {', '.join(hy.EMS_CODES)}")
-    engine_map, schedule, c, e, m, tabs, h, ratios = _inputs(cycle, params)
+    engine_map, schedule, c, e, m, tabs, h, ratios = _inputs(cycle, params, schedule)
     t0 = time.process_time()
     ts, vs = np.asarray(cycle.time_s, float), np.asarray(cycle.speed_mps, float)
     n = ts.size - 1
@@ -308,7 +328,7 @@ def run(cycle, params, *, ems: str | None = None, mode: str = "realistic"):
         ratio = ratios[gear - 1]
         jcost = np.empty((n + 1, grid.size, 2))
         jcost[n] = terminal_cost(params, grid, soc_start, e)
-        dp_kernel(v, a, dt, ratio, c, e, m, tabs, h, levels, *lines, grid, jcost)
+        dp_kernel(v, a, dt, ratio, c, e, m, tabs, h, levels, *lines, grid, jcost, np.empty((grid.size, 5)))
     else:
         jcost = np.zeros((1, 2, 2))
     rows = np.empty((N_ROWS, n))

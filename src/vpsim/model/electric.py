@@ -36,7 +36,7 @@ from . import battery as bt
 from . import machine as mc
 from . import tables as tb
 from . import vehicle as vh
-from .engine import equation
+from .engine import equation, inline
 
 KWH_PER_GALLON_EQUIVALENT = 33.705  # EPA: the energy content of a gallon of gasoline, for MPGe
 BISECTION_STEPS = 48  # halvings of a torque cut to the battery's limit (to 2^-48 of the demand)
@@ -146,7 +146,7 @@ def envelope(w, m, e, env_speed, env_max, env_min):
     return mc.min_torque(w, m), mc.max_torque(w, m)
 
 
-@equation
+@inline
 def machine_power(t, w, m, e, map_speed, map_torque, map_loss):
     """The machine's DC power at (T, w) (E3): T w plus its losses (model, or the measured map's)."""
     if e.measured_machine > 0.0:  # the map's loss, held at its edges (as MeasuredMachine.loss_w)
@@ -206,6 +206,26 @@ def machine_and_battery(t_ask, braking, v, w, soc, e, m, tabs):
     (T_m, current A, U_oc V, R Ohm, P_machine W, at the machine's limit, at the battery's limit)."""
     soc_grid, ocv, r_dis, r_chg, map_speed, map_torque, map_loss, env_speed, env_max, env_min = tabs
     t_min, t_max = envelope(w, m, e, env_speed, env_max, env_min)
+    return machine_and_battery_at(
+        t_ask, braking, v, w, t_min, t_max, battery_state(soc, e, soc_grid, ocv, r_dis, r_chg), e, m, tabs
+    )
+
+
+@equation
+def machine_and_battery_at(t_ask, braking, v, w, t_min, t_max, battery, e, m, tabs):
+    """:func:`machine_and_battery` with the envelope (t_min, t_max) at w and the pack's
+    :func:`battery_state` at hand: a caller that tries many torques at one speed and charge (the hybrid's
+    energy management) evaluates those once."""
+    t, at_machine = machine_torque_within(t_ask, braking, v, t_min, t_max, e)
+    map_speed, map_torque, map_loss = tabs[4], tabs[5], tabs[6]
+    p_machine = machine_power(t, w, m, e, map_speed, map_torque, map_loss)
+    return battery_supplies(t, p_machine, w, battery, e, m, tabs, at_machine)
+
+
+@equation
+def machine_torque_within(t_ask, braking, v, t_min, t_max, e):
+    """(T, at the machine's limit): the torque asked, a braking demand's regenerative share s(v) of it (E2),
+    held within the envelope (t_min, t_max)."""
     at_machine = 0.0
     t = t_ask * regen_fraction(v, e) if braking and t_ask < 0.0 else t_ask
     if t > t_max:
@@ -214,8 +234,18 @@ def machine_and_battery(t_ask, braking, v, w, soc, e, m, tabs):
     elif t < t_min:
         t = t_min
         at_machine = 1.0
-    u_oc, r_d, r_c, i_lo, i_hi = battery_state(soc, e, soc_grid, ocv, r_dis, r_chg)
-    p = machine_power(t, w, m, e, map_speed, map_torque, map_loss) + e.accessory_power
+    return t, at_machine
+
+
+@equation
+def battery_supplies(t, p_machine, w, battery, e, m, tabs, at_machine):
+    """The battery (state ``battery``, :func:`battery_state`) supplying the machine's torque T at w, whose
+    DC power is ``p_machine`` (:func:`machine_power`), and the accessories (E3), (B2): the current, and where
+    it is beyond the pack's limits the torque cut to what the pack can give or take. Returns what
+    :func:`machine_and_battery` returns."""
+    map_speed, map_torque, map_loss = tabs[4], tabs[5], tabs[6]
+    u_oc, r_d, r_c, i_lo, i_hi = battery
+    p = p_machine + e.accessory_power
     i = pack_current(p, u_oc, r_d, r_c)
     at_battery = 0.0
     if i > i_hi or i < i_lo:
@@ -224,13 +254,13 @@ def machine_and_battery(t_ask, braking, v, w, soc, e, m, tabs):
         p_lim = pack_power(i, u_oc, r_d, r_c)
         if t != 0.0 and (t > 0.0) == (p > p_lim):
             t = torque_for_power(p_lim, t, w, m, e, map_speed, map_torque, map_loss)
-            p = machine_power(t, w, m, e, map_speed, map_torque, map_loss) + e.accessory_power
-            i = pack_current(p, u_oc, r_d, r_c)
+            p_machine = machine_power(t, w, m, e, map_speed, map_torque, map_loss)
+            i = pack_current(p_machine + e.accessory_power, u_oc, r_d, r_c)
             i = min(max(i, i_lo), i_hi)
         # the accessories alone beyond the limit (an empty pack): the current is the limit's, the power the
         # pack's; the rest is booked as unserved
     r = r_d if i >= 0.0 else r_c
-    return t, i, u_oc, r, machine_power(t, w, m, e, map_speed, map_torque, map_loss), at_machine, at_battery
+    return t, i, u_oc, r, p_machine, at_machine, at_battery
 
 
 @equation

@@ -43,7 +43,7 @@ from . import engine as en
 from . import rules
 from . import tables as tb
 from . import vehicle as vh
-from .engine import equation
+from .engine import equation, inline
 
 EMS_RULE, EMS_ECMS, EMS_DP = 0, 1, 2
 MISS_PENALTY = 1.0e3  # the price of a trace miss in the ECMS and DP: its wheel work's fuel, a thousand times
@@ -71,30 +71,42 @@ def p2_point(v, a, ratio, soc, on, t_e, c, e, m, tabs):
     """The P2 hybrid's operating point at speed v, acceleration a in the gear of total ratio i, with the
     engine on (``on`` > 0, crank torque from ``t_e``, its torque at the shaft) or off (H1). Returns
     (w, dw, T_in, T_e, T_cr, p_i, mdot_f, T_m, I, U_oc, R, P_machine, brake N, missing N, at the machine's
-    limit, at the battery's limit, engine on, c_m^1.8)."""
+    limit, at the battery's limit, engine on, c_m^1.8).
+
+    Written as its two parts: what the interval fixes (:func:`p2_interval`, and the pack's state at this
+    charge, :func:`vpsim.model.electric.battery_state`), and what the management's choice adds
+    (:func:`p2_choice`); the management, trying many choices at one interval, evaluates the first once."""
+    soc_grid, ocv, r_dis, r_chg = tabs[0], tabs[1], tabs[2], tabs[3]
+    battery = el.battery_state(soc, e, soc_grid, ocv, r_dis, r_chg)
+    return p2_choice(p2_interval(v, a, ratio, c, e, m, tabs), battery, on, t_e, c, e, m, tabs)
+
+
+@equation
+def p2_interval(v, a, ratio, c, e, m, tabs):
+    """What an interval (speed v, acceleration a, total ratio i) fixes whatever the management chooses:
+    (v >= 0, w, dw, wheel force F_w, input-shaft demand T_in (H1), the engine may run, c_m^1.8 at w, the
+    machine's envelope (T_min, T_max) at w, the ratio i)."""
     vv = v if v > 0.0 else 0.0
     w = vh.engine_speed(vv, ratio, c)
     dw = vh.engine_speed(a, ratio, c)
     f = vh.wheel_force(vv, a, c)
+    t_min, t_max = el.envelope(w, m, e, tabs[7], tabs[8], tabs[9])
     t_in = el.shaft_torque(f, ratio, c)
-    running = on > 0.0 and can_run(w, c)
-    cm18 = en.speed_power(w, c)
-    t_cr = 0.0
-    p = 0.0
-    mdot = 0.0
-    te = 0.0
-    if running:
-        te = t_e
-        t_cr = te + vh.inertia_torque(dw, c)
-        p = en.intake_pressure_for_torque(t_cr, w, c, cm18)
-        mdot = en.fuel_flow(p, w, c)
-    t_m, i, u_oc, r, p_m, at_m, at_b = el.machine_and_battery(
-        t_in - te + el.rotor_torque(dw, e), t_in < 0.0, vv, w, soc, e, m, tabs
+    return vv, w, dw, f, t_in, can_run(w, c), en.speed_power(w, c), t_min, t_max, ratio
+
+
+@inline
+def p2_choice(interval, battery, on, t_e, c, e, m, tabs):
+    """The operating point (as :func:`p2_point` returns it) of the choice (engine ``on``, torque ``t_e``) at
+    an interval (:func:`p2_interval`) with the pack in state ``battery``
+    (:func:`vpsim.model.electric.battery_state`)."""
+    vv, w, dw, f, t_in, runs, cm18, t_min, t_max, ratio = interval
+    te, t_cr, p, mdot, running = engine_choice(on, runs, t_e, w, dw, cm18, c)
+    t_m, i, u_oc, r, p_m, at_m, at_b = el.machine_and_battery_at(
+        t_in - te + el.rotor_torque(dw, e), t_in < 0.0, vv, w, t_min, t_max, battery, e, m, tabs
     )
     t_net = te + t_m - el.rotor_torque(dw, e)
-    f_net = el.wheel_force_of_shaft(t_net, ratio, c)
-    missing = f - f_net if f > f_net else 0.0
-    brake = f_net - f if f_net > f else 0.0
+    missing, brake = shortfall_and_brake(f, el.wheel_force_of_shaft(t_net, ratio, c))
     return (
         w,
         dw,
@@ -112,9 +124,42 @@ def p2_point(v, a, ratio, soc, on, t_e, c, e, m, tabs):
         missing,
         at_m,
         at_b,
-        1.0 if running else 0.0,
+        running,
         cm18,
     )
+
+
+@equation
+def engine_choice(on, runs, t_e, w, dw, cm18, c):
+    """(T_e, T_cr, p_i, mdot_f, 1.0) of the engine asked to run (``on`` > 0, and it ``runs`` at w: its
+    idle speed) with torque ``t_e`` at speed w (``cm18`` its c_m^1.8): its crank torque (1), the BQM's
+    intake pressure and fuel (19); all zero if it stands."""
+    if not (on > 0.0 and runs):
+        return 0.0, 0.0, 0.0, 0.0, 0.0
+    t_cr = t_e + vh.inertia_torque(dw, c)
+    p = en.intake_pressure_for_torque(t_cr, w, c, cm18)
+    return t_e, t_cr, p, en.fuel_flow(p, w, c), 1.0
+
+
+@equation
+def shortfall_and_brake(f_demand, f_given):
+    """(force missing, force the friction brakes take) of a wheel-force demand met by ``f_given``."""
+    return max(f_demand - f_given, 0.0), max(f_given - f_demand, 0.0)
+
+
+@equation
+def higher_torques_dominated(point, battery):
+    """Whether every engine torque above this running choice's is worse for the management (a
+    :func:`p2_choice` point, the pack in state ``battery``): the machine is held at its charging side's
+    limit (its generating envelope, or the torque whose current is the pack's charging limit), so a larger
+    engine torque leaves the machine's torque and the battery's current as they are (up to the rounding of
+    the limit's bisection) and only burns more fuel (the fuel rises with the torque), its surplus going to
+    the friction brakes; with no trace miss to close. The ECMS and the DP, trying torques upward, stop
+    there."""
+    t_m, i, at_m, at_b, missing = point[7], point[8], point[14], point[15], point[13]
+    if missing > MISS_TOLERANCE_N or point[16] <= 0.0:
+        return False
+    return (at_m > 0.0 and t_m < 0.0) or (at_b > 0.0 and i <= battery[3])
 
 
 @equation
