@@ -772,6 +772,18 @@ def test_each_kernel_is_stamped_with_what_it_compiles_from():
     assert kernel_digest(backward.run_kernel.py_func) != kernel_digest(backward.account.py_func)
 
 
+def test_an_equation_compiled_another_way_is_another_stamp(monkeypatch):
+    """Turning an equation into an IR-inlined one (or back) changes no bytecode, but the kernels that
+    include it compile differently: their stamp changes (a stale kernel is never loaded for it)."""
+    from vpsim.model import engine as en
+    from vpsim.model._compile import kernel_digest
+
+    digest = kernel_digest.__wrapped__  # uncached: the stamp as a fresh process computes it
+    before = digest(backward.run_kernel.py_func)
+    monkeypatch.setattr(en.crank_torque, "_vpsim_inline", not en.crank_torque._vpsim_inline)
+    assert digest(backward.run_kernel.py_func) != before
+
+
 def test_no_method_file_grows_past_800_lines():
     """A structure that takes new powertrains without a new copy of each method: every file of
     src/vpsim/methods/ stays readable (the forward method is split into its system and its integrators)."""

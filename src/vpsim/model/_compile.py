@@ -103,7 +103,10 @@ def _closure(fn) -> list[tuple[str, str]]:
         if id(f) in seen:
             continue
         seen[id(f)] = None
-        parts.append((f"{f.__module__}.{f.__qualname__}", _source(f)))
+        # how it is compiled into its callers is part of what they compile from: an equation turned into an
+        # IR-inlined one (or back) leaves its bytecode as it was
+        how = f"|inline={getattr(f, '_vpsim_inline', None)}"
+        parts.append((f"{f.__module__}.{f.__qualname__}", _source(f) + how))
         names = _code_names(f.__code__)
         values = [(n, f.__globals__[n]) for n in sorted(names) if n in f.__globals__]
         values += [(f"<default {i}>", d) for i, d in enumerate(f.__defaults__ or ())]

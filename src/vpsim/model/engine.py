@@ -23,12 +23,14 @@ from ._compile import kernel
 
 def equation(fn):
     """Mark a model equation: compiled into every kernel that calls it, plain Python otherwise."""
+    fn._vpsim_inline = False  # part of the kernels' cache stamp (vpsim.model._compile)
     return register_jitable(fn)
 
 
 def inline(fn):
     """Like :func:`equation`, and inlined at Numba IR level into its callers: for the per-step glue of a
     kernel, whose calls (arrays and long tuples in and out) would otherwise cost more than their work."""
+    fn._vpsim_inline = True  # part of the kernels' cache stamp: a kernel compiled either way is another
     return register_jitable(inline="always")(fn)
 
 
