@@ -30,7 +30,7 @@ from ..model import battery as bt
 from ..model import electric as el
 from ..model import vehicle as vh
 from ..model._compile import kernel
-from ..model.engine import equation
+from ..model.engine import equation, inline
 
 ELECTRIC_TERMS = (
     "chemical",
@@ -123,7 +123,7 @@ def interval_kernel(t_mid, v, a, dt, ratio, soc0, c, e, m, tabs, rows, sums):
     return soc
 
 
-@equation
+@inline
 def _forward_point(v, xi, soc, v_ref, kp, ki, ratio, c, e, m, tabs):
     """The forward model at one instant: (dv/dt, the point's values). The driver's wheel force m u (net of
     the road load it feels), the machine and brakes as the point gives them; the rotor's inertia joins the

@@ -198,7 +198,7 @@ def torque_for_power(p_target, t_from, w, m, e, map_speed, map_torque, map_loss)
     return lo if t_from > 0.0 else hi
 
 
-@equation
+@inline
 def machine_and_battery(t_ask, braking, v, w, soc, e, m, tabs):
     """What the machine gives of a torque ``t_ask`` at its shaft (speed w), the battery supplying it
     (E2), (E3), (B1)-(B3): ``braking`` (the wheels' demand is a braking one) applies the regenerative share
