@@ -57,6 +57,7 @@ import numpy as np
 
 from ..errors import EngineFileError, MachineFileError
 from .matlab import read_m_file
+from .measured import checked_arrays
 
 __all__ = ["MeasuredMachine", "load_machine"]
 
@@ -96,28 +97,12 @@ class MeasuredMachine:
         def bad(msg: str) -> MachineFileError:
             return MachineFileError(f"{where}: {msg}")
 
-        arrays: dict[str, np.ndarray] = {}
-        for field_name in (
-            "speed_grid",
-            "torque_grid",
-            "efficiency",
-            "envelope_speed",
-            "max_torque",
-            "min_torque",
-        ):
-            try:
-                a = np.array(getattr(self, field_name), dtype=float)
-            except (TypeError, ValueError):
-                raise bad(f"{field_name} is not numeric") from None
-            if not np.all(np.isfinite(a)):
-                raise bad(f"{field_name} holds non-finite values (NaN or infinity)")
-            arrays[field_name] = a
-        for field_name in ("speed_grid", "torque_grid", "envelope_speed"):
-            a = arrays[field_name]
-            if a.ndim != 1 or a.size < 2:
-                raise bad(f"{field_name} must be a 1-D array of at least 2 points, got shape {a.shape}")
-            if not np.all(np.diff(a) > 0):
-                raise bad(f"{field_name} must be strictly increasing")
+        arrays = checked_arrays(
+            self,
+            ("speed_grid", "torque_grid", "efficiency", "envelope_speed", "max_torque", "min_torque"),
+            ("speed_grid", "torque_grid", "envelope_speed"),
+            bad,
+        )
         speed, torque, eff = arrays["speed_grid"], arrays["torque_grid"], arrays["efficiency"]
         if speed[0] < 0 or arrays["envelope_speed"][0] < 0:
             raise bad("speeds must not be negative")

@@ -118,6 +118,27 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def checked_arrays(obj, numeric, axes, bad) -> dict[str, np.ndarray]:
+    """The fields ``numeric`` of a measured map ``obj`` as float arrays, each finite, and each of ``axes`` a
+    strictly increasing 1-D grid of at least two points; ``bad(message)`` makes the one-line error raised."""
+    arrays: dict[str, np.ndarray] = {}
+    for field_name in numeric:
+        try:
+            a = np.array(getattr(obj, field_name), dtype=float)
+        except (TypeError, ValueError):
+            raise bad(f"{field_name} is not numeric") from None
+        if not np.all(np.isfinite(a)):
+            raise bad(f"{field_name} holds non-finite values (NaN or infinity)")
+        arrays[field_name] = a
+    for field_name in axes:
+        a = arrays[field_name]
+        if a.ndim != 1 or a.size < 2:
+            raise bad(f"{field_name} must be a 1-D array of at least 2 points, got shape {a.shape}")
+        if not np.all(np.diff(a) > 0):
+            raise bad(f"{field_name} must be strictly increasing")
+    return arrays
+
+
 @dataclass(frozen=True, eq=False)
 class MeasuredEngine:
     """An engine described by measured data (for example an ADVISOR fuel-converter file).
@@ -151,21 +172,12 @@ class MeasuredEngine:
         def bad(msg: str) -> EngineFileError:
             return EngineFileError(f"{where}: {msg}")
 
-        arrays = {}
-        for field_name in ("speed_grid", "torque_grid", "fuel_flow", "max_torque_speed", "max_torque"):
-            try:
-                a = np.array(getattr(self, field_name), dtype=float)
-            except (TypeError, ValueError):
-                raise bad(f"{field_name} is not numeric") from None
-            if not np.all(np.isfinite(a)):
-                raise bad(f"{field_name} holds non-finite values (NaN or infinity)")
-            arrays[field_name] = a
-        for field_name in ("speed_grid", "torque_grid", "max_torque_speed"):
-            a = arrays[field_name]
-            if a.ndim != 1 or a.size < 2:
-                raise bad(f"{field_name} must be a 1-D array of at least 2 points, got shape {a.shape}")
-            if not np.all(np.diff(a) > 0):
-                raise bad(f"{field_name} must be strictly increasing")
+        arrays = checked_arrays(
+            self,
+            ("speed_grid", "torque_grid", "fuel_flow", "max_torque_speed", "max_torque"),
+            ("speed_grid", "torque_grid", "max_torque_speed"),
+            bad,
+        )
         if arrays["speed_grid"][0] < 0 or arrays["max_torque_speed"][0] < 0:
             raise bad("speeds must not be negative")
         shape = (arrays["speed_grid"].size, arrays["torque_grid"].size)

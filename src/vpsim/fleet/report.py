@@ -532,6 +532,20 @@ def _axes_grid(n, ncols=2, size=(5.2, 4.2)):
     return fig, axes
 
 
+def _diagonal(ax, lo, hi, title, measured_unit, predicted_unit):
+    """A predicted-against-measured panel's frame: the diagonal, +-10 % lines, limits, labels, legend."""
+    x = np.array([lo, hi])
+    ax.plot(x, x, "k-", lw=0.8)
+    ax.plot(x, 1.1 * x, "k:", lw=0.7)
+    ax.plot(x, 0.9 * x, "k:", lw=0.7, label="±10 %")
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(lo, hi)
+    ax.set_title(title)
+    ax.set_xlabel(f"measured {measured_unit}")
+    ax.set_ylabel(f"predicted {predicted_unit} (out of fold)")
+    ax.legend(fontsize=7, loc="upper left")
+
+
 def figure_predicted_vs_measured(df, cycles, peer: bool, ev=None):
     """One panel per conventional cycle (mpg) and, with battery-electric rows ``ev``, one per EV test
     (MPGe: green diamonds)."""
@@ -560,16 +574,7 @@ def figure_predicted_vs_measured(df, cycles, peer: bool, ev=None):
             alpha=0.75,
             label="vpsim BEV",
         )
-        x = np.array([lo, hi])
-        ax.plot(x, x, "k-", lw=0.8)
-        ax.plot(x, 1.1 * x, "k:", lw=0.7)
-        ax.plot(x, 0.9 * x, "k:", lw=0.7, label="±10 %")
-        ax.set_xlim(lo, hi)
-        ax.set_ylim(lo, hi)
-        ax.set_title(f"battery-electric, {c} (n = {len(sub)})")
-        ax.set_xlabel("measured MPGe (unadjusted)")
-        ax.set_ylabel("predicted MPGe (out of fold)")
-        ax.legend(fontsize=7, loc="upper left")
+        _diagonal(ax, lo, hi, f"battery-electric, {c} (n = {len(sub)})", "MPGe (unadjusted)", "MPGe")
     for ax, c in zip(axes, cycles, strict=False):
         sub = df[(df["cycle"] == c) & np.isfinite(df["predicted_mpg"])]
         lo = 0.9 * min(sub["measured_mpg"].min(), sub["predicted_mpg"].min()) if len(sub) else 0
@@ -605,16 +610,7 @@ def figure_predicted_vs_measured(df, cycles, peer: bool, ev=None):
                 c="tab:red",
                 label="vpsim, trace miss",
             )
-        x = np.array([lo, hi])
-        ax.plot(x, x, "k-", lw=0.8)
-        ax.plot(x, 1.1 * x, "k:", lw=0.7)
-        ax.plot(x, 0.9 * x, "k:", lw=0.7, label="±10 %")
-        ax.set_xlim(lo, hi)
-        ax.set_ylim(lo, hi)
-        ax.set_title(f"{c} (n = {len(sub)})")
-        ax.set_xlabel("measured mpg")
-        ax.set_ylabel("predicted mpg (out of fold)")
-        ax.legend(fontsize=7, loc="upper left")
+        _diagonal(ax, lo, hi, f"{c} (n = {len(sub)})", "mpg", "mpg")
     fig.suptitle(
         "Predicted against measured fuel economy (MPGe for the battery-electric cars), EPA test cars"
     )

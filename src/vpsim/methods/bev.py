@@ -32,20 +32,7 @@ from ..model import vehicle as vh
 from ..model._compile import kernel
 from ..model.engine import equation, inline
 
-ELECTRIC_TERMS = (
-    "chemical",
-    "battery_loss",
-    "accessories",
-    "machine_loss",
-    "rotor_kinetic",
-    "driveline_loss",
-    "vehicle_kinetic",
-    "aero",
-    "rolling",
-    "brake",
-    "trace_miss",
-    "unserved",
-)
+ELECTRIC_TERMS = el.ELECTRIC_TERMS
 (
     T_CHEM,
     T_BLOSS,

@@ -38,6 +38,21 @@ from . import tables as tb
 from . import vehicle as vh
 from .engine import equation, inline
 
+# the energy terms of an electric powertrain, in the order the kernels book them (result.ElectricBalance)
+ELECTRIC_TERMS = (
+    "chemical",
+    "battery_loss",
+    "accessories",
+    "machine_loss",
+    "rotor_kinetic",
+    "driveline_loss",
+    "vehicle_kinetic",
+    "aero",
+    "rolling",
+    "brake",
+    "trace_miss",
+    "unserved",
+)
 KWH_PER_GALLON_EQUIVALENT = 33.705  # EPA: the energy content of a gallon of gasoline, for MPGe
 BISECTION_STEPS = 48  # halvings of a torque cut to the battery's limit (to 2^-48 of the demand)
 

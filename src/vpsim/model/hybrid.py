@@ -249,24 +249,8 @@ def hybrid_powers(point, v, a, c, e):
     )
 
 
-HYBRID_TERMS = (
-    "indicated",
-    "friction",
-    "pumping",
-    "engine_kinetic",
-    "chemical",
-    "battery_loss",
-    "accessories",
-    "machine_loss",
-    "rotor_kinetic",
-    "driveline_loss",
-    "vehicle_kinetic",
-    "aero",
-    "rolling",
-    "brake",
-    "trace_miss",
-    "unserved",
-)
+# the engine's terms, then the electric powertrain's (hybrid_powers returns them in this order)
+HYBRID_TERMS = ("indicated", "friction", "pumping", "engine_kinetic", *el.ELECTRIC_TERMS)
 
 
 # the management's settings as a record compiled code reads (numbers of params.hybrid)
