@@ -851,100 +851,6 @@ def _ratio(num, den) -> float | None:
     return num["median_ms"] / den["median_ms"]
 
 
-def bev_peer_inputs(params) -> tuple:
-    """The bev preset as FASTSim's BEV peer takes a car (:func:`vpsim.fleet.peer_bev.bev_peer_vehicle`):
-    mass, road load A (N), B (N per m/s), C (N per (m/s)^2) and rated power (W), from the model's record."""
-    from .model.record import record
-
-    c = record(params)
-    return (float(c.mass), float(c.rolling_force), float(c.road_load_b), float(c.aero_coefficient))
-
-
-def _bev_peer_ms(settings: Settings, progress) -> dict:
-    """FASTSim 3.1's BEV on the bev preset's car over UDDS: median ms of ``SimDrive.run()`` (the vehicle and
-    cycle built outside the timing), before any vpsim kernel runs in this process."""
-    import warnings
-
-    import fastsim as fsim
-
-    from .fleet import peer_bev as pb
-    from .params import load_parameters
-
-    progress("FASTSim BEV on the bev preset, UDDS")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)
-        p = load_parameters("bev")
-        mass, a, b, cc = bev_peer_inputs(p)
-        veh = fsim.Vehicle.from_dict(pb.bev_peer_vehicle(mass, a, b, cc, p.machine.rated_power))
-        cyc = pb._fastsim_cycle("udds")
-        params = pb._sim_params()
-        median, runs = _timed(lambda sd: sd.run(), settings, setup=lambda: fsim.SimDrive(veh, cyc, params))
-    return {"median_ms": median * 1e3, "runs": runs}
-
-
-def _bev_rows(settings: Settings, progress) -> dict:
-    """vpsim's battery-electric car (the bev preset) on UDDS, each method: median ms of one run."""
-    from .cycles import load_cycle
-    from .params import load_parameters
-    from .simulation import simulate
-
-    progress("vpsim battery-electric car, UDDS")
-    p = load_parameters("bev")
-    cyc = load_cycle("udds")
-    out = {}
-    for method in ("backward", "forward", "inverse"):
-        median, runs = _timed(lambda m=method: simulate(cyc, m, p), settings)
-        out[method] = {"median_ms": median * 1e3, "runs": runs}
-    return out
-
-
-def _hev_peer_ms(settings: Settings, progress) -> dict:
-    """FASTSim 3.1's hybrid (:data:`PEER_HEV_VEHICLE`, a different car than hev_p2's: see there) on UDDS:
-    median ms of ``walk()`` on a SimDrive built outside the timing, after its warm-up, before any vpsim
-    kernel runs in this process (as the other peer rows)."""
-    import warnings
-
-    import fastsim as fsim
-
-    progress(f"{PEER} hybrid {PEER_HEV_VEHICLE}, UDDS")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)
-        veh = fsim.Vehicle.from_resource(PEER_HEV_VEHICLE)
-        cyc = fsim.Cycle.from_resource(PEER_CYCLES["udds"])
-
-        def make():
-            return fsim.SimDrive(veh, cyc)
-
-        t_warm = time.perf_counter()
-        while time.perf_counter() - t_warm < settings.peer_warm_up_s:
-            _walk(make())
-        median, runs = _timed(_walk, settings, setup=make)
-    return {"median_ms": median * 1e3, "runs": runs, "vehicle": PEER_HEV_VEHICLE}
-
-
-def _hev_rows(settings: Settings, progress) -> dict:
-    """vpsim's P2 hybrid (hev_p2) on UDDS, backward method, each energy management but the DP: median ms of
-    one run with its inputs prepared (the gear schedule, as for the engine car's rows), and of a whole
-    ``simulate`` call (the schedule derived inside)."""
-    from .cycles import load_cycle
-    from .gears import default_schedule
-    from .methods import hev
-    from .model.maps import cached_engine_map
-    from .params import load_parameters
-    from .simulation import simulate
-
-    progress("vpsim P2 hybrid, UDDS")
-    p = load_parameters("hev_p2")
-    cyc = load_cycle("udds")
-    schedule = default_schedule(cyc, p, cached_engine_map(p.engine))
-    out = {}
-    for ems in ("rule", "ecms"):
-        median, runs = _timed(lambda e=ems: hev.run(cyc, p, ems=e, schedule=schedule), settings)
-        whole, _ = _timed(lambda e=ems: simulate(cyc, "backward", p, ems=e), settings)
-        out[ems] = {"median_ms": median * 1e3, "runs": runs, "simulate_median_ms": whole * 1e3}
-    return out
-
-
 def run_benchmarks(profile: str = "full", *, peer: bool = True, progress=None) -> dict:
     """Measure everything (see the module docstring) and return one JSON-ready dict.
 
@@ -955,6 +861,8 @@ def run_benchmarks(profile: str = "full", *, peer: bool = True, progress=None) -
         raise ValueError(f"profile must be one of {', '.join(PROFILES)}, got {profile!r}")
     settings = PROFILES[profile]
     progress = progress or (lambda line: None)
+    from . import bench_powertrains
+
     started = time.perf_counter()
     load_start = _loadavg()
     import numba
@@ -979,13 +887,13 @@ def run_benchmarks(profile: str = "full", *, peer: bool = True, progress=None) -
     bev_peer: dict = {}
     if status["available"]:
         try:
-            bev_peer = _bev_peer_ms(settings, progress)
+            bev_peer = bench_powertrains.bev_peer_ms(settings, progress)
         except Exception as exc:
             bev_peer = {"failed": _one_line(exc)}
     hev_peer: dict = {}
     if status["available"]:
         try:
-            hev_peer = _hev_peer_ms(settings, progress)
+            hev_peer = bench_powertrains.hev_peer_ms(settings, progress)
         except Exception as exc:
             hev_peer = {"failed": _one_line(exc)}
     for r in peer_rows:  # the peer's figure: its fastest settled speed, in this process or a fresh one
@@ -995,8 +903,8 @@ def run_benchmarks(profile: str = "full", *, peer: bool = True, progress=None) -
             r["median_ms"] = best
             r["runs"] = -1  # marks the figure as coming from the fresh processes
     rows, setup, failures, calls = _vpsim_rows(settings, progress)
-    bev = _bev_rows(settings, progress)
-    hev = _hev_rows(settings, progress)
+    bev = bench_powertrains.bev_rows(settings, progress)
+    hev = bench_powertrains.hev_rows(settings, progress)
     vpsim_fresh = _vpsim_fresh(settings, progress) if status["available"] else {}
     rows += peer_rows
     paired_ratios, paired = _ratios(settings, calls, makers, progress)

@@ -1,0 +1,102 @@
+"""The battery-electric and hybrid cars' rows of ``vpsim bench`` (:mod:`vpsim.bench`): each car against
+FASTSim 3.1's vehicle of its class, the peer timed before any vpsim kernel runs in the process."""
+
+from __future__ import annotations
+
+import time
+
+from .bench import PEER, PEER_CYCLES, PEER_HEV_VEHICLE, Settings, _timed, _walk
+
+
+def bev_peer_inputs(params) -> tuple:
+    """The bev preset as FASTSim's BEV peer takes a car (:func:`vpsim.fleet.peer_bev.bev_peer_vehicle`):
+    mass, road load A (N), B (N per m/s), C (N per (m/s)^2) and rated power (W), from the model's record."""
+    from .model.record import record
+
+    c = record(params)
+    return (float(c.mass), float(c.rolling_force), float(c.road_load_b), float(c.aero_coefficient))
+
+
+def bev_peer_ms(settings: Settings, progress) -> dict:
+    """FASTSim 3.1's BEV on the bev preset's car over UDDS: median ms of ``SimDrive.run()`` (the vehicle and
+    cycle built outside the timing), before any vpsim kernel runs in this process."""
+    import warnings
+
+    import fastsim as fsim
+
+    from .fleet import peer_bev as pb
+    from .params import load_parameters
+
+    progress("FASTSim BEV on the bev preset, UDDS")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        p = load_parameters("bev")
+        mass, a, b, cc = bev_peer_inputs(p)
+        veh = fsim.Vehicle.from_dict(pb.bev_peer_vehicle(mass, a, b, cc, p.machine.rated_power))
+        cyc = pb._fastsim_cycle("udds")
+        params = pb._sim_params()
+        median, runs = _timed(lambda sd: sd.run(), settings, setup=lambda: fsim.SimDrive(veh, cyc, params))
+    return {"median_ms": median * 1e3, "runs": runs}
+
+
+def bev_rows(settings: Settings, progress) -> dict:
+    """vpsim's battery-electric car (the bev preset) on UDDS, each method: median ms of one run."""
+    from .cycles import load_cycle
+    from .params import load_parameters
+    from .simulation import simulate
+
+    progress("vpsim battery-electric car, UDDS")
+    p = load_parameters("bev")
+    cyc = load_cycle("udds")
+    out = {}
+    for method in ("backward", "forward", "inverse"):
+        median, runs = _timed(lambda m=method: simulate(cyc, m, p), settings)
+        out[method] = {"median_ms": median * 1e3, "runs": runs}
+    return out
+
+
+def hev_peer_ms(settings: Settings, progress) -> dict:
+    """FASTSim 3.1's hybrid (:data:`PEER_HEV_VEHICLE`, a different car than hev_p2's: see there) on UDDS:
+    median ms of ``walk()`` on a SimDrive built outside the timing, after its warm-up, before any vpsim
+    kernel runs in this process (as the other peer rows)."""
+    import warnings
+
+    import fastsim as fsim
+
+    progress(f"{PEER} hybrid {PEER_HEV_VEHICLE}, UDDS")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        veh = fsim.Vehicle.from_resource(PEER_HEV_VEHICLE)
+        cyc = fsim.Cycle.from_resource(PEER_CYCLES["udds"])
+
+        def make():
+            return fsim.SimDrive(veh, cyc)
+
+        t_warm = time.perf_counter()
+        while time.perf_counter() - t_warm < settings.peer_warm_up_s:
+            _walk(make())
+        median, runs = _timed(_walk, settings, setup=make)
+    return {"median_ms": median * 1e3, "runs": runs, "vehicle": PEER_HEV_VEHICLE}
+
+
+def hev_rows(settings: Settings, progress) -> dict:
+    """vpsim's P2 hybrid (hev_p2) on UDDS, backward method, each energy management but the DP: median ms of
+    one run with its inputs prepared (the gear schedule, as for the engine car's rows), and of a whole
+    ``simulate`` call (the schedule derived inside)."""
+    from .cycles import load_cycle
+    from .gears import default_schedule
+    from .methods import hev
+    from .model.maps import cached_engine_map
+    from .params import load_parameters
+    from .simulation import simulate
+
+    progress("vpsim P2 hybrid, UDDS")
+    p = load_parameters("hev_p2")
+    cyc = load_cycle("udds")
+    schedule = default_schedule(cyc, p, cached_engine_map(p.engine))
+    out = {}
+    for ems in ("rule", "ecms"):
+        median, runs = _timed(lambda e=ems: hev.run(cyc, p, ems=e, schedule=schedule), settings)
+        whole, _ = _timed(lambda e=ems: simulate(cyc, "backward", p, ems=e), settings)
+        out[ems] = {"median_ms": median * 1e3, "runs": runs, "simulate_median_ms": whole * 1e3}
+    return out
