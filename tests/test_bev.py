@@ -139,7 +139,7 @@ def test_state_of_charge_agrees_with_the_chemical_energy(runs):
         chem = r.energy.terms["chemical"]
         # charge taken back is counted at the coulombic efficiency in both (B3), (B4); the rest is the
         # discretisation of U_oc over a step
-        assert stored == pytest.approx(chem, rel=2e-3), (cycle, method)
+        assert stored == pytest.approx(chem, rel=1e-4), (cycle, method)  # measured: 2e-5 at worst
 
 
 def test_the_backward_method_tracks_and_reports_the_wall_figures(runs):
