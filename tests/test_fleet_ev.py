@@ -76,16 +76,46 @@ def test_the_fleet_fits_the_bev_class_out_of_fold(tmp_path):
     fold_of, group_of = run.ev["fold_of"], run.ev["group_of"]
     for members in _groups(group_of).values():
         assert len({fold_of[k] for k in members}) == 1
+    cls = {v.key: ev.ev_class(v) for v in _evs(run)}
     for r in df.itertuples():
         key = f"{r.vehicle_id}#{r.configuration}"
-        fit = run.ev["technology"][f"fold{fold_of[key]}.bev"]
-        n_other = sum(len(v.measured_mpge) for v in _evs(run) if fold_of[v.key] != fold_of[key])
+        fit = run.ev["technology"][f"fold{fold_of[key]}.{cls[key]}"]
+        assert fit["basis"] == "class"
+        n_other = sum(
+            len(v.measured_mpge)
+            for v in _evs(run)
+            if fold_of[v.key] != fold_of[key] and cls[v.key] == cls[key]
+        )
         assert fit["n_train"] == n_other  # the rows of the other folds, none of its own
         assert r.machine_loss_scale == fit["machine.loss_scale"]
         assert r.accessory_power_w == fit["electric.accessory_power"]
     # the fit reproduces on the same rows: the folds are deterministic
     again = cal.assign_folds(list(fold_of), 3, groups=group_of)
     assert again == fold_of
+
+
+def test_the_bev_classes_of_real_records(shared_dir, tmp_path):
+    """The class split (vpsim.fleet.ev.ev_class) on named records of the 2022 list: the Audi e-tron S's
+    induction machines, the Taycan's two-speed gearbox, the Model 3 AWD's two axles, the Bolt's one; the
+    Q4 e-tron (a permanent-magnet rear machine) is not an induction car, nor the e-tron GT (two gears)."""
+    cars = read_test_car_list(_real_list(shared_dir))
+    by_model: dict = {}
+    for v in cars.ev_vehicles:
+        by_model.setdefault(v.model, set()).add((ev.ev_class(v), ev.machine_kind(v)))
+    assert by_model["e-tron S"] == {("bev_induction", "induction")}
+    assert by_model["Audi e-tron 55 quattro Sportback"] == {("bev_induction", "induction")}
+    assert by_model["Q4 e-tron 50"] == {("bev_awd", "pm")}
+    assert by_model["e-tron GT"] == {("bev_two_speed", "pm")}
+    assert by_model["Taycan Perf Battery"] == {("bev_two_speed", "pm")}  # rear-wheel drive, two gears
+    assert by_model["Model 3 Long Range AWD"] == {("bev_awd", "pm")}
+    assert by_model["BOLT EUV"] == {("bev", "pm")}
+    # the vehicle file of an induction car says so, and runs
+    rec = next(v for v in cars.ev_vehicles if v.model == "e-tron S")
+    car = tmp_path / "etron.toml"
+    args = ["vehicle", "from-epa", str(_real_list(shared_dir)), "--id", rec.vehicle_id]
+    assert main([*args, "--config", str(rec.configuration), "--out", str(car)]) == 0
+    p = load_parameters(car)
+    assert p.machine.kind == "induction"
 
 
 def _groups(group_of):

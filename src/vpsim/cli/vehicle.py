@@ -122,10 +122,11 @@ def _from_epa_bev(rec, file, out, technology) -> None:
     tech, note = None, ""
     if technology:
         check_complete(Path(technology).parent, Path(technology).name)
-        path = ("bev", "all_vehicles", ev.CLASSES[0])
+        cls = ev.ev_class(rec)
+        path = ("bev", "all_vehicles", cls)
         fit = _fit(technology, path, " with a battery-electric fit")
         tech = _tech_values(technology, fit, ev.TECH_PARAMS, ".".join(path))
-        note = f"fleet fit (bev class, all vehicles) from {Path(technology).name}"
+        note = f"fleet fit ({cls} class, all vehicles) from {Path(technology).name}"
     params = ev.ev_parameters(rec, technology=tech)
     Path(out).write_text(ev.ev_vehicle_toml(rec, params, source=Path(file).name, technology_note=note))
     meas = ", ".join(f"{c} {v:.1f} MPGe" for c, v in rec.measured_mpge.items())

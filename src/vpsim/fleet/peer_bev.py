@@ -333,15 +333,18 @@ def fit_bev_peer(grid: np.ndarray, log_measured: np.ndarray) -> tuple[dict, floa
     }, float(loss[i, j])
 
 
-def calibrate_bev_peer(grid, log_measured, vehicle_fold, k) -> dict:
-    """The BEV peer's technology per (fold, "bev"), each fitted without that fold's rows, by vpsim's own
-    cross-validation procedure (:func:`vpsim.fleet.calibrate.per_fold_and_class`)."""
+def calibrate_bev_peer(grid, log_measured, vehicle_fold, k, vehicle_class=None, classes=BEV_CLASSES) -> dict:
+    """The BEV peer's technology per (fold, class), each fitted without that fold's rows, by vpsim's own
+    cross-validation procedure (:func:`vpsim.fleet.calibrate.per_fold_and_class`). ``vehicle_class``: each
+    row's class (vpsim's, :func:`vpsim.fleet.ev.ev_class`, so that the peer gets the same split); default
+    all ``"bev"``."""
     from .calibrate import per_fold_and_class
 
     vehicle_fold = np.asarray(vehicle_fold)
-    classes = np.full(vehicle_fold.shape, BEV_CLASSES[0], dtype=object)
+    if vehicle_class is None:
+        vehicle_class = np.full(vehicle_fold.shape, BEV_CLASSES[0], dtype=object)
     return per_fold_and_class(
-        lambda rows: fit_bev_peer(grid[rows], log_measured[rows]), vehicle_fold, classes, k, BEV_CLASSES
+        lambda rows: fit_bev_peer(grid[rows], log_measured[rows]), vehicle_fold, vehicle_class, k, classes
     )
 
 

@@ -862,9 +862,10 @@ def _powertrain_md(run, s) -> list[str]:
         "",
         "Median / median abs / p90 abs error, out of fold. Conventional cars: mpg on the cycles above; "
         "battery-electric cars (`vpsim.fleet.ev`): unadjusted MPGe of the charge-depleting UDDS and highway "
-        "tests, the class `bev` with its own technology (`machine.loss_scale`, `electric.accessory_power`) "
-        "fitted on the same kind of folds (EV families held out together). FASTSim: its BEV "
-        "(`vpsim.fleet.peer_bev`) on the same records.",
+        "tests, four classes (`bev`, `bev_awd`, `bev_two_speed`, `bev_induction`: `vpsim.fleet.ev.ev_class`) "
+        "each with its own technology (`machine.loss_scale`, `electric.accessory_power`) fitted on the same "
+        "kind of folds (EV families held out together). FASTSim: its BEV (`vpsim.fleet.peer_bev`) on the "
+        "same records, calibrated per the same classes.",
         "",
         "| powertrain | test | n | vpsim | FASTSim calibrated | FASTSim defaults |",
         "|---|---|---|---|---|---|",

@@ -537,15 +537,20 @@ def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings) -> d
     grid = np.stack([r["log_wall"] for r in ok])
     meas = np.array([math.log(evm.wall_wh_per_km(by_key[r["key"]].measured_mpge[r["cycle"]])) for r in ok])
     vfold = np.array([fold_of[r["key"]] for r in ok])
-    vclass = np.full(len(ok), evm.CLASSES[0], dtype=object)
+    class_of = {v.key: evm.ev_class(v) for v in evs}
+    vclass = np.array([class_of[r["key"]] for r in ok], dtype=object)
     tech = cal.per_fold_and_class(lambda rows: evm.fit(grid[rows], meas[rows]), vfold, vclass, k, evm.CLASSES)
-    params_all, loss_all = evm.fit(grid, meas)
     out["technology"] = {f"fold{f}.{c}": _rounded(t) for (f, c), t in sorted(tech.items())}
-    out["technology_all"] = {
-        evm.CLASSES[0]: _rounded({**params_all, "train_loss": loss_all, "n_train": len(ok)})
-    }
+    out["technology_all"] = {}
+    for c in evm.CLASSES:
+        rows = vclass == c
+        if rows.any():
+            params_all, loss_all = evm.fit(grid[rows], meas[rows])
+            out["technology_all"][c] = _rounded(
+                {**params_all, "train_loss": loss_all, "n_train": int(rows.sum())}
+            )
     items = [
-        (v, c, tech[(fold_of[v.key], evm.CLASSES[0])])
+        (v, c, tech[(fold_of[v.key], class_of[v.key])])
         for v, cs in work
         for c in cs
         if (v.key, c) not in failed
@@ -586,9 +591,11 @@ def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings) -> d
                 ),
                 np.array([fold_of[key_of[r["key"]].key] for r in okp]),
                 k,
+                np.array([class_of[key_of[r["key"]].key] for r in okp], dtype=object),
+                evm.CLASSES,
             )
             citems = [
-                (evm.peer_row(v), evm.PEER_CYCLE[c], _peer_tech(ptech[(fold_of[v.key], pb.BEV_CLASSES[0])]))
+                (evm.peer_row(v), evm.PEER_CYCLE[c], _peer_tech(ptech[(fold_of[v.key], class_of[v.key])]))
                 for v, cs in work
                 for c in cs
             ]
@@ -600,7 +607,7 @@ def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings) -> d
         timings["ev_peer_s"] = time.perf_counter() - t0
     rows = []
     for v, cs in work:
-        t = tech[(fold_of[v.key], evm.CLASSES[0])]
+        t = tech[(fold_of[v.key], class_of[v.key])]
         for c in cs:
             meas_c = v.measured_mpge[c]
             row = {

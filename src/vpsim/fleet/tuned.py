@@ -187,6 +187,24 @@ TUNED_ON_THIS_LIST: tuple[dict, ...] = (
         "how": "Filters EV tests by their measured outcome (the list's 82-191 MPGe well inside); set when the EV reader was written, before any vpsim EV result; no comparison recorded.",
     },
     {
+        "name": "machine_kind",
+        "value": "the Audi e-tron, e-tron S and e-tron Sportback (every traction machine an induction machine, by Audi's specification) run as kind induction in a technology class bev_induction of their own",
+        "where": "src/vpsim/fleet/ev.py: machine_kind",
+        "how": "Class split added after these Audis showed the 2022 EVs' largest errors (UDDS +34..+44 %); the machine kind is the maker's, not fitted; out of fold the split moved UDDS median |error| 10.0 -> 8.8 %, highway 5.8 -> 5.2 %.",
+    },
+    {
+        "name": "ev_class",
+        "value": "BEV technology classes: induction models (machine_kind), then a record with 2+ gears (bev_two_speed), then Drive System Code A/4/P (bev_awd), else bev",
+        "where": "src/vpsim/fleet/ev.py: ev_class",
+        "how": "Split by record fields added after the single class's worst rows proved to be the two-speed Taycans and e-tron GTs; out of fold (with the induction class and the loss axis below) UDDS median/p90 |error| 7.3/20.9 -> 4.8/14.2 % with the two-speed class, -> 4.9/12.5 % adding the AWD class; highway 3.7/9.7 -> 2.9/7.1 -> 2.5/7.3 %.",
+    },
+    {
+        "name": "LOSS_SCALE_AXIS",
+        "value": [0.01, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3, 0.4, 0.55, 0.7, 0.9, 1.1, 1.3, 1.5],
+        "where": "src/vpsim/fleet/ev.py: LOSS_SCALE_AXIS",
+        "how": "Lower end moved from 0.1 to 0.01 after the bev class's fit sat on 0.1 in every fold; the fit then takes 0.01-0.05 (with 1.0-1.1 kW accessory power); out of fold UDDS median |error| 8.8 -> 7.3 %, highway 5.2 -> 3.7 %.",
+    },
+    {
         "name": "MIN_POWER_W_PER_KG",
         "value": 30.0,
         "where": "src/vpsim/fleet/ev.py: MIN_POWER_W_PER_KG",
