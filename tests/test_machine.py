@@ -237,6 +237,13 @@ def test_leave_one_out_figures(shared_dir: Path, benchmark_script) -> None:
     rows = {r["file"]: r for r in fit.leave_one_out(machines)}
     for name, want in LOO_MEDIAN_PTS.items():
         assert rows[name]["median_abs_efficiency_error_pts"] == pytest.approx(want, abs=0.05), name
+    # the form's floor: each file fitted on itself does at least as well as from the others, and MC_PM32
+    # stays above 2 points even so (the 2-point target is beyond this form on that map)
+    for name, r in rows.items():
+        assert r["own_fit_median_abs_efficiency_error_pts"] <= r["median_abs_efficiency_error_pts"] + 0.05, (
+            name
+        )
+    assert rows["MC_PM32"]["own_fit_median_abs_efficiency_error_pts"] == pytest.approx(2.13, abs=0.05)
     assert rows["MC_AC59"]["fitted_on"] == ["MC_AC75", "MC_PM32", "MC_PM49", "MC_PM58", "MC_PRIUS_JPN"]
     assert rows["MC_PM49"]["fitted_on"] == ["MC_AC59", "MC_AC75", "MC_PM32", "MC_PM58", "MC_PRIUS_JPN"]
     # the shipped defaults are the fit on all six, both kinds pooled
