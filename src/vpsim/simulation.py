@@ -67,7 +67,7 @@ def simulate(
         params = load_parameters(params)
     if params.powertrain.type == "bev":
         return _simulate_bev(cycle, method, params, driver, mode, gears, options)
-    if params.powertrain.type == "hev_p2":
+    if params.powertrain.type in ("hev_p2", "hev_split"):
         return _simulate_hev(cycle, method, params, driver, mode, gears, options)
     cycle, params, schedule = resolve_inputs(cycle, params, gears)
     if method == "backward":
@@ -110,7 +110,8 @@ def _simulate_bev(cycle, method, params, driver, mode, gears, options):
 
 
 def _simulate_hev(cycle, method, params, driver, mode, gears, options):
-    """The P2 hybrid (:mod:`vpsim.methods.hev`): the backward method with its energy management."""
+    """The hybrids, P2 (:mod:`vpsim.methods.hev`) and power-split (:mod:`vpsim.methods.hev_split`): the
+    backward and inverse methods with their energy management."""
     if method == "forward":
         raise VpsimError(
             "the hybrid runs on the backward and inverse methods in this version; its forward method is not "
@@ -127,7 +128,10 @@ def _simulate_hev(cycle, method, params, driver, mode, gears, options):
         raise VpsimError(f"option {sorted(options)[0]!r} does not apply to the hybrid")
     if not isinstance(cycle, Cycle):
         cycle = load_cycle(cycle)
-    from .methods import hev
+    if params.powertrain.type == "hev_split":
+        from .methods import hev_split as hev
+    else:
+        from .methods import hev
 
     if method == "inverse":
         driver = "2" if driver is None else str(driver)
