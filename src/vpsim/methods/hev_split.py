@@ -271,8 +271,9 @@ def _build_inputs(params):
     engine_map = cached_engine_map(params.engine)
     c = kernel_records(params)[0]
     e, m, tabs = el.electric_records(params)
+    # the line on the exact BQM fuel flow (19), the one the kernels burn
     powers, speeds, cap_speed, cap_power = sp.best_efficiency_line(
-        engine_map, float(c.idle_speed), params.split.engine_max_speed
+        engine_map.with_exact(), float(c.idle_speed), params.split.engine_max_speed
     )
     lines = (engine_map.max_torque_speed, engine_map.max_torque_values)
     return dict(

@@ -45,7 +45,7 @@ from . import vehicle as vh
 from .engine import equation, inline
 
 LINE_POINTS = 121  # powers of the best-efficiency line (uniform from 0 to the engine's top power)
-LINE_SPEEDS = 241  # speeds it is searched over
+LINE_SPEEDS = 931  # speeds it is searched over (0.5 rad/s apart on the preset)
 SPEED_TRIALS = 16  # speeds tried across the gear set's range where MG1 cannot hold the engine on the line
 
 # the point's fields after the P2's (hybrid.p2_point's first 18, which the shared cost functions read)
