@@ -168,8 +168,8 @@ def test_inverse_method_near_backward(runs, cycle):
 
 
 def test_dp_on_ftp75_within_its_time_target():
-    """DP over 121 SOC points on FTP-75 (1,874 intervals): target <= 20 s on 2 cores (measured 4.7-4.9 s of
-    CPU, 9-10 s wall on a loaded machine)."""
+    """DP over 121 SOC points on FTP-75 (1,874 intervals): target <= 20 s on 2 cores (measured 1.2 s of CPU,
+    2.5-5 s wall on a loaded machine)."""
     vpsim.simulate("udds", "backward", SPLIT, ems="dp")  # compiled
     t0 = time.perf_counter()
     r = vpsim.simulate("ftp75", "backward", SPLIT, ems="dp")

@@ -109,6 +109,8 @@ def dp_kernel(v, a, dt, ratio, c, e, m, g, s, tabs, h, levels, lines, best, cap,
                 if pt[sp.P_FEASIBLE] <= 0.0:
                     if u == 0:
                         fallback = base  # what the causal kernel drives if nothing is feasible
+                    if u > 1:  # levels rise: MG1 holds, and the pack takes, no more of a larger power either
+                        break
                     continue
                 c0 = base + (h.engine_start_fuel if u > 0 else 0.0)  # from off: a start
                 best0 = min(best0, c0)
@@ -188,6 +190,8 @@ def causal_kernel(
                 p_e = sp.engine_power_choice(u, levels, p_follow, p_high)
                 pt = sp.split_choice(interval, battery, o, p_e, c, e, m, g, s, tabs, eng, opt)
                 if pt[sp.P_FEASIBLE] <= 0.0:
+                    if u > 1:  # levels rise: MG1 holds, and the pack takes, no more of a larger power either
+                        break
                     continue
                 start = u > 0 and on == 0.0
                 if ems == hy.EMS_DP:
