@@ -16,7 +16,7 @@ from pathlib import Path
 from .cycles import Cycle, load_cycle
 from .errors import VpsimError
 from .gears import GearSchedule, default_schedule, load_schedule
-from .params import Parameters, load_parameters
+from .params import HYBRIDS, Parameters, load_parameters
 
 METHODS = ("backward", "forward", "inverse")
 MODES = ("realistic", "paper", "extended")  # "extended": the realistic mode's earlier name
@@ -67,7 +67,7 @@ def simulate(
         params = load_parameters(params)
     if params.powertrain.type == "bev":
         return _simulate_bev(cycle, method, params, driver, mode, gears, options)
-    if params.powertrain.type in ("hev_p2", "hev_split"):
+    if params.powertrain.type in HYBRIDS:
         return _simulate_hev(cycle, method, params, driver, mode, gears, options)
     cycle, params, schedule = resolve_inputs(cycle, params, gears)
     if method == "backward":
