@@ -59,7 +59,7 @@ def test_hybrid_saves_fuel_against_the_same_car_without_its_battery(runs):
 
 
 def test_charge_sustaining_correction_follows_j1711(runs):
-    from vpsim.methods.hev import charge_sustaining_fuel
+    from vpsim.model.hybrid import charge_sustaining_fuel
 
     r = runs["us06", "rule"]
     fuel, nec = charge_sustaining_fuel(r.fuel_kg, r.energy.terms, HEV.engine.fuel_heating_value)

@@ -42,7 +42,7 @@ from .errors import ParameterError
 from .textio import check_path, printable, read_text
 from .units import FIELD_DIMENSIONS, to_si
 
-PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l", "bev", "hev_p2")
+PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l", "bev", "hev_p2", "hev_split")
 
 
 @dataclass(frozen=True)
@@ -265,6 +265,22 @@ class Hybrid:
 
 
 @dataclass(frozen=True)
+class Split:
+    """A power-split hybrid's planetary gear set and generator (:mod:`vpsim.model.split`): the engine on the
+    carrier, MG1 on the sun, the ring to the wheels (through ``transmission.final_drive``) with MG2 (the
+    [machine]) through ``mg2_ratio``. Defaults: the 2016-2022 Prius / Corolla Hybrid transaxle (P610)."""
+
+    sun_teeth: int = 30
+    ring_teeth: int = 78
+    mg2_ratio: float = 3.824  # MG2 to ring speed ratio
+    engine_max_speed: float = 545.0  # rad/s, the engine's top speed (5,200 rpm)
+    generator_rated_power: float = 23.0e3  # W, MG1's peak
+    generator_base_speed: float = 575.0  # rad/s: MG1's constant-torque range (23 kW / 40 N m)
+    generator_max_speed: float = 1780.0  # rad/s (17,000 rpm)
+    generator_inertia: float = 0.01  # kg m^2, MG1's rotor
+
+
+@dataclass(frozen=True)
 class Parameters:
     """A complete parameter set. ``provenance`` maps ``"section.field"`` to its confidence label/note."""
 
@@ -279,6 +295,7 @@ class Parameters:
     machine: Machine = field(default_factory=Machine)
     electric: Electric = field(default_factory=Electric)
     hybrid: Hybrid = field(default_factory=Hybrid)
+    split: Split = field(default_factory=Split)
     provenance: dict[str, str] = field(default_factory=dict, compare=False, repr=False)
     citation: str = field(default="", compare=False, repr=False)
 
@@ -337,8 +354,10 @@ _SECTIONS = {
     "machine": Machine,
     "electric": Electric,
     "hybrid": Hybrid,
+    "split": Split,
 }
-POWERTRAINS = ("conventional", "bev", "hev_p2")
+POWERTRAINS = ("conventional", "bev", "hev_p2", "hev_split")
+HYBRIDS = ("hev_p2", "hev_split")
 EMS = ("rule", "ecms", "dp")
 MACHINE_KINDS = ("pm", "induction")
 _ATTR_ALIASES = {"lambda": "lambda_"}  # TOML name -> attribute
@@ -434,6 +453,12 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "hybrid.ecms_gain": (0.0, 1000.0, True),
     "hybrid.engine_start_fuel": (0.0, 0.1, True),
     "hybrid.dp_soc_span": (0.01, 1.0, True),
+    "split.mg2_ratio": (0.1, 20.0, True),
+    "split.engine_max_speed": (100.0, 2000.0, True),
+    "split.generator_rated_power": (0.0, 1.0e6, False),
+    "split.generator_base_speed": (0.0, 5000.0, False),
+    "split.generator_max_speed": (0.0, 5000.0, False),
+    "split.generator_inertia": (0.0, 10.0, True),
 }
 # Whole numbers: (low, high). Production piston engines have 1 to 16 cylinders and are two-stroke (1
 # revolution per cycle) or four-stroke (2); Newton converges in a handful of iterations or not at all.
@@ -445,6 +470,8 @@ _INT_RANGES: dict[str, tuple[int, int]] = {
     "battery.cells_in_parallel": (1, 2000),
     "hybrid.torque_levels": (2, 200),
     "hybrid.dp_soc_points": (11, 2001),
+    "split.sun_teeth": (8, 500),
+    "split.ring_teeth": (8, 1000),
 }
 _MAX_LIST = 20  # gears of a gearbox (heavy trucks have up to 18)
 _LIST_LENGTHS = {"engine.map_speed_range": 2}
@@ -745,12 +772,12 @@ def _check_electric(p: Parameters, where: str) -> None:
         )
     if p.hybrid.ems not in EMS:
         raise ParameterError(f"{where}: hybrid.ems = {p.hybrid.ems!r}; expected one of {', '.join(EMS)}")
-    if p.powertrain.type == "hev_p2" and not b.soc_min < p.hybrid.soc_target < b.soc_max:
+    if p.powertrain.type in HYBRIDS and not b.soc_min < p.hybrid.soc_target < b.soc_max:
         raise ParameterError(
             f"{where}: hybrid.soc_target = {p.hybrid.soc_target:g} is outside the battery's window "
             f"({b.soc_min:g}, {b.soc_max:g})"
         )
-    if p.powertrain.type in ("bev", "hev_p2"):
+    if p.powertrain.type in ("bev", *HYBRIDS):
         from .model.battery import CELLS
 
         if b.cell not in CELLS and not b.cell.lower().endswith(".m"):
@@ -758,6 +785,8 @@ def _check_electric(p: Parameters, where: str) -> None:
                 f"{where}: battery.cell = {b.cell!r}; expected one of {', '.join(CELLS)} or an ADVISOR "
                 "ESS_*.m file"
             )
+    if p.powertrain.type == "hev_split":
+        _check_split(p, where)
     if p.powertrain.type == "bev":
         if len(p.transmission.gearbox_ratios) != 1 or p.transmission.is_cvt:
             raise ParameterError(
@@ -765,6 +794,38 @@ def _check_electric(p: Parameters, where: str) -> None:
                 "hold "
                 f"one ratio, got {len(p.transmission.gearbox_ratios)}"
             )
+
+
+def _check_split(p: Parameters, where: str) -> None:
+    """A power-split gear set that can turn: a ring larger than the sun by an even number of teeth (the
+    pinions between them have (Z_r - Z_s) / 2 teeth), one ratio from the ring to the wheels, a generator whose
+    base speed is below its top speed, and an engine that reaches its idle speed."""
+    sp = p.split
+    if not sp.ring_teeth > sp.sun_teeth:
+        raise ParameterError(
+            f"{where}: split.ring_teeth = {sp.ring_teeth} must exceed split.sun_teeth = {sp.sun_teeth}: with "
+            "the ring no larger than the sun there is no room for the pinions, and the gear set locks"
+        )
+    if (sp.ring_teeth - sp.sun_teeth) % 2:
+        raise ParameterError(
+            f"{where}: split.ring_teeth - split.sun_teeth = {sp.ring_teeth - sp.sun_teeth} must be even (the "
+            "pinions between sun and ring have half the difference in teeth)"
+        )
+    if not sp.generator_base_speed < sp.generator_max_speed:
+        raise ParameterError(
+            f"{where}: split.generator_base_speed = {sp.generator_base_speed:g} rad/s must be below "
+            f"split.generator_max_speed = {sp.generator_max_speed:g}"
+        )
+    if not sp.engine_max_speed > IDLE_CHECK_SPEED:
+        raise ParameterError(
+            f"{where}: split.engine_max_speed = {sp.engine_max_speed:g} rad/s must exceed the idle speed "
+            f"{IDLE_CHECK_SPEED:g} rad/s"
+        )
+    if len(p.transmission.gearbox_ratios) != 1 or p.transmission.is_cvt:
+        raise ParameterError(
+            f"{where}: a power-split hybrid drives the wheels from the ring through one reduction: "
+            f"transmission.gearbox_ratios must hold one ratio, got {len(p.transmission.gearbox_ratios)}"
+        )
 
 
 def engine_check_figures(c) -> dict:

@@ -22,10 +22,11 @@ import time
 
 # what each group runs: every signature the methods, their drivers, solvers and modes, the batch (sweeps)
 # and the maps compile
-GROUPS = {  # two of about equal length (60 s on a 2-core machine)
+GROUPS = {  # the first two of about equal length (60 s on a 2-core machine), the third shorter (about 30 s)
     "rosenbrock": "forward method (Rosenbrock, the default solver) and its batch",
     "others": "backward and inverse methods, their batch, the maps, the forward method's Dormand-Prince and "
     "the battery-electric and hybrid cars",
+    "split": "power-split hybrid",
 }
 
 
@@ -84,6 +85,7 @@ KERNEL_MODULES = (
     "vpsim.methods.inverse",
     "vpsim.methods.bev",
     "vpsim.methods.hev",
+    "vpsim.methods.hev_split",
 )
 
 
@@ -128,6 +130,10 @@ def run_group(group: str) -> None:
         for ems in ("ecms", "dp"):  # the hybrid (rule and ecms share one kernel)
             vpsim.simulate(cycle, method="backward", params="hev_p2", ems=ems)
         vpsim.simulate(cycle, method="inverse", params="hev_p2")
+    elif group == "split":  # the power-split hybrid (rule and ecms share one kernel)
+        for ems in ("ecms", "dp"):
+            vpsim.simulate(cycle, method="backward", params="hev_split", ems=ems)
+        vpsim.simulate(cycle, method="inverse", params="hev_split")
     elif group == "rosenbrock":
         for mode in ("paper", "realistic"):
             vpsim.simulate(cycle, method="forward", mode=mode)

@@ -16,7 +16,7 @@ from pathlib import Path
 from .cycles import Cycle, load_cycle
 from .errors import VpsimError
 from .gears import GearSchedule, default_schedule, load_schedule
-from .params import Parameters, load_parameters
+from .params import HYBRIDS, Parameters, load_parameters
 
 METHODS = ("backward", "forward", "inverse")
 MODES = ("realistic", "paper", "extended")  # "extended": the realistic mode's earlier name
@@ -67,7 +67,7 @@ def simulate(
         params = load_parameters(params)
     if params.powertrain.type == "bev":
         return _simulate_bev(cycle, method, params, driver, mode, gears, options)
-    if params.powertrain.type == "hev_p2":
+    if params.powertrain.type in HYBRIDS:
         return _simulate_hev(cycle, method, params, driver, mode, gears, options)
     cycle, params, schedule = resolve_inputs(cycle, params, gears)
     if method == "backward":
@@ -110,7 +110,8 @@ def _simulate_bev(cycle, method, params, driver, mode, gears, options):
 
 
 def _simulate_hev(cycle, method, params, driver, mode, gears, options):
-    """The P2 hybrid (:mod:`vpsim.methods.hev`): the backward method with its energy management."""
+    """The hybrids, P2 (:mod:`vpsim.methods.hev`) and power-split (:mod:`vpsim.methods.hev_split`): the
+    backward and inverse methods with their energy management."""
     if method == "forward":
         raise VpsimError(
             "the hybrid runs on the backward and inverse methods in this version; its forward method is not "
@@ -127,7 +128,10 @@ def _simulate_hev(cycle, method, params, driver, mode, gears, options):
         raise VpsimError(f"option {sorted(options)[0]!r} does not apply to the hybrid")
     if not isinstance(cycle, Cycle):
         cycle = load_cycle(cycle)
-    from .methods import hev
+    if params.powertrain.type == "hev_split":
+        from .methods import hev_split as hev
+    else:
+        from .methods import hev
 
     if method == "inverse":
         driver = "2" if driver is None else str(driver)

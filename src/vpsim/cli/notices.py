@@ -30,6 +30,7 @@ KERNELS = {
     "vpsim.methods.inverse": ("inverse kernels", "10-20 s"),
     "vpsim.methods.bev": ("battery-electric kernels", "3-8 s"),
     "vpsim.methods.hev": ("hybrid kernels", "5-15 s"),
+    "vpsim.methods.hev_split": ("power-split hybrid kernels", "15-35 s"),
 }
 _MODEL = ("vpsim.model.engine", "vpsim.model.tables", "vpsim.methods.backward")  # maps and gear rule too
 METHOD_MODULES = {

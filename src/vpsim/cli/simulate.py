@@ -99,7 +99,7 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
     """Simulate a vehicle on a drive cycle and report its fuel consumption."""
     from ..cycles import MIN_CONSUMPTION_DISTANCE_M, load_cycle
     from ..gears import load_schedule
-    from ..params import load_parameters
+    from ..params import HYBRIDS, load_parameters
     from ..simulation import simulate as run
     from .notices import announce_compilation
 
@@ -120,7 +120,7 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         raise VpsimError("--solver applies to --method forward (the integrator of the dynamic model)")
     options = {} if solver is None else {"solver": solver}
     if ems is not None:
-        if params.powertrain.type != "hev_p2":
+        if params.powertrain.type not in HYBRIDS:
             raise VpsimError(f"--ems applies to a hybrid; {vehicle} is a {params.powertrain.type} car")
         options["ems"] = ems
     result = run(cyc, method=method, params=params, driver=driver, mode=mode, gears=schedule, **options)

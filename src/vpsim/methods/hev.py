@@ -31,7 +31,6 @@ from ..model import hybrid as hy
 from ..model import tables as tb
 from ..model import vehicle as vh
 from ..model._compile import kernel
-from ..model.engine import equation
 from ..model.tables import gear_index
 
 # rows of the per-interval series
@@ -64,21 +63,6 @@ S_FUEL, S_DIST, S_STARTS, S_MISS_S, S_MAX_MISS, S_MACHINE_S, S_BATTERY_S, S_REGE
 )
 N_SUMS = N_TERMS + 9
 MISS_TOLERANCE_N = 1e-9
-
-
-@equation
-def _interp_soc(jnext, s_on, soc, soc0, dsoc, n):
-    """The cost-to-go J_{k+1}(soc, s_on), linear on the grid; beyond it, the end value plus a steep slope
-    (beyond the top: no gain; below the bottom: the grid's steepest slope, times 10)."""
-    x = (soc - soc0) / dsoc
-    if x <= 0.0:
-        slope = (jnext[0, s_on] - jnext[1, s_on]) / dsoc
-        return jnext[0, s_on] + 10.0 * max(slope, 0.0) * (-x * dsoc) + 1e-3 * (-x)
-    if x >= n - 1.0:
-        return jnext[n - 1, s_on]
-    j = int(x)
-    f = x - j
-    return jnext[j, s_on] * (1.0 - f) + jnext[j + 1, s_on] * f
 
 
 @kernel(_nrt=False)
@@ -114,7 +98,7 @@ def dp_kernel(
                 pt = hy.p2_choice(interval, battery, on, te, c, e, m, tabs)
                 nxt = soc_grid[i] + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt[k]
                 s_next = 1 if u > 0 else 0
-                base = hy.ecms_cost(pt, dt[k], False, 0.0, c, h) + _interp_soc(
+                base = hy.ecms_cost(pt, dt[k], False, 0.0, c, h) + hy.cost_to_go(
                     jcost[k + 1], s_next, nxt, soc0, dsoc, n
                 )
                 c0 = base + (h.engine_start_fuel if u > 0 else 0.0)  # from off: a start
@@ -175,18 +159,7 @@ def causal_kernel(
         choice_te = 0.0
         if ems == hy.EMS_RULE:
             t_in = el.shaft_torque(vh.wheel_force(v, a, c), ratio, c)
-            demand = t_in * w
-            want = on
-            if on > 0.0:
-                if (
-                    demand < h.engine_off_power
-                    and on_time >= h.min_on_time
-                    and soc > h.soc_low + h.soc_hysteresis
-                ):
-                    want = 0.0
-            elif demand > h.engine_on_power or soc < h.soc_low:
-                want = 1.0
-            if want > 0.0 and runs:
+            if hy.rule_wants_engine(on, on_time, t_in * w, soc, h) and runs:
                 choice_on = 1.0
                 choice_te = hy.rule_engine_torque(t_in, w, soc, t_low, t_high, h)
         else:
@@ -201,7 +174,7 @@ def causal_kernel(
                 start = u > 0 and on == 0.0
                 if ems == hy.EMS_DP:
                     nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
-                    cost = hy.ecms_cost(pt, dt, start, 0.0, c, h) + _interp_soc(
+                    cost = hy.ecms_cost(pt, dt, start, 0.0, c, h) + hy.cost_to_go(
                         jcost[k + 1], 1 if u > 0 else 0, nxt, soc_grid[0], soc_grid[1] - soc_grid[0], n_grid
                     )
                 else:
@@ -282,28 +255,6 @@ def _inputs(cycle, params, schedule=None):
     )
 
 
-def dp_grid(params) -> np.ndarray:
-    """The DP's state-of-charge grid: ``dp_soc_points`` over ``soc_target`` +- ``dp_soc_span`` / 2, within the
-    battery's window."""
-    h, b = params.hybrid, params.battery
-    lo = max(b.soc_min, h.soc_target - 0.5 * h.dp_soc_span)
-    hi = min(b.soc_max, h.soc_target + 0.5 * h.dp_soc_span)
-    return np.linspace(lo, hi, h.dp_soc_points)
-
-
-def terminal_cost(params, grid, soc_start, e) -> np.ndarray:
-    """J_K(soc): no cost at or above the start's charge; below it, the charge's energy made fuel at a fifth of
-    the heating value, ten times over (steep enough that the optimum ends charge-sustaining)."""
-    from ..model.electric import pack_of
-    from ..model.record import kernel_records
-
-    pk = pack_of(params)
-    u_mid = float(np.interp(soc_start, pk.soc, pk.ocv_v))
-    per_soc = hy.fuel_equivalent(pk.capacity_as * u_mid, 0.2, kernel_records(params)[0])
-    deficit = np.maximum(soc_start - grid, 0.0)
-    return np.repeat((10.0 * per_soc * deficit)[:, None], 2, axis=1)
-
-
 def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", schedule=None):
     """The P2 hybrid of ``params`` on ``cycle`` (backward method) with the management ``ems`` (default
     ``params.hybrid.ems``); a :class:`vpsim.result.Result`. ``schedule``: the gear rule's schedule of this
@@ -319,7 +270,7 @@ def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", sched
     soc_start = params.battery.soc_initial
     levels = params.hybrid.torque_levels
     lines = (engine_map.max_torque_speed, engine_map.max_torque_values, engine_map.min_torque_values)
-    grid = dp_grid(params)
+    grid = hy.dp_grid(params)
     if ems == "dp":
         dt = np.diff(ts)
         v = 0.5 * (vs[1:] + vs[:-1])
@@ -327,7 +278,7 @@ def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", sched
         gear = schedule.gear_at(0.5 * (ts[1:] + ts[:-1])).astype(np.int64)
         ratio = ratios[gear - 1]
         jcost = np.empty((n + 1, grid.size, 2))
-        jcost[n] = terminal_cost(params, grid, soc_start, e)
+        jcost[n] = hy.terminal_cost(params, grid, soc_start)
         dp_kernel(v, a, dt, ratio, c, e, m, tabs, h, levels, *lines, grid, jcost, np.empty((grid.size, 5)))
     else:
         jcost = np.zeros((1, 2, 2))
@@ -378,28 +329,6 @@ _COLUMNS = {
 }
 
 
-def charge_sustaining_fuel(fuel_kg, terms, q_hv) -> tuple[float, float]:
-    """(fuel corrected for the battery's net energy change, that change relative to the fuel's energy).
-
-    SAE J1711's charge-balance rule: a net energy change within 1 % of the fuel's energy needs no correction;
-    beyond it the fuel is corrected. J1711 corrects by the slope of fuel against energy change over several
-    tests; from one run, the engine's own average efficiency over it (crank work over fuel energy) times a
-    charging path of 0.9 (machine generating and battery charging) stands for that slope, documented in
-    docs/model.md."""
-    chem = terms["chemical"]  # energy the battery gave (negative: it was charged)
-    fuel_energy = fuel_kg * q_hv
-    if fuel_energy <= 0.0:
-        return fuel_kg, math.nan
-    ratio = chem / fuel_energy
-    if abs(ratio) <= 0.01:
-        return fuel_kg, ratio
-    crank = terms["indicated"] - terms["friction"] - terms["pumping"]
-    eta = crank / fuel_energy * 0.9
-    if not eta > 0.0:
-        return math.nan, ratio
-    return fuel_kg + chem / (q_hv * eta), ratio
-
-
 def _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu):
     from ..result import ElectricBalance, Result, TraceMiss
 
@@ -417,23 +346,9 @@ def _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu):
     terms = {name: float(sums[q]) for q, name in enumerate(hy.HYBRID_TERMS)}
     fuel = float(sums[S_FUEL])
     distance = float(sums[S_DIST])
-    q_hv = params.engine.fuel_heating_value
-    fuel_cs, nec = charge_sustaining_fuel(fuel, terms, q_hv)
-    km = distance / 1e3
-    litres_cs = fuel_cs / params.simulation.fuel_density
-    electric = {
-        "electric_wh_per_km": terms["chemical"] / 3.6e3 / km if km > 1e-3 else math.nan,
-        "wall_wh_per_km": math.nan,
-        "mpge": math.nan,
-        "soc_start": float(soc_start),
-        "soc_end": float(soc_end),
-        "regen_wh": float(sums[S_REGEN]) / 3600.0,
-        "fuel_l_per_100km_cs": litres_cs / (km / 100.0) if km > 1e-3 else math.nan,
-        "net_energy_change_ratio": nec,
-        "engine_starts": int(sums[S_STARTS]),
-        "engine_on_s": float(sums[S_ON_S]),
-        "ems": ems,
-    }
+    electric = hy.electric_figures(
+        params, terms, fuel, distance, soc_start, soc_end, sums[S_REGEN], sums[S_STARTS], sums[S_ON_S], ems
+    )
     balance = ElectricBalance(terms)  # indicated + chemical = the rest
     trace = TraceMiss(
         seconds=round(float(sums[S_MISS_S]), 9),
@@ -504,7 +419,7 @@ def run_inverse(cycle, params, *, driver: str = "2", ems: str | None = None, mod
         hy.EMS_CODES[ems],
         params.hybrid.torque_levels,
         *lines,
-        dp_grid(params),
+        hy.dp_grid(params),
         np.zeros((1, 2, 2)),
         params.battery.soc_initial,
         rows,

@@ -222,19 +222,30 @@ def machine_and_battery(t_ask, braking, v, w, soc, e, m, tabs):
     soc_grid, ocv, r_dis, r_chg, map_speed, map_torque, map_loss, env_speed, env_max, env_min = tabs
     t_min, t_max = envelope(w, m, e, env_speed, env_max, env_min)
     return machine_and_battery_at(
-        t_ask, braking, v, w, t_min, t_max, battery_state(soc, e, soc_grid, ocv, r_dis, r_chg), e, m, tabs
+        t_ask,
+        braking,
+        v,
+        w,
+        t_min,
+        t_max,
+        battery_state(soc, e, soc_grid, ocv, r_dis, r_chg),
+        0.0,
+        e,
+        m,
+        tabs,
     )
 
 
 @equation
-def machine_and_battery_at(t_ask, braking, v, w, t_min, t_max, battery, e, m, tabs):
+def machine_and_battery_at(t_ask, braking, v, w, t_min, t_max, battery, p_other, e, m, tabs):
     """:func:`machine_and_battery` with the envelope (t_min, t_max) at w and the pack's
     :func:`battery_state` at hand: a caller that tries many torques at one speed and charge (the hybrid's
-    energy management) evaluates those once."""
+    energy management) evaluates those once. ``p_other``: the DC power of another machine on the same pack
+    (a power-split hybrid's generator; 0 for one machine), served before this one's."""
     t, at_machine = machine_torque_within(t_ask, braking, v, t_min, t_max, e)
     map_speed, map_torque, map_loss = tabs[4], tabs[5], tabs[6]
     p_machine = machine_power(t, w, m, e, map_speed, map_torque, map_loss)
-    return battery_supplies(t, p_machine, w, battery, e, m, tabs, at_machine)
+    return battery_supplies(t, p_machine, p_other, w, battery, e, m, tabs, at_machine)
 
 
 @equation
@@ -253,14 +264,14 @@ def machine_torque_within(t_ask, braking, v, t_min, t_max, e):
 
 
 @equation
-def battery_supplies(t, p_machine, w, battery, e, m, tabs, at_machine):
+def battery_supplies(t, p_machine, p_other, w, battery, e, m, tabs, at_machine):
     """The battery (state ``battery``, :func:`battery_state`) supplying the machine's torque T at w, whose
-    DC power is ``p_machine`` (:func:`machine_power`), and the accessories (E3), (B2): the current, and where
-    it is beyond the pack's limits the torque cut to what the pack can give or take. Returns what
-    :func:`machine_and_battery` returns."""
+    DC power is ``p_machine`` (:func:`machine_power`), another machine's DC power ``p_other`` and the
+    accessories (E3), (B2): the current, and where it is beyond the pack's limits this machine's torque cut
+    to what the pack can give or take. Returns what :func:`machine_and_battery` returns."""
     map_speed, map_torque, map_loss = tabs[4], tabs[5], tabs[6]
     u_oc, r_d, r_c, i_lo, i_hi = battery
-    p = p_machine + e.accessory_power
+    p = p_machine + p_other + e.accessory_power
     i = pack_current(p, u_oc, r_d, r_c)
     at_battery = 0.0
     if i > i_hi or i < i_lo:
@@ -268,12 +279,12 @@ def battery_supplies(t, p_machine, w, battery, e, m, tabs, at_machine):
         i = i_hi if i > i_hi else i_lo
         p_lim = pack_power(i, u_oc, r_d, r_c)
         if t != 0.0 and (t > 0.0) == (p > p_lim):
-            t = torque_for_power(p_lim, t, w, m, e, map_speed, map_torque, map_loss)
+            t = torque_for_power(p_lim - p_other, t, w, m, e, map_speed, map_torque, map_loss)
             p_machine = machine_power(t, w, m, e, map_speed, map_torque, map_loss)
-            i = pack_current(p_machine + e.accessory_power, u_oc, r_d, r_c)
+            i = pack_current(p_machine + p_other + e.accessory_power, u_oc, r_d, r_c)
             i = min(max(i, i_lo), i_hi)
-        # the accessories alone beyond the limit (an empty pack): the current is the limit's, the power the
-        # pack's; the rest is booked as unserved
+        # the accessories (and another machine) alone beyond the limit (an empty pack): the current is the
+        # limit's, the power the pack's; the rest is booked as unserved
     r = r_d if i >= 0.0 else r_c
     return t, i, u_oc, r, p_machine, at_machine, at_battery
 

@@ -103,7 +103,7 @@ def p2_choice(interval, battery, on, t_e, c, e, m, tabs):
     vv, w, dw, f, t_in, runs, cm18, t_min, t_max, ratio = interval
     te, t_cr, p, mdot, running = engine_choice(on, runs, t_e, w, dw, cm18, c)
     t_m, i, u_oc, r, p_m, at_m, at_b = el.machine_and_battery_at(
-        t_in - te + el.rotor_torque(dw, e), t_in < 0.0, vv, w, t_min, t_max, battery, e, m, tabs
+        t_in - te + el.rotor_torque(dw, e), t_in < 0.0, vv, w, t_min, t_max, battery, 0.0, e, m, tabs
     )
     t_net = te + t_m - el.rotor_torque(dw, e)
     missing, brake = shortfall_and_brake(f, el.wheel_force_of_shaft(t_net, ratio, c))
@@ -276,3 +276,107 @@ def hybrid_record(params):
     h[0] = tuple(float(getattr(params.hybrid, n)) for n in H_FIELDS)
     h.flags.writeable = False
     return h[0]
+
+
+# --- the energy management's parts every hybrid layout shares ----------------------------------------------
+
+
+@equation
+def rule_wants_engine(on, on_time, demand, soc, h):
+    """The rule's engine state: it starts when the demand power exceeds ``engine_on_power`` or the charge
+    falls below ``soc_low``; it stops below ``engine_off_power`` once it ran ``min_on_time`` and the charge is
+    back above ``soc_low + soc_hysteresis`` (hysteresis both in power and in charge)."""
+    if on > 0.0:
+        return not (
+            demand < h.engine_off_power and on_time >= h.min_on_time and soc > h.soc_low + h.soc_hysteresis
+        )
+    return demand > h.engine_on_power or soc < h.soc_low
+
+
+@equation
+def cost_to_go(jnext, s_on, soc, soc0, dsoc, n):
+    """The DP's cost-to-go J_{k+1}(soc, s_on), linear on the grid; beyond it, the end value plus a steep slope
+    (beyond the top: no gain; below the bottom: the grid's steepest slope, times 10)."""
+    x = (soc - soc0) / dsoc
+    if x <= 0.0:
+        slope = (jnext[0, s_on] - jnext[1, s_on]) / dsoc
+        return jnext[0, s_on] + 10.0 * max(slope, 0.0) * (-x * dsoc) + 1e-3 * (-x)
+    if x >= n - 1.0:
+        return jnext[n - 1, s_on]
+    j = int(x)
+    f = x - j
+    return jnext[j, s_on] * (1.0 - f) + jnext[j + 1, s_on] * f
+
+
+def dp_grid(params):
+    """The DP's state-of-charge grid: ``dp_soc_points`` over ``soc_target`` +- ``dp_soc_span`` / 2, within the
+    battery's window."""
+    import numpy as np
+
+    h, b = params.hybrid, params.battery
+    lo = max(b.soc_min, h.soc_target - 0.5 * h.dp_soc_span)
+    hi = min(b.soc_max, h.soc_target + 0.5 * h.dp_soc_span)
+    return np.linspace(lo, hi, h.dp_soc_points)
+
+
+def terminal_cost(params, grid, soc_start):
+    """J_K(soc): no cost at or above the start's charge; below it, the charge's energy made fuel at a fifth of
+    the heating value, ten times over (steep enough that the optimum ends charge-sustaining)."""
+    import numpy as np
+
+    from .electric import pack_of
+    from .record import kernel_records
+
+    pk = pack_of(params)
+    u_mid = float(np.interp(soc_start, pk.soc, pk.ocv_v))
+    per_soc = fuel_equivalent(pk.capacity_as * u_mid, 0.2, kernel_records(params)[0])
+    deficit = np.maximum(soc_start - grid, 0.0)
+    return np.repeat((10.0 * per_soc * deficit)[:, None], 2, axis=1)
+
+
+def charge_sustaining_fuel(fuel_kg, terms, q_hv) -> tuple[float, float]:
+    """(fuel corrected for the battery's net energy change, that change relative to the fuel's energy).
+
+    SAE J1711's charge-balance rule: a net energy change within 1 % of the fuel's energy needs no correction;
+    beyond it the fuel is corrected. J1711 corrects by the slope of fuel against energy change over several
+    tests; from one run, the engine's own average efficiency over it (crank work over fuel energy) times a
+    charging path of 0.9 (machine generating and battery charging) stands for that slope, documented in
+    docs/model.md."""
+    import math
+
+    chem = terms["chemical"]  # energy the battery gave (negative: it was charged)
+    fuel_energy = fuel_kg * q_hv
+    if fuel_energy <= 0.0:
+        return fuel_kg, math.nan
+    ratio = chem / fuel_energy
+    if abs(ratio) <= 0.01:
+        return fuel_kg, ratio
+    crank = terms["indicated"] - terms["friction"] - terms["pumping"]
+    eta = crank / fuel_energy * 0.9
+    if not eta > 0.0:
+        return math.nan, ratio
+    return fuel_kg + chem / (q_hv * eta), ratio
+
+
+def electric_figures(params, terms, fuel_kg, distance_m, soc_start, soc_end, regen_j, starts, on_s, ems):
+    """The charge-sustaining and electric figures of a hybrid's run (its ``Result.electric``): the
+    J1711-corrected fuel (:func:`charge_sustaining_fuel`), the battery's net energy per km, the charge at
+    both ends, the regenerated energy, the engine's starts and running time."""
+    import math
+
+    fuel_cs, nec = charge_sustaining_fuel(fuel_kg, terms, params.engine.fuel_heating_value)
+    km = distance_m / 1e3
+    litres_cs = fuel_cs / params.simulation.fuel_density
+    return {
+        "electric_wh_per_km": terms["chemical"] / 3.6e3 / km if km > 1e-3 else math.nan,
+        "wall_wh_per_km": math.nan,
+        "mpge": math.nan,
+        "soc_start": float(soc_start),
+        "soc_end": float(soc_end),
+        "regen_wh": float(regen_j) / 3600.0,
+        "fuel_l_per_100km_cs": litres_cs / (km / 100.0) if km > 1e-3 else math.nan,
+        "net_energy_change_ratio": nec,
+        "engine_starts": int(starts),
+        "engine_on_s": float(on_s),
+        "ems": ems,
+    }

@@ -1,0 +1,482 @@
+"""The power-split hybrid on the backward and inverse methods, with its energy management: rules, ECMS,
+dynamic programming.
+
+The cycle is tracked exactly, as by the P2 hybrid's backward method (:mod:`vpsim.methods.hev`): each interval
+of the piecewise-linear cycle at its mean speed and constant acceleration. At each interval the management
+chooses whether the engine runs and its power; the engine turns at the speed of least fuel for that power
+within the gear set's limits, and the operating point (:func:`vpsim.model.split.split_choice`) gives fuel,
+both machines' torques, the battery's current and every energy term; the state of charge moves on by (B3).
+The management's parts are the P2's (:mod:`vpsim.model.hybrid`: the rule's on/off decision, the ECMS's
+cost and equivalence factor, the DP's cost-to-go, grid and terminal cost, the J1711 fuel); only the choice
+(engine power instead of torque) and the point are the layout's.
+
+* ``rule`` and ``ecms`` decide interval by interval from what they know then (:func:`causal_kernel`).
+* ``dp`` computes the least fuel-to-go J_k(soc, engine state) backward over a grid of the state of charge
+  (:func:`dp_kernel`), then drives the cycle from the true state with it (:func:`causal_kernel`).
+
+The inverse method (:func:`run_inverse`) drives the smoothing driver's trajectory with the same management
+and point. The forward method is not built (``vpsim.simulate`` says so).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from ..errors import VpsimError
+from ..model import battery as bt
+from ..model import electric as el
+from ..model import hybrid as hy
+from ..model import split as sp
+from ..model import tables as tb
+from ..model._compile import kernel
+
+# rows of the per-interval series
+(
+    R_T,
+    R_V,
+    R_A,
+    R_WC,
+    R_WS,
+    R_WM,
+    R_TE,
+    R_TG,
+    R_TM,
+    R_P,
+    R_MDOT,
+    R_I,
+    R_UOC,
+    R_U,
+    R_SOC,
+    R_BRAKE,
+    R_MISS,
+    R_ON,
+    R_LIM_M,
+    R_LIM_B,
+    R_PG,
+    R_PM,
+) = range(22)
+N_ROWS = 22
+N_TERMS = len(hy.HYBRID_TERMS)
+# sums after the energy terms
+(S_FUEL, S_DIST, S_STARTS, S_MISS_S, S_MAX_MISS, S_MACHINE_S, S_BATTERY_S, S_REGEN, S_ON_S, S_NONE_S) = range(
+    N_TERMS, N_TERMS + 10
+)
+N_SUMS = N_TERMS + 10
+RULE_TRIES = 12  # the rule's engine power, a fifth less each time the gear set cannot take it
+
+
+@kernel(_nrt=False)
+def dp_kernel(v, a, dt, ratio, c, e, m, g, s, tabs, h, levels, lines, best, cap, soc_grid, jcost, packs):
+    """Backward: jcost[k, i, q] the least fuel (kg) from interval k to the end at charge soc_grid[i] with the
+    engine in state q (0 off, 1 on) before it. jcost[K] is the terminal cost, filled by the caller; ``packs``
+    (grid points x 5) is room for the pack's state at each grid charge. ``lines``: the engine's full-load
+    line (speeds, torques); ``best``: its best-efficiency line (powers, speeds); ``cap``: its full-load
+    power's running maximum (speeds, powers)."""
+    eng = (lines[0], lines[1], tb.inverse_spacing(lines[0]))
+    opt = (best[0], best[1], tb.inverse_spacing(best[0]))
+    inv_cap = tb.inverse_spacing(cap[0])
+    n = soc_grid.size
+    soc0 = soc_grid[0]
+    dsoc = soc_grid[1] - soc_grid[0]
+    for i in range(n):
+        st = el.battery_state(soc_grid[i], e, tabs[0], tabs[1], tabs[2], tabs[3])
+        for q in range(5):
+            packs[i, q] = st[q]
+    for k in range(v.size - 1, -1, -1):
+        interval = sp.split_interval(v[k], a[k], ratio[k], c, e, m, g, s, tabs)
+        runs = interval[9] <= interval[10]
+        p_high = sp.engine_power_limit(interval[10], cap[0], cap[1], inv_cap) if runs else 0.0
+        p_follow = sp.demand_power(interval, e, p_high)
+        for i in range(n):
+            battery = (packs[i, 0], packs[i, 1], packs[i, 2], packs[i, 3], packs[i, 4])
+            best0 = math.inf
+            best1 = math.inf
+            fallback = math.inf
+            for u in range(levels + 2):
+                if u > 0 and not runs:
+                    break
+                on = 1.0 if u > 0 else 0.0
+                p_e = sp.engine_power_choice(u, levels, p_follow, p_high)
+                pt = sp.split_choice(interval, battery, on, p_e, c, e, m, g, s, tabs, eng, opt)
+                nxt = soc_grid[i] + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt[k]
+                base = hy.ecms_cost(pt, dt[k], False, 0.0, c, h) + hy.cost_to_go(
+                    jcost[k + 1], 1 if u > 0 else 0, nxt, soc0, dsoc, n
+                )
+                if pt[sp.P_FEASIBLE] <= 0.0:
+                    if u == 0:
+                        fallback = base  # what the causal kernel drives if nothing is feasible
+                    if u > 1:  # levels rise: MG1 holds, and the pack takes, no more of a larger power either
+                        break
+                    continue
+                c0 = base + (h.engine_start_fuel if u > 0 else 0.0)  # from off: a start
+                best0 = min(best0, c0)
+                best1 = min(best1, base)
+                if u > 1 and sp.higher_powers_dominated(pt, battery):
+                    break
+            jcost[k, i, 0] = best0 if best0 < math.inf else fallback
+            jcost[k, i, 1] = best1 if best1 < math.inf else fallback
+
+
+@kernel(_nrt=False)
+def causal_kernel(
+    time_s,
+    speed,
+    ratio,
+    c,
+    e,
+    m,
+    g,
+    s,
+    tabs,
+    h,
+    ems,
+    levels,
+    lines,
+    best,
+    cap,
+    soc_grid,
+    jcost,
+    soc0,
+    rows,
+    sums,
+):
+    """Drive the cycle with the management ``ems`` (rule, ecms, or dp with the cost-to-go ``jcost``); fill
+    ``rows`` and the sums. Returns the final state of charge."""
+    eng = (lines[0], lines[1], tb.inverse_spacing(lines[0]))
+    opt = (best[0], best[1], tb.inverse_spacing(best[0]))
+    inv_cap = tb.inverse_spacing(cap[0])
+    soc = soc0
+    on = 0.0
+    on_time = 0.0
+    n_grid = soc_grid.size
+    for k in range(time_s.size - 1):
+        dt = time_s[k + 1] - time_s[k]
+        v = 0.5 * (speed[k + 1] + speed[k])
+        a = (speed[k + 1] - speed[k]) / dt
+        interval = sp.split_interval(v, a, ratio, c, e, m, g, s, tabs)
+        runs = interval[9] <= interval[10]
+        p_high = sp.engine_power_limit(interval[10], cap[0], cap[1], inv_cap) if runs else 0.0
+        p_follow = sp.demand_power(interval, e, p_high)
+        battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
+        choice_on = 0.0
+        choice_p = 0.0
+        found = False
+        if ems == hy.EMS_RULE:
+            demand = interval[4] * interval[1]  # the ring's power demand
+            if hy.rule_wants_engine(on, on_time, demand, soc, h) and runs:
+                # the demand plus the charging power of the rule's load-point shift, as a torque at unit
+                # speed (a power), within 0 and the engine's top power; where the gear set cannot take
+                # it, a fifth less, up to RULE_TRIES times
+                p_try = hy.rule_engine_torque(demand, 1.0, soc, 0.0, p_high, h)
+                for _ in range(RULE_TRIES):
+                    pt = sp.split_choice(interval, battery, 1.0, p_try, c, e, m, g, s, tabs, eng, opt)
+                    if pt[sp.P_FEASIBLE] > 0.0:
+                        choice_on, choice_p, found = 1.0, p_try, True
+                        break
+                    p_try *= 0.8
+            if not found:
+                found = sp.split_choice(interval, battery, 0.0, 0.0, c, e, m, g, s, tabs, eng, opt)[24] > 0.0
+        else:
+            s_factor = hy.equivalence_factor(soc, h)
+            cheapest = math.inf
+            for u in range(levels + 2):
+                if u > 0 and not runs:
+                    break
+                o = 1.0 if u > 0 else 0.0
+                p_e = sp.engine_power_choice(u, levels, p_follow, p_high)
+                pt = sp.split_choice(interval, battery, o, p_e, c, e, m, g, s, tabs, eng, opt)
+                if pt[sp.P_FEASIBLE] <= 0.0:
+                    if u > 1:  # levels rise: MG1 holds, and the pack takes, no more of a larger power either
+                        break
+                    continue
+                start = u > 0 and on == 0.0
+                if ems == hy.EMS_DP:
+                    nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
+                    cost = hy.ecms_cost(pt, dt, start, 0.0, c, h) + hy.cost_to_go(
+                        jcost[k + 1], 1 if u > 0 else 0, nxt, soc_grid[0], soc_grid[1] - soc_grid[0], n_grid
+                    )
+                else:
+                    cost = hy.ecms_cost(pt, dt, start, s_factor, c, h)
+                if cost < cheapest:
+                    cheapest = cost
+                    choice_on = o
+                    choice_p = p_e
+                    found = True
+                if u > 1 and sp.higher_powers_dominated(pt, battery):
+                    break
+        pt = sp.split_choice(interval, battery, choice_on, choice_p, c, e, m, g, s, tabs, eng, opt)
+        running = pt[16]
+        if not found:  # no choice within the gear set's limits: the engine off, counted
+            sums[S_NONE_S] += dt
+        if running > 0.0 and on == 0.0:
+            sums[S_STARTS] += 1.0
+            sums[S_FUEL] += h.engine_start_fuel
+        on_time = on_time + dt if running > 0.0 else 0.0
+        on = running
+        missing = pt[13] if pt[13] > hy.MISS_TOLERANCE_N else 0.0
+        terms = sp.split_powers(pt, v, a, c, e, s)
+        for q in range(N_TERMS):
+            sums[q] += terms[q] * dt
+        sums[S_FUEL] += pt[6] * dt
+        sums[S_DIST] += interval[0] * dt
+        if missing > 0.0:
+            sums[S_MISS_S] += dt
+            sums[S_MAX_MISS] = max(sums[S_MAX_MISS], el.shaft_torque(missing, ratio, c))
+        sums[S_MACHINE_S] += pt[14] * dt
+        sums[S_BATTERY_S] += pt[15] * dt
+        sums[S_ON_S] += running * dt
+        if pt[11] < 0.0:
+            sums[S_REGEN] += -pt[11] * dt
+        rows[R_T, k] = 0.5 * (time_s[k + 1] + time_s[k])
+        rows[R_V, k] = v
+        rows[R_A, k] = a
+        rows[R_WC, k] = pt[sp.P_WC]
+        rows[R_WS, k] = pt[sp.P_WS]
+        rows[R_WM, k] = pt[0]
+        rows[R_TE, k] = pt[3]
+        rows[R_TG, k] = pt[sp.P_TG]
+        rows[R_TM, k] = pt[7]
+        rows[R_P, k] = pt[5] if running > 0.0 else math.nan
+        rows[R_MDOT, k] = pt[6]
+        rows[R_I, k] = pt[8]
+        rows[R_UOC, k] = pt[9]
+        rows[R_U, k] = pt[9] - pt[10] * pt[8]
+        rows[R_SOC, k] = soc
+        rows[R_BRAKE, k] = pt[12]
+        rows[R_MISS, k] = el.shaft_torque(missing, ratio, c)
+        rows[R_ON, k] = running
+        rows[R_LIM_M, k] = pt[14]
+        rows[R_LIM_B, k] = pt[15]
+        rows[R_PG, k] = pt[sp.P_PG]
+        rows[R_PM, k] = pt[11]
+        soc += bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
+    return soc
+
+
+# --- Python side ------------------------------------------------------------------------------------------
+
+
+def _inputs(params):
+    """The records and tables of a parameter set (built once per set)."""
+    from ..model.record import memo
+
+    return memo(params, "split_inputs", _build_inputs)
+
+
+def _build_inputs(params):
+    from ..model.maps import cached_engine_map
+    from ..model.record import kernel_records
+    from ..model.record import ratios as total_ratios
+
+    engine_map = cached_engine_map(params.engine)
+    c = kernel_records(params)[0]
+    e, m, tabs = el.electric_records(params)
+    # the line on the exact BQM fuel flow (19), the one the kernels burn
+    powers, speeds, cap_speed, cap_power = sp.best_efficiency_line(
+        engine_map.with_exact(), float(c.idle_speed), params.split.engine_max_speed
+    )
+    lines = (engine_map.max_torque_speed, engine_map.max_torque_values)
+    return dict(
+        c=c,
+        e=e,
+        m=m,
+        g=sp.generator_record(params),
+        s=sp.split_record(params),
+        tabs=tabs.astuple(),
+        h=hy.hybrid_record(params),
+        ratio=float(total_ratios(params.transmission)[0]),
+        lines=lines,
+        best=(powers, speeds),
+        cap=(cap_speed, cap_power),
+    )
+
+
+def _check_ems(ems, params):
+    ems = ems or params.hybrid.ems
+    if ems not in hy.EMS_CODES:
+        raise VpsimError(f"unknown energy management {ems!r}; expected one of {', '.join(hy.EMS_CODES)}")
+    return ems
+
+
+def _drive(ts, vs, params, ems, jcost, x):
+    """The causal kernel over samples (ts, vs): (rows, sums, final charge)."""
+    n = ts.size - 1
+    rows = np.empty((N_ROWS, n))
+    sums = np.zeros(N_SUMS)
+    soc_end = causal_kernel(
+        ts,
+        vs,
+        x["ratio"],
+        x["c"],
+        x["e"],
+        x["m"],
+        x["g"],
+        x["s"],
+        x["tabs"],
+        x["h"],
+        hy.EMS_CODES[ems],
+        params.hybrid.torque_levels,
+        x["lines"],
+        x["best"],
+        x["cap"],
+        hy.dp_grid(params),
+        jcost,
+        params.battery.soc_initial,
+        rows,
+        sums,
+    )
+    return rows, sums, soc_end
+
+
+def run(cycle, params, *, ems: str | None = None, mode: str = "realistic"):
+    """The power-split hybrid of ``params`` on ``cycle`` (backward method) with the management ``ems``
+    (default ``params.hybrid.ems``); a :class:`vpsim.result.Result`."""
+    ems = _check_ems(ems, params)
+    x = _inputs(params)
+    t0 = time.process_time()
+    ts, vs = np.asarray(cycle.time_s, float), np.asarray(cycle.speed_mps, float)
+    n = ts.size - 1
+    soc_start = params.battery.soc_initial
+    jcost = np.zeros((1, 2, 2))
+    if ems == "dp":
+        grid = hy.dp_grid(params)
+        dt = np.diff(ts)
+        jcost = np.empty((n + 1, grid.size, 2))
+        jcost[n] = hy.terminal_cost(params, grid, soc_start)
+        dp_kernel(
+            0.5 * (vs[1:] + vs[:-1]),
+            np.diff(vs) / dt,
+            dt,
+            np.full(n, x["ratio"]),
+            x["c"],
+            x["e"],
+            x["m"],
+            x["g"],
+            x["s"],
+            x["tabs"],
+            x["h"],
+            params.hybrid.torque_levels,
+            x["lines"],
+            x["best"],
+            x["cap"],
+            grid,
+            jcost,
+            np.empty((grid.size, 5)),
+        )
+    rows, sums, soc_end = _drive(ts, vs, params, ems, jcost, x)
+    cpu = time.process_time() - t0
+    return _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu)
+
+
+_COLUMNS = {
+    "speed_mps": R_V,
+    "accel_mps2": R_A,
+    "engine_speed_radps": R_WC,
+    "generator_speed_radps": R_WS,
+    "machine_speed_radps": R_WM,
+    "engine_torque_nm": R_TE,
+    "generator_torque_nm": R_TG,
+    "machine_torque_nm": R_TM,
+    "intake_pressure_pa": R_P,
+    "fuel_flow_kgps": R_MDOT,
+    "battery_current_a": R_I,
+    "open_circuit_voltage_v": R_UOC,
+    "battery_voltage_v": R_U,
+    "brake_force_n": R_BRAKE,
+    "torque_shortfall_nm": R_MISS,
+    "engine_on": R_ON,
+    "machine_at_limit": R_LIM_M,
+    "battery_at_limit": R_LIM_B,
+    "generator_power_w": R_PG,
+    "machine_power_w": R_PM,
+}
+
+
+def _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu):
+    from ..result import ElectricBalance, Result, TraceMiss
+
+    ts = np.asarray(cycle.time_s, float)
+    idx = np.minimum(np.arange(ts.size), n - 1)
+    series = {k: rows[j, idx].copy() for k, j in _COLUMNS.items()}
+    series["time_s"] = ts.copy()
+    series["speed_mps"] = np.asarray(cycle.speed_mps, float).copy()
+    series["reference_speed_mps"] = series["speed_mps"].copy()
+    series["soc"] = np.append(rows[R_SOC, : ts.size - 1], soc_end)
+    for k in ("engine_on", "machine_at_limit", "battery_at_limit"):
+        series[k] = series[k] > 0.5
+    terms = {name: float(sums[q]) for q, name in enumerate(hy.HYBRID_TERMS)}
+    fuel = float(sums[S_FUEL])
+    distance = float(sums[S_DIST])
+    electric = hy.electric_figures(
+        params, terms, fuel, distance, soc_start, soc_end, sums[S_REGEN], sums[S_STARTS], sums[S_ON_S], ems
+    )
+    trace = TraceMiss(
+        seconds=round(float(sums[S_MISS_S]), 9),
+        max_torque_shortfall_nm=float(sums[S_MAX_MISS]),
+        details={
+            "machine_at_limit_s": round(float(sums[S_MACHINE_S]), 6),
+            "battery_at_limit_s": round(float(sums[S_BATTERY_S]), 6),
+            "torque_beyond_full_load_s": round(float(sums[S_MISS_S]), 6),
+            "no_choice_within_gear_set_s": round(float(sums[S_NONE_S]), 6),
+        },
+    )
+    return Result(
+        method="backward",
+        cycle=cycle.name,
+        driver=None,
+        mode=mode,
+        series=series,
+        fuel_kg=fuel,
+        distance_m=distance,
+        fuel_density_kg_per_l=params.simulation.fuel_density,
+        cpu_time_s=cpu,
+        steps=int(n),
+        trace_miss=trace,
+        energy=ElectricBalance(terms),  # indicated + chemical = the rest
+        vehicle=params.name,
+        solver={"steps": int(n), "ems": ems},
+        limits={},
+        electric=electric,
+    )
+
+
+def run_inverse(cycle, params, *, driver: str = "2", ems: str | None = None, mode: str = "realistic"):
+    """The power-split hybrid on the inverse method: the smoothing driver's trajectory v_d(t) (34)-(35),
+    sampled on :func:`vpsim.drivers.smoothing.inverse_grid`, driven by the same management and operating
+    point as the backward method (as the P2's inverse method, :func:`vpsim.methods.hev.run_inverse`)."""
+    from ..cycles import Cycle
+    from ..drivers.smoothing import SmoothingDriver, inverse_grid
+
+    ems = _check_ems(ems, params)
+    if ems == "dp":
+        raise VpsimError(
+            "the dynamic programming management runs on the backward method only (a known cycle)"
+        )
+    a = params.driver(driver).inverse_a
+    ts, vs = np.asarray(cycle.time_s, float), np.asarray(cycle.speed_mps, float)
+    grid = inverse_grid(ts, params.simulation.inverse_max_step)
+    smooth = np.maximum(SmoothingDriver(ts, vs, a).evaluate(grid)[0], 0.0)
+    x = _inputs(params)
+    t0 = time.process_time()
+    rows, sums, soc_end = _drive(grid, smooth, params, ems, np.zeros((1, 2, 2)), x)
+    cpu = time.process_time() - t0
+    starts = np.searchsorted(grid, ts[:-1])  # the grid intervals that start at the cycle's samples
+    r = _result(
+        Cycle(cycle.name, ts, vs),
+        params,
+        ems,
+        mode,
+        rows[:, starts],
+        sums,
+        params.battery.soc_initial,
+        soc_end,
+        ts.size - 1,
+        cpu,
+    )
+    series = dict(r.series)
+    series["speed_mps"] = smooth[np.searchsorted(grid, ts)]  # the samples are grid points
+    return dataclasses.replace(r, method="inverse", driver=driver, series=series, steps=int(grid.size - 1))

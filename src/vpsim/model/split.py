@@ -1,0 +1,345 @@
+"""The power-split hybrid: one planetary gear set between the engine, a generator and the wheels, written
+once from the components (the engine of :mod:`vpsim.model.engine`, the machines and battery of
+:mod:`vpsim.model.electric` and :mod:`vpsim.model.machine`) and the management's choices of
+:mod:`vpsim.model.hybrid`.
+
+Layout (the Toyota/Lexus/Ford hybrids): the engine on the planet carrier, the generator MG1 on the sun, the
+ring to the wheels through the final drive (ratio i_r = ``transmission.final_drive``, efficiency eta), the
+traction machine MG2 on the ring through its reduction i_m2 (``split.mg2_ratio``). With k = Z_r / Z_s (ring
+over sun teeth):
+
+    (P1) Willis:          w_s = (1 + k) w_c - k w_r             w_r = i_r v / r,  w_m2 = i_m2 w_r
+    (P2) torque balance:  T_s = T_c / (1 + k),  T_r = k T_c / (1 + k)   (ideal gears, massless pinions)
+                          so that T_c w_c = T_s w_s + T_r w_r (power is conserved through the set)
+    (P3) machines:        T_g = -T_s + J_g dw_s                 (MG1 holds the sun: its reaction torque)
+                          T_m2 = (T_ring - T_r) / i_m2 + J_m2 dw_m2,  T_ring = F_w r / (i_r eta) (E1)
+    (P4) speed window:    the carrier (engine) speed w_c within [w_idle, w_e,max] and such that |w_s| <=
+                          w_g,max: w_c in [(k w_r - w_g,max) / (1 + k), (k w_r + w_g,max) / (1 + k)]
+
+The engine's speed is free within (P4): the management chooses whether the engine runs and its power P_e;
+the engine then turns at the speed of least fuel for that power (the best-efficiency line, (P5):
+w*(P) = argmin_w mdot_f(P / w, w) over the engine's map, :func:`best_efficiency_line`), held within (P4)
+and at or above the speed where MG1's rated torque can hold the engine's (P / w <= (1 + k) T_g,rated). Over
+an interval the engine's speed is held (dw_c = 0: its change between intervals, a fraction of a percent of
+the cycle's energy, is not booked), so dw_s = -k dw_r. Both machines draw on one pack: MG1's DC power is
+served first, MG2's torque cut where the pack cannot give or take the sum
+(:func:`vpsim.model.electric.machine_and_battery_at`). A choice is infeasible where MG1 cannot hold the
+reaction torque or turns beyond its top speed (the engine at rest at a ring speed where |k w_r| > w_g,max), or
+the pack cannot take MG1's generated power.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import battery as bt
+from . import electric as el
+from . import engine as en
+from . import hybrid as hy
+from . import machine as mc
+from . import rules
+from . import tables as tb
+from . import vehicle as vh
+from .engine import equation, inline
+
+LINE_POINTS = 121  # powers of the best-efficiency line (uniform from 0 to the engine's top power)
+LINE_SPEEDS = 931  # speeds it is searched over (0.5 rad/s apart on the preset)
+SPEED_TRIALS = 16  # speeds tried across the gear set's range where MG1 cannot hold the engine on the line
+
+# the point's fields after the P2's (hybrid.p2_point's first 18, which the shared cost functions read)
+P_WC, P_WS, P_TG, P_PG, P_DWS, P_TRING, P_FEASIBLE = range(18, 25)
+
+
+@equation
+def sun_speed(w_c, w_r, s):
+    """(P1) Willis: the sun's (MG1's) speed of carrier speed w_c and ring speed w_r."""
+    return (1.0 + s.ring_over_sun) * w_c - s.ring_over_sun * w_r
+
+
+@equation
+def carrier_speed(w_s, w_r, s):
+    """(P1) solved for the carrier: w_c = (w_s + k w_r) / (1 + k)."""
+    return (w_s + s.ring_over_sun * w_r) / (1.0 + s.ring_over_sun)
+
+
+@equation
+def planetary_torques(t_c, s):
+    """(P2): the torques (T_s, T_r) a carrier torque T_c puts on the sun and the ring."""
+    return t_c / (1.0 + s.ring_over_sun), s.ring_over_sun * t_c / (1.0 + s.ring_over_sun)
+
+
+@equation
+def carrier_speed_range(w_r, c, g, s):
+    """(P4): the engine speeds (lowest, highest) the gear set allows at ring speed w_r: at or above idle and
+    below the engine's top speed, with the sun (MG1) within its top speed either way. Empty (lowest >
+    highest) where none is."""
+    lo = max(c.idle_speed, carrier_speed(-g.max_speed, w_r, s))
+    hi = min(s.engine_max_speed, carrier_speed(g.max_speed, w_r, s))
+    return lo, hi
+
+
+@equation
+def engine_speed_for_power(p, w_r, dw_r, w_lo, w_hi, lines, best, g, s):
+    """The engine's speed for power p at ring speed w_r: on the best-efficiency line (P5), at or above the
+    speed where MG1's rated torque holds the engine's (p / w <= (1 + k) T_g,rated), within (w_lo, w_hi)
+    (P4); where MG1 cannot hold the engine there (above its base speed its torque falls as 1 / w_s), the
+    nearest of ``SPEED_TRIALS`` speeds across the range where it can and the engine reaches p. Returns (the
+    speed, its torque p / w, feasible)."""
+    w = tb.interp_at(p, best[0], best[1], best[2])
+    w_min = max(w_lo, p / ((1.0 + s.ring_over_sun) * g.rated_torque))
+    if w_min > w_hi:
+        return w_hi, p / w_hi, False
+    w = min(max(w, w_min), w_hi)
+    if engine_speed_holds(p, w, w_r, dw_r, lines, g, s):
+        return w, p / w, True
+    best_w, gap = w, math.inf
+    for j in range(SPEED_TRIALS):
+        wj = w_min + (w_hi - w_min) * j / (SPEED_TRIALS - 1.0)
+        if abs(wj - w) < gap and engine_speed_holds(p, wj, w_r, dw_r, lines, g, s):
+            best_w, gap = wj, abs(wj - w)
+    return best_w, p / best_w, gap < math.inf
+
+
+@equation
+def engine_speed_holds(p, w_c, w_r, dw_r, lines, g, s):
+    """Whether the engine gives power p at speed w_c within its full-load line, and MG1 holds its reaction
+    (:func:`generator_point`)."""
+    t_e = p / w_c
+    if t_e > tb.interp_at(w_c, lines[0], lines[1], lines[2]) * (1.0 + 1e-9):
+        return False
+    return generator_point(t_e, w_c, w_r, dw_r, g, s)[4]
+
+
+@equation
+def demand_power(interval, e, p_high):
+    """The engine power that follows the demand: the ring's power demand and the accessories, within 0 and
+    the engine's top power ``p_high`` (the management's choice that leaves the battery nearly idle)."""
+    return min(max(interval[4] * interval[1] + e.accessory_power, 0.0), p_high)
+
+
+@equation
+def engine_power_choice(u, levels, p_follow, p_high):
+    """The management's u-th choice of engine power: 0 (u = 0: the engine off), the demand-following power
+    (u = 1, :func:`demand_power`), then ``levels`` powers evenly from 0 to ``p_high`` (u = 2 ...)."""
+    if u == 0:
+        return 0.0
+    if u == 1:
+        return p_follow
+    return hy.engine_torque_level(u - 2, levels, 0.0, p_high)
+
+
+@equation
+def engine_power_limit(w_hi, cap_speed, cap_power, inv_cap):
+    """The most the engine may give at speeds up to w_hi: the running maximum of its full-load power."""
+    return tb.interp_at(w_hi, cap_speed, cap_power, inv_cap)
+
+
+@equation
+def split_interval(v, a, ratio, c, e, m, g, s, tabs):
+    """What an interval (speed v, acceleration a, ring-to-wheel ratio i_r) fixes whatever the management
+    chooses: (v >= 0, w_r, dw_r, wheel force F_w, ring demand T_ring (E1), w_m2, dw_m2, MG2's envelope
+    (T_min, T_max) at w_m2, the engine's speed range (P4), ratio)."""
+    vv = v if v > 0.0 else 0.0
+    w_r = vh.engine_speed(vv, ratio, c)
+    dw_r = vh.engine_speed(a, ratio, c)
+    f = vh.wheel_force(vv, a, c)
+    w_m2 = s.mg2_ratio * w_r
+    dw_m2 = s.mg2_ratio * dw_r
+    t_min, t_max = el.envelope(w_m2, m, e, tabs[7], tabs[8], tabs[9])
+    w_lo, w_hi = carrier_speed_range(w_r, c, g, s)
+    return vv, w_r, dw_r, f, el.shaft_torque(f, ratio, c), w_m2, dw_m2, t_min, t_max, w_lo, w_hi, ratio
+
+
+@equation
+def generator_point(t_e, w_c, w_r, dw_r, g, s):
+    """MG1 at the engine's torque t_e and speed w_c (P1)-(P3): (w_s, dw_s, T_g, P_g DC, within its limits,
+    T_r the ring's share of the engine's torque)."""
+    w_s = sun_speed(w_c, w_r, s)
+    dw_s = sun_speed(0.0, dw_r, s)  # the engine's speed held over the interval
+    t_s, t_r = planetary_torques(t_e, s)
+    t_g = -t_s + s.generator_inertia * dw_s
+    ok = abs(w_s) <= g.max_speed and mc.min_torque(w_s, g) <= t_g <= mc.max_torque(w_s, g)
+    return w_s, dw_s, t_g, mc.electric_power(t_g, w_s, g), ok, t_r
+
+
+@equation
+def engine_choice_speed(on, p, w_r, dw_r, w_lo, w_hi, lines, best, g, s):
+    """(w_c, T_e, feasible) of the management's choice: at rest (0, 0, True) or running at power p
+    (:func:`engine_speed_for_power`)."""
+    if on > 0.0:
+        return engine_speed_for_power(p, w_r, dw_r, w_lo, w_hi, lines, best, g, s)
+    return 0.0, 0.0, True
+
+
+@inline
+def split_choice(interval, battery, on, p_e, c, e, m, g, s, tabs, lines, best):
+    """The operating point of the choice (engine ``on``, power ``p_e``) at an interval
+    (:func:`split_interval`) with the pack in state ``battery``; ``lines`` the engine's full-load line
+    (speeds, torques, their inverse spacing), ``best`` its best-efficiency line (powers, speeds, inverse
+    spacing; :func:`best_efficiency_line`). Returns the P2 point's 18 fields
+    (:func:`vpsim.model.hybrid.p2_point`; its machine is MG2, its input torque the ring's demand) and then
+    (w_c, w_s, T_g, P_g, dw_s, the ring's net torque, feasible)."""
+    vv, w_r, dw_r, f, t_ring, w_m2, dw_m2, t_min, t_max, w_lo, w_hi, ratio = interval
+    w_c, t_e, feasible = engine_choice_speed(on, p_e, w_r, dw_r, w_lo, w_hi, lines, best, g, s)
+    cm18 = en.speed_power(w_c, c)
+    te, t_cr, p, mdot, running = hy.engine_choice(on, on > 0.0, t_e, w_c, 0.0, cm18, c)
+    w_s, dw_s, t_g, p_g, ok, t_r = generator_point(te, w_c, w_r, dw_r, g, s)
+    t_m, i, u_oc, r, p_m, at_m, at_b = el.machine_and_battery_at(
+        (t_ring - t_r) / s.mg2_ratio + el.rotor_torque(dw_m2, e),
+        t_ring < 0.0,
+        vv,
+        w_m2,
+        t_min,
+        t_max,
+        battery,
+        p_g,
+        e,
+        m,
+        tabs,
+    )
+    t_net = t_r + s.mg2_ratio * (t_m - el.rotor_torque(dw_m2, e))
+    missing, brake = hy.shortfall_and_brake(f, el.wheel_force_of_shaft(t_net, ratio, c))
+    feasible = choice_feasible(
+        feasible, ok, p_g + p_m + e.accessory_power - el.pack_power(i, u_oc, r, r), p_g
+    )
+    return (
+        w_m2,
+        dw_m2,
+        t_ring,
+        te,
+        t_cr,
+        p,
+        mdot,
+        t_m,
+        i,
+        u_oc,
+        r,
+        p_m,
+        brake,
+        missing,
+        at_m,
+        at_b,
+        running,
+        cm18,
+        w_c,
+        w_s,
+        t_g,
+        p_g,
+        dw_s,
+        t_net,
+        feasible,
+    )
+
+
+@equation
+def choice_feasible(engine_ok, generator_ok, unserved, p_g):
+    """1.0 where the choice is feasible: the engine reaches its power within the gear set's limits, MG1
+    holds its reaction torque, and the pack takes what MG1 generates (a negative ``unserved`` power: it
+    cannot, with MG2 already cut to nothing, and the power would vanish); 0.0 otherwise."""
+    return 1.0 if engine_ok and generator_ok and unserved > -1e-6 * (1.0 + abs(p_g)) else 0.0
+
+
+@equation
+def higher_powers_dominated(point, battery):
+    """Whether every engine power above this running choice's is worse for the management: the pack is at
+    its charging limit, so more engine power only makes MG2's torque smaller (or MG1's power infeasible),
+    the surplus going to the friction brakes, with no trace miss to close. The ECMS and DP, trying powers
+    upward, stop there."""
+    if point[13] > hy.MISS_TOLERANCE_N or point[16] <= 0.0:
+        return False
+    return point[15] > 0.0 and point[8] <= battery[3]
+
+
+@equation
+def split_powers(point, v, a, c, e, s):
+    """Every energy term (W) of a :func:`split_choice` point, in the order of
+    :data:`vpsim.model.hybrid.HYBRID_TERMS`:
+
+    indicated + chemical = friction + pumping + engine kinetic (0: its speed held) + battery loss
+                           + accessories + machine loss (MG1 + MG2) + rotor kinetic (MG1 + MG2)
+                           + driveline loss + vehicle kinetic + aero + rolling + brake - trace miss - unserved
+    """
+    w_m2, dw_m2, t_m, p, t_cr, running, cm18 = (
+        point[0],
+        point[1],
+        point[7],
+        point[5],
+        point[4],
+        point[16],
+        point[17],
+    )
+    i, u_oc, r, p_m, brake, missing = point[8], point[9], point[10], point[11], point[12], point[13]
+    w_c, w_s, t_g, p_g, dw_s, t_net = point[18], point[19], point[20], point[21], point[22], point[23]
+    vv = v if v > 0.0 else 0.0
+    indicated, friction, pumping = 0.0, 0.0, 0.0
+    if running > 0.0:
+        indicated, friction, pumping = rules.engine_powers(p, w_c, t_cr, 1.0, c, cm18)
+    w_r = w_m2 / s.mg2_ratio
+    f_net = vh.wheel_force(vv, a, c) + brake - missing
+    return (
+        indicated,
+        friction,
+        pumping,
+        0.0,
+        bt.chemical_power(u_oc, i, e.coulombic_efficiency),
+        bt.battery_loss(u_oc, r, i, e.coulombic_efficiency),
+        e.accessory_power,
+        (p_g - t_g * w_s) + (p_m - t_m * w_m2),
+        s.generator_inertia * dw_s * w_s + el.rotor_torque(dw_m2, e) * w_m2,
+        t_net * w_r - f_net * vv,
+        el.kinetic_power(vv, a, c),
+        vh.aero_force(vv, c) * vv,
+        vh.rolling_force(vv, c) * vv,
+        brake * vv,
+        missing * vv,
+        p_g + p_m + e.accessory_power - el.pack_power(i, u_oc, r, r),
+    )
+
+
+# --- records and tables (built once per parameter set) -----------------------------------------------------
+
+S_FIELDS = ("ring_over_sun", "mg2_ratio", "engine_max_speed", "generator_inertia")
+
+
+def split_record(params):
+    """The gear set's record (:data:`S_FIELDS`) of ``params.split``."""
+    sp = params.split
+    r = np.zeros(1, np.dtype([(n, np.float64) for n in S_FIELDS], align=True)).view(np.recarray)
+    r[0] = (sp.ring_teeth / sp.sun_teeth, sp.mg2_ratio, sp.engine_max_speed, sp.generator_inertia)
+    r.flags.writeable = False
+    return r[0]
+
+
+def generator_record(params):
+    """MG1's machine record: the scalable loss model (:mod:`vpsim.model.machine`) at its rating."""
+    sp = params.split
+    return mc.machine_record(
+        mc.MachineSpec(
+            rated_power_w=sp.generator_rated_power,
+            base_speed_radps=sp.generator_base_speed,
+            max_speed_radps=sp.generator_max_speed,
+            kind="pm",
+            inertia_kgm2=sp.generator_inertia,
+        )
+    )
+
+
+def best_efficiency_line(engine_map, w_lo, w_hi):
+    """(P5) The engine's best-efficiency line over speeds [w_lo, w_hi] of its map: (powers, speeds) with
+    powers uniform from 0 to its top power, each at the speed of least fuel flow (0 W: w_lo), and its
+    full-load power's running maximum (speeds, powers), both as the kernels read them."""
+    speeds = np.linspace(w_lo, w_hi, LINE_SPEEDS)
+    t_full = np.asarray(engine_map.max_torque(speeds), float)
+    p_full = np.maximum(t_full * speeds, 0.0)
+    top = float(p_full.max())
+    powers = np.linspace(0.0, top, LINE_POINTS)
+    best = np.empty(LINE_POINTS)
+    best[0] = w_lo
+    for j in range(1, LINE_POINTS):
+        t = powers[j] / speeds
+        ok = t <= t_full * (1.0 + 1e-12)
+        fuel = np.where(ok, np.asarray(engine_map.fuel_flow(np.where(ok, t, 0.0), speeds), float), np.inf)
+        best[j] = speeds[int(np.argmin(fuel))]
+    return powers, best, speeds, np.maximum.accumulate(p_full)
