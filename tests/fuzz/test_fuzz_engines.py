@@ -154,6 +154,8 @@ JSON_BASE = {
         ({"fc_fuel_type": ["x"]}, "fc_fuel_type"),
         ({"fc_inertia": "heavy"}, "must be numeric"),
         ({"units": {"fc_disp": "cc"}}, "expected 'L'"),
+        ({"fc_disp": True}, "'fc_disp' holds true, expected numbers"),  # numpy reads true as 1
+        ({"fc_fuel_map": [[0.5, 1.5, 3.0], [1.0, False, 6.0], [1.5, 4.5, 9.0]]}, "'fc_fuel_map' holds false"),
     ],
 )
 def test_hostile_engine_json(tmp_path, change, match):
@@ -211,6 +213,32 @@ def test_diesel_and_cng_maps_are_not_compared_in_litres_of_gasoline(capsys, tmp_
             tmp_path / "o",
         )
         assert code == 2 and f"fuel type '{fuel}'" in err
+
+
+@pytest.mark.skipif(not GEO_JSON.exists(), reason=f"engine file not found at {GEO_JSON}")
+@pytest.mark.parametrize(
+    ("scale", "match"),
+    [
+        (1e300, "minimum BSFC 2.479e+302 g/kWh is more than 10000 g/kWh"),
+        (1e3, "minimum BSFC 2.479e+05 g/kWh is more than 10000 g/kWh"),  # mg/s written as g/s
+        (1e306, "no measured node below full load gives a finite, positive BSFC"),  # the BSFC overflows
+        ("digits", "minimum BSFC"),  # every entry a 300-digit integer
+        (1e-3, "brake efficiency"),  # g/s read as kg/s the other way round: refused when the map is read
+    ],
+)
+def test_scaling_refuses_a_map_no_piston_engine_has(capsys, tmp_path, scale, match):
+    """A measured map in the wrong units: scaling --calibrate fitted it and printed a cycle fuel of 300
+    digits (with a warning); now one line, and nothing written into --out."""
+    data = json.loads(GEO_JSON.read_text())
+    fuel = data["fc_fuel_map"]
+    data["fc_fuel_map"] = [[int("9" * 300) if scale == "digits" else v * scale for v in r] for r in fuel]
+    p = tmp_path / "e.json"
+    p.write_text(json.dumps(data))
+    out = tmp_path / "o"
+    args = ["--bore", 0.074, "--stroke", 0.077, "--cylinders", 3, "--calibrate", "--out", out]
+    code, _, err = run_cli(capsys, "scaling", "--measured", p, *args)
+    assert code == 2 and match in err, err
+    assert not out.exists() or not any(out.iterdir())
 
 
 def test_engine_metadata_warnings(capsys, tmp_path):
