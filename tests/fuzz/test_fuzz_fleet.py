@@ -407,3 +407,14 @@ def test_a_record_with_a_pushing_road_load_is_listed_in_excluded_csv_never_run(t
     assert len(why) == 1 and why[0].startswith("implausible road load: target_a_lbf 1,"), why
     with (out / "vehicles.csv").open(newline="") as f:
         assert "T004" not in {r["vehicle_id"] for r in csv.DictReader(f)}
+
+
+@pytest.mark.parametrize(
+    ("value", "reason"),
+    [("1.9", "configuration 1.9 is not a whole number"), ("x", "configuration 'x' is not a number")],
+)
+def test_from_epa_names_why_every_row_of_a_vehicle_was_left_out(tmp_path, capsys, value, reason):
+    """Every test row of a vehicle excluded (configuration 1.9): from-epa says why, not "no vehicle"."""
+    lst = _edited(write_list(tmp_path / "list.csv"), tmp_path / "bad.csv", "T004", "configuration", value)
+    code, _, err = run_cli(capsys, "vehicle", "from-epa", lst, "--id", "T004", "--out", tmp_path / "c.toml")
+    assert code == 2 and f"vehicle T004: every test row is excluded ({reason})" in err, err
