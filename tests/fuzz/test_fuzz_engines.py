@@ -66,6 +66,26 @@ def test_cell_doubling_of_the_issue_in_a_memory_limited_process(tmp_path):
         assert p.returncode == 2 and "limit" in p.stderr
 
 
+@pytest.mark.parametrize(
+    "text",
+    [
+        "a = zeros(1, 999999); b = [a a a a]; c = {b b b b};\n" * 100_000,  # 5 MB: 35 s and 560 MB before
+        "x = 1;\n" * 700_000,  # 30 s before
+        "x = [" + "1 " * 2_500_000 + "];\n",  # one line: 50 s and 900 MB before
+        "x = [" + "\n" * 4_000_000 + "];\n",  # rows without a token between them
+    ],
+    ids=["statements", "assignments", "one_row", "newlines"],
+)
+def test_a_5_mb_hostile_m_file_is_refused_in_seconds(tmp_path, text):
+    """The issue's 5 MB hostile .m (30 s and 900 MB to refuse): the token bound stops it in a few seconds,
+    under a 1 GB address-space limit in a process of its own."""
+    (tmp_path / "h.m").write_text(text[: 5 * 1024 * 1024 - 16])
+    t0 = time.perf_counter()
+    p = run_limited(["engine", "import", "h.m"], cwd=tmp_path, timeout=60, memory=1024**3)
+    assert p.returncode == 2 and "tokens" in p.stderr, p.stderr
+    assert time.perf_counter() - t0 < 10
+
+
 def _atoms():
     return st.sampled_from(
         [
