@@ -267,7 +267,7 @@ def load_schedule(path: str | Path, n_gears: int, *, cycle: Cycle | None = None)
     newline convention, ``#`` comment lines, ``,`` ``;`` or tab as delimiter. With ``cycle`` given, every
     time must lie within the cycle. Errors name the line.
     """
-    from .cycles import _clip, _cut, _sniff_delimiter, _uncommented
+    from .cycles import _clip, _cut, _number, _rows, _sniff_delimiter, _uncommented
 
     path = Path(path)
     text = read_text(path, CycleError, limit=MAX_GEAR_FILE_BYTES, what="gear schedule CSV file")
@@ -277,15 +277,7 @@ def load_schedule(path: str | Path, n_gears: int, *, cycle: Cycle | None = None)
     gears: list[int] = []
     header = None
     ti = gi = -1
-    rows = iter(reader)
-    while True:
-        try:
-            row = next(rows)
-        except StopIteration:
-            break
-        except csv.Error as exc:
-            raise CycleError(f"{path}:{reader.line_num}: malformed CSV ({exc})") from None
-        lineno = reader.line_num
+    for lineno, row in _rows(reader, path):
         if not row or not "".join(row).strip():
             continue
         if header is None:
@@ -303,13 +295,13 @@ def load_schedule(path: str | Path, n_gears: int, *, cycle: Cycle | None = None)
             raise CycleError(f"{path}:{lineno}: expected {len(header)} fields, got {len(row)}")
         t_text, g_text = row[ti].strip(), row[gi].strip()
         try:
-            t = float(t_text)
+            t = _number(t_text)
         except ValueError:
             raise CycleError(f"{path}:{lineno}: time_s {_cut(t_text)} is not a number") from None
         if not math.isfinite(t):
             raise CycleError(f"{path}:{lineno}: time_s is {_clip(t_text)}, expected a finite number")
         try:
-            gf = float(g_text)
+            gf = _number(g_text)
         except ValueError:
             raise CycleError(f"{path}:{lineno}: gear {_cut(g_text)} is not a number") from None
         if not math.isfinite(gf):

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ParameterError
-from .textio import check_path, printable, read_text
+from .textio import check_path, printable, read_text, toml_error
 from .units import FIELD_DIMENSIONS, to_si
 
 PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l", "bev", "hev_p2", "hev_split")
@@ -1069,7 +1069,7 @@ def read_toml(path: Path, error: type[Exception]) -> dict[str, Any]:
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise error(f"{path}: not valid TOML ({exc})") from None
+        raise error(f"{path}: not valid TOML ({toml_error(exc, text)})") from None
     except RecursionError:
         raise error(f"{path}: not valid TOML (arrays or tables nested too deeply)") from None
 

@@ -147,3 +147,38 @@ __all__ = [
     "read_text",
     "short_name",
 ]
+
+
+# where a quote opened is searched for in files of at most so many lines, re-parsing at most so much text
+TOML_OPEN_SEARCH_LINES = 5000
+TOML_OPEN_SEARCH_BYTES = 1024 * 1024  # (Python parses TOML at about 1-2 MB/s)
+
+
+def toml_error(exc: Exception, text: str) -> str:
+    """``exc`` (a ``tomllib.TOMLDecodeError``) as a one-line reason. Python's parser reports a quote,
+    string or array left open "at end of document"; the line it opens on is then found as the line after
+    the longest run of whole lines that parses (re-parsing from the end; in a file of at most
+    :data:`TOML_OPEN_SEARCH_LINES` lines, within a bounded amount of text: else the parser's words)."""
+    import tomllib
+
+    msg = str(exc)
+    if not msg.endswith("(at end of document)"):
+        return msg
+    lines = text.splitlines(keepends=True)
+    if len(lines) > TOML_OPEN_SEARCH_LINES:
+        return msg
+    spent = 0
+    for k in range(len(lines) - 1, -1, -1):
+        head = "".join(lines[:k])
+        spent += len(head)
+        if spent > TOML_OPEN_SEARCH_BYTES:
+            break
+        try:
+            tomllib.loads(head)
+        except tomllib.TOMLDecodeError as e:
+            if str(e).endswith("(at end of document)"):
+                continue
+        except RecursionError:
+            break
+        return f"{msg[: -len('(at end of document)')]}(at line {k + 1}, where it opens and is never closed)"
+    return msg

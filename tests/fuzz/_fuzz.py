@@ -68,6 +68,15 @@ def run_cli(capsys, *args) -> tuple[int, str, str]:
     return code, out, err
 
 
+def child_env(**extra) -> dict:
+    """The environment of a vpsim subprocess: this checkout's package whatever its working folder (with the
+    relative PYTHONPATH=src the tests are run with, a subprocess in a temporary folder imported whichever
+    vpsim was installed)."""
+    env = dict(os.environ, **extra)
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO / "src"), *filter(None, [env.get("PYTHONPATH")])])
+    return env
+
+
 def run_limited(args, *, cwd: Path, timeout: float = 60.0, memory: int = MEMORY_LIMIT_BYTES):
     """Run ``python -m vpsim ARGS`` in a subprocess under an address-space limit and a time limit; check the
     answer; return the CompletedProcess. Exceeding either limit fails the test."""
@@ -77,7 +86,7 @@ def run_limited(args, *, cwd: Path, timeout: float = 60.0, memory: int = MEMORY_
         "from vpsim.cli.main import main\n"
         "sys.exit(main(sys.argv[1:]))\n"
     )
-    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", NUMBA_NUM_THREADS="1")
+    env = child_env(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", NUMBA_NUM_THREADS="1")
     p = subprocess.run(
         [sys.executable, "-c", code, *[str(a) for a in args]],
         cwd=cwd,

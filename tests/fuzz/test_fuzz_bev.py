@@ -175,3 +175,20 @@ def test_bad_cells_in_code_are_one_line():
 def test_check_answer_accepts_a_bev_json(capsys):
     code, out, err = run_cli(capsys, "simulate", "--vehicle", "bev", "--cycle", "hwfet", "--json")
     check_answer(code, out, err, as_json=True)
+
+
+@pytest.mark.parametrize("kind", ["fifo", "folder", "missing"])
+def test_a_cell_file_that_is_not_a_file_is_named_as_such(tmp_path, capsys, kind):
+    """battery.cell naming a FIFO or a folder: 'not a regular file' (it said 'no such file', and opening a
+    FIFO would block)."""
+    import os
+
+    ess = tmp_path / "ESS_X.m"
+    if kind == "fifo":
+        os.mkfifo(ess)
+    elif kind == "folder":
+        ess.mkdir()
+    car = tmp_path / "car.toml"
+    car.write_text('base = "bev"\n[battery]\ncell = "ESS_X.m"\n')
+    code, _, err = run_cli(capsys, "simulate", "--vehicle", car, "--cycle", "udds")
+    assert code == 2 and ("no such file" if kind == "missing" else "not a regular file") in err, err

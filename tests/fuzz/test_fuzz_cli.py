@@ -4,12 +4,11 @@ traceback. Most cases run in this process through ``main``; a few through the in
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 
 import pytest
-from _fuzz import NAN_WORD, check_answer, check_json, run_cli
+from _fuzz import NAN_WORD, check_answer, check_json, child_env, run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -282,7 +281,7 @@ def test_entry_point_in_a_subprocess(tmp_path):
             capture_output=True,
             text=True,
             timeout=120,
-            env=dict(os.environ, VPSIM_DEBUG="0"),
+            env=child_env(VPSIM_DEBUG="0"),
         )
         assert p.returncode == status, p.stderr
         check_answer(p.returncode, p.stdout, p.stderr, as_json="--json" in args)
@@ -296,6 +295,7 @@ def test_broken_stdout_pipe_is_not_a_traceback(tmp_path):
         capture_output=True,
         text=True,
         timeout=120,
+        env=child_env(),
     )
     assert "Traceback" not in p.stderr
 

@@ -33,7 +33,14 @@ CASES = [
     ("nul", HEADER + b"0,0\x00\n", "not a text file"),
     ("huge_field", HEADER + b"0,0\n1," + b"9" * 10_000_000 + b"\n", "malformed CSV"),
     ("huge_quoted_field", HEADER + b'0,0\n1,"' + b"x" * 10_000_000 + b'"\n', "malformed CSV"),
-    ("unclosed_quote", HEADER + b'0,0\n1,"10\n2,0\n', "is not a number"),
+    # the quote opens on line 3: the error names that line, not the one the field runs on to
+    ("unclosed_quote", HEADER + b'0,0\n1,"10\n2,0\n3,0\n', ":3: a quote opened on this line is not closed"),
+    ("quoted_ok", HEADER + b'0,0\n1,"10"\n2,0\n', "ok"),
+    ("underscore", HEADER + b"0,0\n1,1_0\n2,0\n", "speed '1_0' is not a number"),  # float() reads 10
+    ("underscore_time", HEADER + b"0,0\n1_0,1\n", "time '1_0' is not a number"),
+    ("hex", HEADER + b"0,0\n1,0x10\n", "is not a number"),
+    ("arabic_digits", HEADER + "0,0\n1,\u0661\u0660\n".encode(), "is not a number"),  # float() reads 10
+    ("inner_space", HEADER + b"0,0\n1,1 0\n", "is not a number"),
     ("duplicate_speed", b"time_s,speed_kmh,speed_kmh\n0,0,0\n1,1,1\n", "appears twice"),
     ("two_speed_units", b"time_s,speed_kmh,speed_mps\n0,0,0\n1,1,1\n", "2 speed columns"),
     ("no_time", b"speed_kmh\n0\n1\n", "no time column"),

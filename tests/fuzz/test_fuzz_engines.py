@@ -66,6 +66,26 @@ def test_cell_doubling_of_the_issue_in_a_memory_limited_process(tmp_path):
         assert p.returncode == 2 and "limit" in p.stderr
 
 
+@pytest.mark.parametrize(
+    "text",
+    [
+        "a = zeros(1, 999999); b = [a a a a]; c = {b b b b};\n" * 100_000,  # 5 MB: 35 s and 560 MB before
+        "x = 1;\n" * 700_000,  # 30 s before
+        "x = [" + "1 " * 2_500_000 + "];\n",  # one line: 50 s and 900 MB before
+        "x = [" + "\n" * 4_000_000 + "];\n",  # rows without a token between them
+    ],
+    ids=["statements", "assignments", "one_row", "newlines"],
+)
+def test_a_5_mb_hostile_m_file_is_refused_in_seconds(tmp_path, text):
+    """The issue's 5 MB hostile .m (30 s and 900 MB to refuse): the token bound stops it in a few seconds,
+    under a 1 GB address-space limit in a process of its own."""
+    (tmp_path / "h.m").write_text(text[: 5 * 1024 * 1024 - 16])
+    t0 = time.perf_counter()
+    p = run_limited(["engine", "import", "h.m"], cwd=tmp_path, timeout=60, memory=1024**3)
+    assert p.returncode == 2 and "tokens" in p.stderr, p.stderr
+    assert time.perf_counter() - t0 < 10
+
+
 def _atoms():
     return st.sampled_from(
         [
@@ -154,6 +174,8 @@ JSON_BASE = {
         ({"fc_fuel_type": ["x"]}, "fc_fuel_type"),
         ({"fc_inertia": "heavy"}, "must be numeric"),
         ({"units": {"fc_disp": "cc"}}, "expected 'L'"),
+        ({"fc_disp": True}, "'fc_disp' holds true, expected numbers"),  # numpy reads true as 1
+        ({"fc_fuel_map": [[0.5, 1.5, 3.0], [1.0, False, 6.0], [1.5, 4.5, 9.0]]}, "'fc_fuel_map' holds false"),
     ],
 )
 def test_hostile_engine_json(tmp_path, change, match):
@@ -211,6 +233,32 @@ def test_diesel_and_cng_maps_are_not_compared_in_litres_of_gasoline(capsys, tmp_
             tmp_path / "o",
         )
         assert code == 2 and f"fuel type '{fuel}'" in err
+
+
+@pytest.mark.skipif(not GEO_JSON.exists(), reason=f"engine file not found at {GEO_JSON}")
+@pytest.mark.parametrize(
+    ("scale", "match"),
+    [
+        (1e300, "minimum BSFC 2.479e+302 g/kWh is more than 10000 g/kWh"),
+        (1e3, "minimum BSFC 2.479e+05 g/kWh is more than 10000 g/kWh"),  # mg/s written as g/s
+        (1e306, "no measured node below full load gives a finite, positive BSFC"),  # the BSFC overflows
+        ("digits", "minimum BSFC"),  # every entry a 300-digit integer
+        (1e-3, "brake efficiency"),  # g/s read as kg/s the other way round: refused when the map is read
+    ],
+)
+def test_scaling_refuses_a_map_no_piston_engine_has(capsys, tmp_path, scale, match):
+    """A measured map in the wrong units: scaling --calibrate fitted it and printed a cycle fuel of 300
+    digits (with a warning); now one line, and nothing written into --out."""
+    data = json.loads(GEO_JSON.read_text())
+    fuel = data["fc_fuel_map"]
+    data["fc_fuel_map"] = [[int("9" * 300) if scale == "digits" else v * scale for v in r] for r in fuel]
+    p = tmp_path / "e.json"
+    p.write_text(json.dumps(data))
+    out = tmp_path / "o"
+    args = ["--bore", 0.074, "--stroke", 0.077, "--cylinders", 3, "--calibrate", "--out", out]
+    code, _, err = run_cli(capsys, "scaling", "--measured", p, *args)
+    assert code == 2 and match in err, err
+    assert not out.exists() or not any(out.iterdir())
 
 
 def test_engine_metadata_warnings(capsys, tmp_path):

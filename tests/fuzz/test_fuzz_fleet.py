@@ -291,6 +291,65 @@ def test_a_technology_file_value_is_a_number_in_range(tmp_path, capsys, vehicle_
     assert not car.exists()
 
 
+def _set(data: dict, dotted: str, value) -> None:
+    """``data`` with the key at the dotted path (its last part the new key) set to ``value``."""
+    *parents, key = dotted.split("/")
+    for p in parents:
+        data = data[p]
+    data[key] = value
+
+
+@pytest.mark.parametrize(
+    ("vehicle_id", "where", "value", "expect"),
+    [
+        # a misspelt fit: read as absent, the default accessory power would have been used
+        ("T004", "all_vehicles/boosted/engine.accesory_power", 100.0, "boosted.engine.accesory_power'"),
+        ("T004", "all_vehicles/na/engine.thermal_efficiency ", 0.3, "'all_vehicles.na.engine.thermal_effic"),
+        ("T004", "all_vehicle", {}, "'all_vehicle'"),  # a misspelt table beside the right one
+        ("T004", "all_vehicles/NA", {}, "'all_vehicles.NA'"),  # a class no fleet run fits
+        ("T004", "bev/all_vehicle", {}, "'bev.all_vehicle'"),  # the whole file is checked, not the part read
+        ("T004", "all_vehicles/boosted/extra", 1.0, "'all_vehicles.boosted.extra'"),
+        ("E001", "bev/all_vehicles/bev/machine.loss_scale_", 1.0, "'bev.all_vehicles.bev.machine.loss_"),
+        ("E001", "bev/all_vehicles/suv", {}, "'bev.all_vehicles.suv'"),
+        ("T004", "all_vehicles/na/" + "k" * 5000, 1.0, "..."),  # a long key is cut, the line stays short
+        ("T004", "all_vehicles/na/\x1b[31m", 1.0, "\\x1b[31m"),  # escaped for the terminal
+    ],
+)
+def test_a_technology_file_with_a_key_no_fleet_run_writes_is_refused(
+    tmp_path, capsys, vehicle_id, where, value, expect
+):
+    """An unknown key anywhere in a technology.json (a misspelt key silently ignored is a wrong number): one
+    line naming the file, the key and the keys expected there; nothing written."""
+    import json
+
+    from fleet_csv import EVS, write_ev_list
+
+    lst = write_ev_list(tmp_path / "list.csv", evs=[EVS[0]])
+    tech = _technology(tmp_path / "technology.json")
+    data = json.loads(tech.read_text())
+    _set(data, where, value)
+    tech.write_text(json.dumps(data))
+    car = tmp_path / "c.toml"
+    args = ["vehicle", "from-epa", lst, "--id", vehicle_id, "--out", car, "--technology", tech]
+    code, _, err = run_cli(capsys, *args)
+    assert code == 2 and str(tech) in err and "unknown key" in err and "only:" in err, err
+    assert expect in err and "\x1b" not in err, err
+    assert not car.exists()
+
+
+def test_a_technology_file_without_the_cars_class_says_which_it_has(tmp_path, capsys):
+    import json
+
+    lst = write_list(tmp_path / "list.csv")
+    tech = _technology(tmp_path / "technology.json")
+    data = json.loads(tech.read_text())
+    del data["all_vehicles"]["boosted"]
+    tech.write_text(json.dumps(data))
+    args = ["vehicle", "from-epa", lst, "--id", "T004", "--out", tmp_path / "c.toml", "--technology", tech]
+    code, _, err = run_cli(capsys, *args)
+    assert code == 2 and "has no fit for this car's class boosted (the run fitted: na, high_output)" in err
+
+
 def test_a_technology_file_in_range_is_used(tmp_path, capsys):
     lst = write_list(tmp_path / "list.csv")
     tech = _technology(tmp_path / "technology.json", **{"engine.thermal_efficiency": 0.45})
@@ -348,3 +407,14 @@ def test_a_record_with_a_pushing_road_load_is_listed_in_excluded_csv_never_run(t
     assert len(why) == 1 and why[0].startswith("implausible road load: target_a_lbf 1,"), why
     with (out / "vehicles.csv").open(newline="") as f:
         assert "T004" not in {r["vehicle_id"] for r in csv.DictReader(f)}
+
+
+@pytest.mark.parametrize(
+    ("value", "reason"),
+    [("1.9", "configuration 1.9 is not a whole number"), ("x", "configuration 'x' is not a number")],
+)
+def test_from_epa_names_why_every_row_of_a_vehicle_was_left_out(tmp_path, capsys, value, reason):
+    """Every test row of a vehicle excluded (configuration 1.9): from-epa says why, not "no vehicle"."""
+    lst = _edited(write_list(tmp_path / "list.csv"), tmp_path / "bad.csv", "T004", "configuration", value)
+    code, _, err = run_cli(capsys, "vehicle", "from-epa", lst, "--id", "T004", "--out", tmp_path / "c.toml")
+    assert code == 2 and f"vehicle T004: every test row is excluded ({reason})" in err, err

@@ -28,6 +28,9 @@ CASES = [
     ("negative_gear", H + b"0,-1\n", "gear -1 is not a whole number"),
     ("huge_gear", H + b"0,1e308\n", "is not a whole number"),
     ("text_gear", H + b"0,first\n", "gear 'first' is not a number"),
+    ("underscore_gear", H + b"0,1\n10,1_0\n", "gear '1_0' is not a number"),  # float() reads 10
+    ("underscore_time", H + b"0,1\n1_0,2\n", "time_s '1_0' is not a number"),
+    ("unclosed_quote", H + b'0,1\n10,"2\n20,3\n', ":3: a quote opened on this line is not closed"),
     ("after_the_cycle", H + b"0,1\n5000,2\n", "outside the cycle nedc (0 to 1180 s)"),
     ("before_the_cycle", H + b"-5,1\n", "outside the cycle"),
     ("backwards", H + b"0,1\n10,2\n5,3\n", "does not increase"),

@@ -87,6 +87,11 @@ CASES = [
     ("[engine]\nthermal_efficiency = 0.6\n", "engine.thermal_efficiency = 0.6 is not below 0.6"),
     ("[vehicle]\nmass = 1e-6\n", "vehicle.mass = 1e-06 is outside the plausible range [50, 100000] (in kg"),
     ('[vehicle]\nmass = { value = 1, unit = "mg" }\n', "vehicle.mass"),
+    # Python's parser says "at end of document" of a quote, string or array left open: the line it opens on
+    ("[vehicle]\nname = 'x\nmass = 1200\n", "(at line 2, where it opens and is never closed)"),
+    ('[vehicle]\nmass = [1,\n2,\n3]\n[engine]\nbore = 0.07\nx = """abc\n\ny=1\n', "(at line 7, where it"),
+    ("[vehicle]\nmass = 1200\nname = [\n'a',\n", "(at line 3, where it opens"),
+    ("[vehicle]\nname = 'x\n" + "# c\n" * 6000, "(at end of document)"),  # too long to search: as parsed
 ]
 
 

@@ -35,9 +35,9 @@ def vehicle():
 )
 def from_epa(file, vehicle_id, config, out, technology):
     """Write the parameters of test vehicle --id of the EPA test car list FILE as an editable TOML."""
-    from ..fleet.calibrate import TECH_PARAMS, vehicle_class
+    from ..fleet.calibrate import vehicle_class
     from ..fleet.epa import read_test_car_list
-    from ..fleet.report import check_complete
+    from ..fleet.technology import read_technology
     from ..fleet.vehicle import record_parameters, vehicle_toml
     from ..textio import printable
 
@@ -49,13 +49,7 @@ def from_epa(file, vehicle_id, config, out, technology):
         return
     tech, note = None, ""
     if technology:
-        check_complete(Path(technology).parent, Path(technology).name)
-        cls = vehicle_class(rec)
-        fit = _fit(technology, ("all_vehicles", cls), "")
-        # (a technology.json written before the accessories were fitted has no accessory power)
-        names = [k for k in TECH_PARAMS if k in fit or k != "engine.accessory_power"]
-        tech = _tech_values(technology, fit, names, f"all_vehicles.{cls}")
-        note = f"fleet fit ({cls} class, all vehicles) from {Path(technology).name}"
+        tech, note = read_technology(technology, "conventional", vehicle_class(rec))
     params = record_parameters(rec, technology=tech)
     text = vehicle_toml(rec, params, source=Path(file).name, technology_note=note)
     Path(out).write_text(text)
@@ -76,34 +70,6 @@ def from_epa(file, vehicle_id, config, out, technology):
     )
 
 
-def _fit(technology, keys: tuple[str, ...], what: str) -> dict:
-    """The table at ``keys`` of a technology.json (read as JSON, one line if it is not)."""
-    from ..textio import read_json
-
-    data = read_json(technology, VpsimError, what="technology.json")
-    for k in keys:
-        if not isinstance(data, dict) or k not in data:
-            where = ".".join(keys)
-            raise VpsimError(f"{technology}: not a technology.json of vpsim fleet{what} (no {where})")
-        data = data[k]
-    if not isinstance(data, dict):
-        raise VpsimError(f"{technology}: {'.'.join(keys)} is not a table of the fitted values")
-    return data
-
-
-def _tech_values(technology, fit: dict, names, where: str) -> dict[str, float]:
-    """The fitted values ``names`` of ``fit``, each a number in its field's range (an efficiency of 1 or
-    more, or a ``true``, is refused with one line: booleans are never read as numbers)."""
-    from ..params import check_field
-
-    out = {}
-    for k in names:
-        if k not in fit:
-            raise VpsimError(f"{technology}: {where} has no {k}; not a technology.json of vpsim fleet")
-        out[k] = check_field(k, fit[k], f"{technology} ({where})")
-    return out
-
-
 def _not_an_input(out, *inputs) -> None:
     """--out may not name an input: writing it would replace what is being read."""
     target = Path(out).resolve()
@@ -116,17 +82,12 @@ def _from_epa_bev(rec, file, out, technology) -> None:
     """A battery-electric record's vehicle file (:mod:`vpsim.fleet.ev`); ``technology``: a fleet run's
     technology.json, its battery-electric fit on all vehicles."""
     from ..fleet import ev
-    from ..fleet.report import check_complete
+    from ..fleet.technology import read_technology
     from ..textio import printable
 
     tech, note = None, ""
     if technology:
-        check_complete(Path(technology).parent, Path(technology).name)
-        cls = ev.ev_class(rec)
-        path = ("bev", "all_vehicles", cls)
-        fit = _fit(technology, path, " with a battery-electric fit")
-        tech = _tech_values(technology, fit, ev.TECH_PARAMS, ".".join(path))
-        note = f"fleet fit ({cls} class, all vehicles) from {Path(technology).name}"
+        tech, note = read_technology(technology, "bev", ev.ev_class(rec))
     params = ev.ev_parameters(rec, technology=tech)
     Path(out).write_text(ev.ev_vehicle_toml(rec, params, source=Path(file).name, technology_note=note))
     meas = ", ".join(f"{c} {v:.1f} MPGe" for c, v in rec.measured_mpge.items())

@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import re
 from array import array
 from dataclasses import dataclass, field
 from importlib import resources
@@ -233,6 +234,41 @@ def _sniff_delimiter(lines) -> str:
     return ","
 
 
+# a decimal number as a spreadsheet writes it; Python's float() also reads "1_0" (as 10), " 1 " and "١"
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?", re.ASCII)
+_NON_FINITE = {"nan", "+nan", "-nan", "inf", "+inf", "-inf", "infinity", "+infinity", "-infinity"}
+
+
+def _number(text: str) -> float:
+    """``text`` (stripped) as a float: digits, one point, an exponent; ``nan``/``inf`` come back as such
+    for the caller's finiteness check. ValueError for anything else (``1_0``, ``0x10``, ``true``)."""
+    if _NUMBER.fullmatch(text) or text.lower() in _NON_FINITE:
+        return float(text)
+    raise ValueError(text)
+
+
+def _rows(reader, where):
+    """(first line, row) of each row of a CSV ``reader``; one-line CycleError for malformed CSV or a quote
+    left open (the csv module would run the field on to the next quote or the end of the file, and the
+    error would name that line)."""
+    start = 1
+    rows = iter(reader)
+    while True:
+        try:
+            row = next(rows)
+        except StopIteration:
+            return
+        except csv.Error as exc:
+            raise CycleError(f"{where}:{start}: malformed CSV ({exc})") from None
+        if any("\n" in f or "\r" in f for f in row):
+            raise CycleError(
+                f"{where}:{start}: a quote opened on this line is not closed on it (the field runs on to "
+                f"line {reader.line_num})"
+            )
+        yield start, row
+        start = reader.line_num + 1
+
+
 def _cut(text: str, limit: int = 40) -> str:
     """A field of a file as a short repr for a one-line message."""
     return repr(_clip(text, limit))
@@ -255,15 +291,7 @@ def _read_csv(fh, where: str, *, speed_unit: str | None, name: str) -> Cycle:
     speeds = array("d")
     t_col = v_col = -1
     scale = 1.0
-    rows = iter(reader)
-    while True:
-        try:
-            row = next(rows)
-        except StopIteration:
-            break
-        except csv.Error as exc:
-            raise CycleError(f"{where}:{reader.line_num}: malformed CSV ({exc})") from None
-        lineno = reader.line_num
+    for lineno, row in _rows(reader, where):
         if not row or not "".join(row).strip():
             continue
         if header is None:
@@ -310,7 +338,7 @@ def _read_csv(fh, where: str, *, speed_unit: str | None, name: str) -> Cycle:
         for col, label in ((t_col, "time"), (v_col, "speed")):
             text = row[col].strip()
             try:
-                x = float(text.replace(",", ".") if decimal_comma else text)
+                x = _number(text.replace(",", ".") if decimal_comma else text)
             except ValueError:
                 raise CycleError(f"{where}:{lineno}: {label} {_cut(text)} is not a number") from None
             if not math.isfinite(x):

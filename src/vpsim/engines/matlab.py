@@ -73,6 +73,7 @@ from ..errors import EngineFileError
 __all__ = [
     "MAX_ELEMENTS",
     "MAX_FILE_BYTES",
+    "MAX_TOKENS",
     "InlineFunction",
     "MValue",
     "evaluate_m_text",
@@ -83,6 +84,11 @@ MAX_FILE_BYTES = 5 * 1024 * 1024  # largest .m file read
 MAX_ELEMENTS = 1_000_000  # largest array made
 MAX_WORK = 100_000_000  # array elements computed by all operations of one file together
 MAX_STATEMENTS = 1_000_000  # statements executed (loop bodies count once per pass)
+# tokens (numbers, names, operators) read from one text: ADVISOR's largest data files hold a few thousand
+# (FC_SI63_emis.m 2,383; a 2-hour cycle at 1 Hz about 30,000). Reading and parsing run at about 0.1-0.2 M
+# tokens per second, so this bounds a hostile file's time to a few seconds (5 MB of them took 30-50 s and
+# 900 MB to refuse)
+MAX_TOKENS = 200_000
 MAX_NESTING = 32  # parentheses / brackets / unary operators nested in one expression
 MAX_TREE_DEPTH = 200  # depth of one expression's syntax tree (long chains such as 1+1+...+1)
 MAX_EVAL_CHARS = 10_000  # longest text accepted by eval(...)
@@ -152,6 +158,13 @@ def _value_end(tok: _Tok, in_brackets: bool) -> bool:
     return tok.kind == "op" and tok.value in ("'", ".'")
 
 
+def _too_many_tokens(line: int):
+    raise _MError(
+        line,
+        f"more than {MAX_TOKENS} tokens (numbers, names, operators); an ADVISOR data file has a few thousand",
+    )
+
+
 def _tokenize(text: str) -> list[_Tok]:
     toks: list[_Tok] = []
     stack: list[tuple[str, int]] = []  # open brackets and their lines
@@ -167,6 +180,8 @@ def _tokenize(text: str) -> list[_Tok]:
         # Inside [] and {} whitespace between two operands separates elements: [1 -2], [a' b], [x (1)].
         if starts_value and space and in_matrix() and toks and _value_end(toks[-1], True):
             toks.append(_Tok(",", ",", line))
+        if len(toks) >= MAX_TOKENS:
+            _too_many_tokens(line)
         toks.append(_Tok(kind, value, line))
         space = False
         stmt_start = False
@@ -177,6 +192,8 @@ def _tokenize(text: str) -> list[_Tok]:
             if stack and stack[-1][0] == "(":
                 raise _MError(line, f"line ends inside '(' opened on line {stack[-1][1]} (missing ')')")
             if stack:
+                if len(toks) >= MAX_TOKENS:
+                    _too_many_tokens(line)
                 toks.append(_Tok(";", ";", line))  # a newline inside [] or {} ends a row
             else:
                 toks.append(_Tok("nl", "\n", line))

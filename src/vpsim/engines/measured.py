@@ -76,6 +76,7 @@ FUEL_DENSITY_RANGE = (0.0005, 1.5)  # kg/L: compressed natural gas at 1 bar (0.0
 FUEL_LHV_RANGE = (5.0e6, 1.5e8)  # J/kg: methanol-water blends to hydrogen (120 MJ/kg)
 DISPLACEMENT_RANGE = (0.01e-3, 30.0e-3)  # m^3
 PLAUSIBLE_MIN_BSFC = (150.0, 1000.0)  # g/kWh: best brake efficiency about 55 % (large Diesel) to 8 %
+REFUSED_MIN_BSFC = 10 * PLAUSIBLE_MIN_BSFC[1]  # g/kWh (0.8 %): a unit slip (mg/s for g/s), not an engine
 FUELS: dict[str, tuple[tuple[float, float], tuple[float, float]]] = {
     # fuel: ((density kg/L), (lower heating value J/kg))
     "gasoline": ((0.69, 0.79), (40.0e6, 44.5e6)),
@@ -298,13 +299,26 @@ class MeasuredEngine:
     def check_gasoline(self, fuel_density_kg_per_l: float | None = None) -> None:
         """Refuse (EngineFileError) to stand for a gasoline engine: vpsim's model is a gasoline SI engine and
         its fuel is counted in litres of gasoline, so a Diesel, CNG, ... map, or one whose fuel density
-        differs by more than 3 % from ``fuel_density_kg_per_l``, cannot be compared with it in litres."""
+        differs by more than 3 % from ``fuel_density_kg_per_l``, cannot be compared with it in litres. Nor can
+        a map whose best BSFC is ten times any piston engine's (:data:`REFUSED_MIN_BSFC`; between that and
+        :data:`PLAUSIBLE_MIN_BSFC` it is a warning): its fuel is in other units or nonsense, and a fit or a
+        cycle's fuel from it would be a number of hundreds of digits. (Too low a BSFC, a brake efficiency
+        above any engine's, is refused when the map is read.)"""
         where = self.source or self.name
         fuel = self.fuel()
         if fuel is not None and fuel != "gasoline":
             raise EngineFileError(
                 f"{where}: fuel type {self.fuel_type!r}: vpsim compares measured maps with its gasoline SI "
                 "engine in litres of gasoline; a map of another fuel cannot be compared"
+            )
+        bsfc, _, _ = self._bsfc_nodes()
+        hi = REFUSED_MIN_BSFC
+        if bsfc.size == 0:  # (none finite: a map of 1e306 g/s overflows)
+            raise EngineFileError(f"{where}: no measured node below full load gives a finite, positive BSFC")
+        if not float(np.min(bsfc)) <= hi:
+            raise EngineFileError(
+                f"{where}: minimum BSFC {float(np.min(bsfc)):.4g} g/kWh is more than {hi:g} g/kWh, ten times "
+                "any piston engine's (fc_fuel_map not in g/s?); such a map cannot be compared or fitted"
             )
         d = fuel_density_kg_per_l
         if d is not None and abs(self.fuel_density / d - 1.0) > 0.03:
@@ -509,6 +523,13 @@ class MeasuredEngine:
             if name not in data:
                 raise EngineFileError(f"{p}: key '{name}' is missing")
             x = data[name]
+            stack = [x]
+            while stack:  # true/false are not numbers (numpy reads them as 1 and 0)
+                y = stack.pop()
+                if isinstance(y, bool):
+                    raise EngineFileError(f"{p}: '{name}' holds {json.dumps(y)}, expected numbers")
+                if isinstance(y, list):
+                    stack.extend(y)
             try:
                 a = np.array(x, dtype=float)
             except (TypeError, ValueError, OverflowError):

@@ -331,6 +331,17 @@ class TestCarList:
         ]
         if why:
             raise VpsimError(f"{self.path}: vehicle {vehicle_id} is excluded: {why[0]}")
+        rows = [  # no record was built: each of its test rows was left out (configuration 1.9, ...)
+            r["reason"]
+            for r in self.excluded_rows
+            if r["vehicle_id"] == vehicle_id
+            and (configuration is None or r["configuration"] == configuration)
+        ]
+        if rows:
+            reasons = "; ".join(dict.fromkeys(rows))
+            raise VpsimError(
+                f"{self.path}: vehicle {vehicle_id}: every test row is excluded ({printable(reasons)[:300]})"
+            )
         raise VpsimError(
             f"{self.path}: no vehicle {vehicle_id}"
             + ("" if configuration is None else f" config {configuration}")

@@ -69,7 +69,7 @@ class Cell:
 
 def check_cell(cell: Cell) -> None:
     """One line naming the cell and the field when the tables cannot describe a cell."""
-    where = f"cell {cell.name!r}"
+    where = f"cell {cell.name!r}" + (f" ({cell.source})" if cell.source else "")
     n = len(cell.soc)
     if n < 2:
         raise ParameterError(f"{where}: soc needs at least 2 points, got {n}")
@@ -286,7 +286,7 @@ def resolve_cell(name: str, base_dir: Path | None = None) -> Cell:
     if not p.is_absolute() and base_dir is not None:
         p = base_dir / p
     if p.suffix.lower() == ".m":
-        if not p.is_file():
+        if not p.exists() and not p.is_symlink():  # (a FIFO, folder or link loop: named by the reader)
             raise ParameterError(f"battery.cell = {name!r}: no such file")
         return cell_from_ess_file(p)
     raise ParameterError(
