@@ -281,7 +281,7 @@ def validate_variants(params: Parameters, names: list[str], values: np.ndarray) 
 
         a, b, c = (_column(params, names, values, f"vehicle.road_load_{k}") for k in "abc")
         top = ROAD_LOAD_CHECK_SPEED
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", over="ignore", invalid="ignore"):  # c may be subnormal: -b/2c inf
             vertex = np.where(c > 0.0, np.clip(-b / (2.0 * c), 0.0, top), 0.0)
         lowest = np.minimum.reduce([a, a + b * top + c * top * top, a + b * vertex + c * vertex * vertex])
         used = (a != 0.0) | (b != 0.0) | (c != 0.0)
