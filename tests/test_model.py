@@ -131,6 +131,25 @@ def test_batch_rows_equal_single_runs_with_the_exact_map(params):
             assert df["trace_miss_s"][k] == r.trace_miss.seconds
 
 
+def test_batch_rows_equal_single_runs_where_the_engine_brakes(params):
+    """The batch evaluates the closed-throttle line only where a demand can fall below it: with fuel cut-off
+    and accessories (engine braking, cylinders cut) its rows are still the single runs' (exact map)."""
+    cuts = [125.0, 150.0, 0.0]
+    df = run_batch(
+        "ftp75",
+        {"simulation.fuel_cutoff_speed": cuts, "engine.accessory_power": [300.0, 0.0, 500.0]},
+        mode="realistic",
+    )
+    c, p, s = resolve_inputs("ftp75", params)
+    for k, cut in enumerate(cuts):
+        d = params.with_changes(
+            simulation={"fuel_cutoff_speed": cut}, engine={"accessory_power": [300.0, 0.0, 500.0][k]}
+        )
+        exact = cached_engine_map(d.engine).with_exact()
+        r = backward.run(c, d, engine_map=exact, schedule=s, mode="realistic")
+        assert df["fuel_kg"][k] == pytest.approx(r.fuel_kg, rel=1e-12)
+
+
 # --- one definition per equation ---------------------------------------------------------------------
 
 # numbers that only occur in the equations of the model: Soltic's friction law (5) and the friction term of
@@ -782,6 +801,19 @@ def test_an_equation_compiled_another_way_is_another_stamp(monkeypatch):
     before = digest(backward.run_kernel.py_func)
     monkeypatch.setattr(en.crank_torque, "_vpsim_inline", not en.crank_torque._vpsim_inline)
     assert digest(backward.run_kernel.py_func) != before
+
+
+def test_a_kernel_compiled_with_other_options_is_another_stamp(monkeypatch):
+    """A kernel's own compiler options (``fastmath``, ``parallel``) change no bytecode either: they are part
+    of its stamp, so a kernel cached with other options is never loaded for it."""
+    from vpsim.model._compile import kernel_digest
+
+    digest = kernel_digest.__wrapped__
+    fn = backward.run_kernel.py_func
+    before = digest(fn)
+    assert "_nrt" in fn._vpsim_options
+    monkeypatch.setattr(fn, "_vpsim_options", fn._vpsim_options + "fastmath={'arcp'}")
+    assert digest(fn) != before
 
 
 def test_no_method_file_grows_past_800_lines():

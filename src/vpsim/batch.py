@@ -110,15 +110,14 @@ def run_batch(
     if not isinstance(params, Parameters):
         params = load_parameters(params)
     names, values = normalise_variants(variants, params)
-    validate_variants(params, names, values)
+    recs = _validate_variants(params, names, values)
     schedules, schedule_of_variant = _schedules(cycle, params, names, values, gears)
     if method == "backward":
-        out = _backward(cycle, params, names, values, schedules, schedule_of_variant, mode)
+        out = _backward(cycle, params, names, values, schedules, schedule_of_variant, mode, recs)
     else:
         out = _forward(cycle, params, names, values, schedules, schedule_of_variant, mode, driver, rtol)
-    df = pd.DataFrame({name: values[:, j] for j, name in enumerate(names)})
-    for col, arr in out.items():
-        df[col] = arr
+    # one construction (a column inserted at a time costs a copy of the frame's block each)
+    df = pd.DataFrame({**{name: values[:, j] for j, name in enumerate(names)}, **out})
     df.index.name = "variant"
     return df
 
@@ -231,7 +230,13 @@ def _split(name: str, params: Parameters) -> tuple[str, str, int | None]:
 
 
 def validate_variants(params: Parameters, names: list[str], values: np.ndarray) -> None:
-    """Check every variant through :meth:`Parameters.with_changes`; errors name the variant row.
+    """Check every variant through :meth:`Parameters.with_changes`; errors name the variant row (the checks:
+    :func:`_validate_variants`)."""
+    _validate_variants(params, names, values)
+
+
+def _validate_variants(params: Parameters, names: list[str], values: np.ndarray):
+    """:func:`validate_variants`; returns the variants' records where the engine check built them, else None.
 
     The per-field checks are intervals, so each column is validated at its smallest and largest value (and
     every value for whole-number fields); the checks that couple fields (A_min < A_max, a stepped gearbox's
@@ -288,15 +293,25 @@ def validate_variants(params: Parameters, names: list[str], values: np.ndarray) 
         bad = np.flatnonzero(used & (lowest < 0.0))
         if bad.size:
             _check_row(params, names, values, int(bad[0]))
+    return _validated_records(params, names, values)
+
+
+def _validated_records(params: Parameters, names: list[str], values: np.ndarray):
+    """The engine check of :func:`validate_variants` (after its per-field checks); returns the variants'
+    records (:func:`vpsim.model.record.records`) where it built them, for the run to use, else None."""
     if any(n.startswith("engine.") for n in names):
         # the engine as a whole (displacement, full-load and motoring BMEP, idle) couples its fields: checked
         # for every variant at once, the first implausible one then through with_changes for its message
         from .model.record import records
         from .params import engine_check_figures
 
+        n = values.shape[0]
         (veh, tr, eng, sim), _ = _sections(params, names, values)
-        for i in np.flatnonzero(~np.broadcast_to(engine_check_figures(records(veh, tr, eng, sim))["ok"], n)):
+        recs = records(veh, tr, eng, sim)
+        for i in np.flatnonzero(~np.broadcast_to(engine_check_figures(recs)["ok"], n)):
             _check_row(params, names, values, int(i))
+        return recs
+    return None
 
 
 def _column(params, names, values, key):
@@ -391,12 +406,13 @@ def _schedules(cycle, params, names, values, gears):
 # --- backward -----------------------------------------------------------------------------------------------
 
 
-def _backward(cycle, params, names, values, schedules, schedule_of_variant, mode):
+def _backward(cycle, params, names, values, schedules, schedule_of_variant, mode, recs=None):
     from .methods import backward
     from .model.record import records
 
     (veh, tr, eng, sim), ratios = _sections(params, names, values)
-    recs = records(veh, tr, eng, sim)
+    if recs is None:  # (built by the engine check where an engine field varies)
+        recs = records(veh, tr, eng, sim)
     n_var = values.shape[0]
     if recs.size != n_var:
         recs = np.ascontiguousarray(np.broadcast_to(recs, (n_var,))).view(np.recarray)

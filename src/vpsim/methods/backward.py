@@ -41,7 +41,7 @@ from ..model.maps import (
     GeneratedEngineMap,
     cached_engine_map,
 )
-from ..model.record import kernel_records
+from ..model.record import kernel_records, memo
 from ..model.record import ratios as total_ratios
 from ..model.tables import gear_index
 from ..result import EnergyBalance, Result, TraceMiss, limits_of
@@ -63,11 +63,14 @@ MISS_TOLERANCE_NM = 1e-9  # a shortfall below this is rounding, not a trace miss
 
 @inline
 def _point(
-    time_s,
+    dt_s,
     speed,
+    accel,
+    speed18,
     k,
     g,
     ratios,
+    f18,
     c,
     extended,
     fuel_kind,
@@ -82,11 +85,14 @@ def _point(
     inv_mt,
 ):
     """The operating point interval k imposes in gear index g, limited by the max-torque line; its intake
-    pressure and (``fuel_kind`` exact or table) fuel flow. Returns the values of one row (R_V .. R_MDOT)."""
+    pressure and (``fuel_kind`` exact or table) fuel flow. Returns the values of one row (R_V .. R_MDOT).
+
+    ``dt_s``, ``speed``, ``accel``, ``speed18``: the cycle's intervals (:func:`cycle_intervals`); ``f18``:
+    :func:`vpsim.model.engine.speed_power` of gear g's engine speed per unit of vehicle speed, so that the
+    engaged engine's c_m^1.8 is ``f18 * speed18[k]`` (no power per interval)."""
     i = ratios[g]
-    dt = time_s[k + 1] - time_s[k]
-    v = 0.5 * (speed[k + 1] + speed[k])
-    a = (speed[k + 1] - speed[k]) / dt
+    v = speed[k]
+    a = accel[k]
     t_closed = 0.0
     if extended:
         t_closed = tb.interp_at(vh.engine_speed(v, i, c), line_speed, line_min, inv_line)
@@ -97,7 +103,9 @@ def _point(
     short = t_req - t_max if t_req > t_max else 0.0
     t_cr = t_req - short
     t_fired = t_cr if fired >= 1.0 else t_closed  # cylinders cut: the throttle is closed (manifold, fuel)
-    cm18 = en.speed_power(w, c)  # the friction law's power of the speed, once per interval (5)
+    # the friction law's power of the speed (5): the gear's factor times the cycle's |v|^1.8 where the engine
+    # turns with the wheels, else at its own speed (idle, a converter's pump)
+    cm18 = f18 * speed18[k] if w == w_wheel else en.speed_power(w, c)
     p = en.intake_pressure_for_torque(t_fired, w, c, cm18)
     if fuel_kind == FUEL_EXACT:
         mdot = en.fuel_flow(p, w, c)
@@ -131,19 +139,22 @@ def _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fi
 
 
 @inline
-def _kahan(acc, comp, q, x):
-    """acc[q] += x with Kahan's compensation in comp[q]."""
-    y = x - comp[q]
-    t = acc[q] + y
-    comp[q] = (t - acc[q]) - y
-    acc[q] = t
+def _kahan(total, comp, x):
+    """(total + x, its new compensation) with Kahan's compensation ``comp``."""
+    y = x - comp
+    t = total + y
+    return t, (t - total) - y
+
+
+# the running sums of a pass: the N_ACC sums of account()'s results, then the Kahan compensations of fuel,
+# distance and miss seconds, then the speed deficit of the current contiguous miss (kept in registers: as an
+# array the sums went through memory every interval)
+ZERO_SUMS = (0.0,) * (N_ACC + 4)
 
 
 @inline
 def _book(
-    acc,
-    comp,
-    cur,
+    sums,
     dt,
     i,
     v,
@@ -163,10 +174,14 @@ def _book(
     realistic,
     cm18,
 ):
-    """Add interval's fuel, distance, energy terms and trace miss to the sums; returns the speed deficit of
-    the current contiguous miss (``cur``). ``cm18``: :func:`vpsim.model.engine.speed_power` at w."""
-    _kahan(acc, comp, A_FUEL, rules.fuel_used(mdot, fired, c) * dt)
-    _kahan(acc, comp, A_DIST, v * dt)
+    """The sums (:data:`ZERO_SUMS` to start) with the interval's fuel, distance, energy terms and trace miss
+    added. ``cm18``: :func:`vpsim.model.engine.speed_power` at w."""
+    # fmt: off
+    (e0, e1, e2, e3, e4, e5, e6, e7, e8, e9, e10, e11,  # rules.ENERGY_TERMS, then account()'s, then these
+     fuel, dist, miss, max_short, deficit, fuel_c, dist_c, miss_c, cur) = sums  # (a slice: slower)
+    # fmt: on
+    fuel, fuel_c = _kahan(fuel, fuel_c, rules.fuel_used(mdot, fired, c) * dt)
+    dist, dist_c = _kahan(dist, dist_c, v * dt)
     pw = rules.powers(
         p,
         w,
@@ -186,26 +201,36 @@ def _book(
     )
     if with_engine:  # the engine's terms need the model's physics at the operating point (plain sums: their
         # rounding, ~1e-13 of the balance, is far below what the balance is checked to)
-        acc[0] += pw[0] * dt
-        acc[1] += pw[1] * dt
-        acc[2] += pw[2] * dt
-        acc[3] += pw[3] * dt
-        acc[4] += pw[4] * dt
-        acc[9] += pw[9] * dt
-        acc[10] += pw[10] * dt
-        acc[11] += pw[11] * dt
-    acc[5] += pw[5] * dt
-    acc[6] += pw[6] * dt
-    acc[7] += pw[7] * dt
-    acc[8] += pw[8] * dt
-    if short > acc[A_MAX_SHORT]:
-        acc[A_MAX_SHORT] = short
+        e0 += pw[0] * dt
+        e1 += pw[1] * dt
+        e2 += pw[2] * dt
+        e3 += pw[3] * dt
+        e4 += pw[4] * dt
+        e9 += pw[9] * dt
+        e10 += pw[10] * dt
+        e11 += pw[11] * dt
+    e5 += pw[5] * dt
+    e6 += pw[6] * dt
+    e7 += pw[7] * dt
+    e8 += pw[8] * dt
+    if short > max_short:
+        max_short = short
     cur = _deficit_after(short, dt, i, cur, c)
     if short > MISS_TOLERANCE_NM:
-        _kahan(acc, comp, A_MISS_S, dt)
-        if cur > acc[A_DEFICIT]:
-            acc[A_DEFICIT] = cur
-    return cur
+        miss, miss_c = _kahan(miss, miss_c, dt)
+        if cur > deficit:
+            deficit = cur
+    # fmt: off
+    return (e0, e1, e2, e3, e4, e5, e6, e7, e8, e9, e10, e11,
+            fuel, dist, miss, max_short, deficit, fuel_c, dist_c, miss_c, cur)
+    # fmt: on
+
+
+@inline
+def _store_sums(acc, sums):
+    """account()'s results (the first N_ACC of the sums) into ``acc``."""
+    for q in range(N_ACC):
+        acc[q] = sums[q]
 
 
 @inline
@@ -217,11 +242,14 @@ def _deficit_after(short, dt, i, cur, c):
 
 
 # _nrt=False: no reference counting (each call of an equation with array arguments would otherwise pay for
-# atomic increments and decrements); the kernels allocate nothing, their scratch space ``comp`` comes in
+# atomic increments and decrements); the kernels allocate nothing
 @kernel(_nrt=False)
 def run_kernel(
     time_s,
+    dt_s,
     speed,
+    accel,
+    speed18,
     sched_t,
     sched_gear,
     ratios,
@@ -238,31 +266,37 @@ def run_kernel(
     gear,
     rows,
     acc,
-    comp,
 ):
     """The BQM over the cycle's intervals: operating points (and their fuel flow, unless ``fuel_kind`` is
     FUEL_GIVEN: then only ``rows`` are filled, for :func:`account` after the map gave the fuel), and the
-    sums of :func:`account` in the same pass. ``rows`` may have no columns (no series wanted)."""
+    sums of :func:`account` in the same pass. ``rows`` may have no columns (no series wanted). ``time_s``:
+    the cycle's samples; ``dt_s``, ``speed``, ``accel``, ``speed18``: its intervals (:func:`cycle_intervals`).
+    """
     c = recs[0]
     inv_line = tb.inverse_spacing(line_speed)
     inv_ms = tb.inverse_spacing(map_speed)
     inv_mt = tb.inverse_spacing(map_torque)
-    for q in range(N_ACC):
-        acc[q] = 0.0
-        comp[q] = 0.0
     keep = rows.shape[1] == gear.size
     book = fuel_kind != FUEL_GIVEN
     j = 0
-    cur = 0.0
+    sums = ZERO_SUMS
+    g_f18 = -1  # the gear whose factor f18 is at hand (gears change every few seconds, intervals every one)
+    f18 = 0.0
     for k in range(gear.size):
         g, j = gear_index(time_s, k, sched_t, sched_gear, j)
         gear[k] = g + 1
+        if g != g_f18:
+            f18 = en.speed_power(vh.engine_speed(1.0, ratios[g], c), c)
+            g_f18 = g
         v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot, cm18 = _point(
-            time_s,
+            dt_s,
             speed,
+            accel,
+            speed18,
             k,
             g,
             ratios,
+            f18,
             c,
             extended,
             fuel_kind,
@@ -279,11 +313,9 @@ def run_kernel(
         if keep:
             _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot, c)
         if book:
-            cur = _book(
-                acc,
-                comp,
-                cur,
-                time_s[k + 1] - time_s[k],
+            sums = _book(
+                sums,
+                dt_s[k],
                 ratios[g],
                 v,
                 a,
@@ -302,23 +334,19 @@ def run_kernel(
                 extended,
                 cm18,
             )
+    _store_sums(acc, sums)
 
 
 @kernel(_nrt=False)
-def account(time_s, rows, ratios, gear, recs, with_engine, extended, acc, comp):
+def account(time_s, rows, ratios, gear, recs, with_engine, extended, acc):
     """Fuel and distance (compensated sums over the intervals), the energy terms and the trace miss: seconds
     beyond the max-torque line, the largest shortfall and the largest speed deficit accumulated over a
     contiguous miss, from the rows of :func:`run_kernel` (with the fuel flow of a measured map filled in)."""
     c = recs[0]
-    for q in range(N_ACC):
-        acc[q] = 0.0
-        comp[q] = 0.0
-    cur = 0.0
+    sums = ZERO_SUMS
     for k in range(gear.size):
-        cur = _book(
-            acc,
-            comp,
-            cur,
+        sums = _book(
+            sums,
             time_s[k + 1] - time_s[k],
             ratios[gear[k] - 1],
             rows[R_V, k],
@@ -338,6 +366,27 @@ def account(time_s, rows, ratios, gear, recs, with_engine, extended, acc, comp):
             extended,
             en.speed_power(rows[R_W, k], c),
         )
+    _store_sums(acc, sums)
+
+
+def cycle_intervals(cycle) -> tuple:
+    """The cycle's intervals as the backward method takes them (piecewise-linear speed: constant
+    acceleration, mean speed): (dt, mean speed, acceleration, |mean speed|^1.8), read-only arrays computed
+    once per cycle and kept on it (a cycle is immutable), like a gear schedule prepared for it: every run on
+    the cycle, of any design, shares them. |v|^1.8 is :func:`vpsim.model.engine.speed_power_scaled`: the
+    engaged engine's c_m^1.8 is a factor per gear times it."""
+    return memo(cycle, "backward_intervals", _intervals)
+
+
+def _intervals(cycle) -> tuple:
+    t, vs = cycle.time_s, cycle.speed_mps
+    dt = t[1:] - t[:-1]
+    v = 0.5 * (vs[1:] + vs[:-1])
+    a = (vs[1:] - vs[:-1]) / dt
+    out = (dt, v, a, en.speed_power_scaled(v))
+    for x in out:
+        x.setflags(write=False)
+    return out
 
 
 def _map_arrays(engine_map, params):
@@ -395,15 +444,18 @@ def run(
     ratios = total_ratios(params.transmission)
     n = cycle.time_s.size - 1
 
-    def passes(time_s, speed, keep):
+    def passes(time_s, intervals, keep):
+        dt_s, speed, accel, speed18 = intervals
         n_k = time_s.size - 1
         gear = np.empty(n_k, dtype=np.int64)
         rows = np.empty((N_ROWS, n_k if keep or kind == FUEL_GIVEN else 0))
         acc = np.empty(N_ACC)
-        comp = np.empty(N_ACC)
         run_kernel(
             time_s,
+            dt_s,
             speed,
+            accel,
+            speed18,
             schedule.time_s,
             schedule.gear,
             ratios,
@@ -420,7 +472,6 @@ def run(
             gear,
             rows,
             acc,
-            comp,
         )
         if kind == FUEL_GIVEN:
             flow = np.asarray(engine_map.fuel_flow(rows[R_TCR], rows[R_W]), dtype=float)
@@ -428,13 +479,14 @@ def run(
                 rows[R_CLUTCH] == rules.CLUTCH_OPEN, params.simulation.idle_fuel_flow, flow
             )
             rows[R_MDOT] = np.where(rows[R_FIRED] != 0.0, rows[R_MDOT], 0.0)  # fuel cut-off
-            account(time_s, rows, ratios, gear, recs, generated, extended, acc, np.empty(N_ACC))
+            account(time_s, rows, ratios, gear, recs, generated, extended, acc)
         return gear, rows, acc
 
+    intervals = cycle_intervals(cycle)
     if not run_kernel.overloads:  # compile (or load) outside the timing
-        passes(cycle.time_s[:2], cycle.speed_mps[:2], keep_series)
+        passes(cycle.time_s[:2], tuple(x[:1] for x in intervals), keep_series)
     t0 = time.process_time()
-    gear, rows, acc = passes(cycle.time_s, cycle.speed_mps, keep_series or _rows)
+    gear, rows, acc = passes(cycle.time_s, intervals, keep_series or _rows)
     cpu = time.process_time() - t0
     sums = acc.tolist()
     trace = TraceMiss(
@@ -520,13 +572,14 @@ def _sample_series(cycle, params, rows, gear, generated) -> dict:
     """The series at the cycle's samples, the time base of every method (:func:`sample_rows`)."""
     out = np.empty((N_SAMPLE_ROWS, gear.size + 1))
     sample_rows(rows, gear, kernel_records(params), generated, out)
+    gear_s = out[S_GEAR].astype(np.int64)
     return {
         "time_s": cycle.time_s,
         "reference_speed_mps": cycle.speed_mps,
         "speed_mps": cycle.speed_mps,
         "accel_mps2": out[S_ACC],
-        "gear": out[S_GEAR].astype(np.int64),
-        "gearbox_ratio": gearbox_ratio_series(params, out[S_GEAR]),
+        "gear": gear_s,
+        "gearbox_ratio": gearbox_ratio_series(params, gear_s),
         "engine_speed_radps": out[S_W],
         "crank_torque_nm": out[S_TCR],
         "engine_torque_nm": out[S_TE],
@@ -599,7 +652,8 @@ def _lazy_line(w, full, line_w, inv, cache, c):
 @equation
 def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, out):
     """One variant: the operating points of :func:`run_kernel` with the exact BQM, each line of the
-    variant's own engine evaluated lazily (a Newton solve per node actually needed).
+    variant's own engine evaluated lazily (a Newton solve per node actually needed), and only where it can
+    matter (the max-torque line as below; the closed-throttle line: see ``p_hi``).
 
     The max-torque line matters only where the demanded intake pressure comes near the wide-open-throttle
     pressure p_max(w_e), which decreases with w_e: below p_max at a node above every speed of the run, less
@@ -627,6 +681,20 @@ def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, out):
         p_screen = -math.inf  # the full-load pressure is not monotone (spool) or power-capped: no screening
     cache_max = np.full(n_line, np.nan)
     cache_min = np.full(n_line if extended else 1, np.nan)
+    # The closed-throttle line matters only where the engaged engine is asked for less than it (engine
+    # braking, fuel cut-off: rules.engine_braking); elsewhere its value changes nothing. It is the FQM at
+    # A_min, T_cr(p_min(w_e), w_e), with p_min falling as w_e rises (the cylinders draw more), T_cr rising
+    # with p_i and T_cr(p, w_e) falling with w_e (friction): on the line's nodes from below the idle speed up
+    # (an engaged engine turns at least that fast) it stays below T_cr(p_min(node below idle), w_e) plus the
+    # friction rise over two node intervals at the run's top speed. A demand above that needs no node.
+    p_hi = math.inf
+    closed_margin = 0.0
+    if extended and c.torque_slope > 0.0:
+        p_hi, _ = en.steady_pressure(
+            c.min_throttle_area, line_w[max(int(math.floor(c.idle_speed / step)) - 1, 0)], c
+        )
+        d_t = en.crank_torque(0.0, max(w_s - 2.0 * step, 0.0), c) - en.crank_torque(0.0, w_s, c)
+        closed_margin = abs(d_t) * (1.0 + 1e-9) + 1e-6
     fuel = 0.0
     miss_s = 0.0
     max_short = 0.0
@@ -639,12 +707,19 @@ def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, out):
         gear_cm18[g] = en.speed_power(vh.engine_speed(1.0, rat[g], c), c)
     for k in range(gear.size):
         i = rat[gear[k]]
-        t_closed = 0.0
-        if extended:
-            t_closed = _lazy_line(vh.engine_speed(v[k], i, c), False, line_w, inv, cache_min, c)
-        w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(
-            v[k], a[k], i, gear[k] + 1, t_closed, extended, c
-        )
+        t_closed = -math.inf  # first without the closed-throttle line (p_hi), then with it if needed
+        for with_line in range(2):  # (one call site of the IR-inlined operating point)
+            w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(
+                v[k], a[k], i, gear[k] + 1, t_closed, extended, c
+            )
+            if (
+                with_line
+                or not extended
+                or clutch != rules.CLUTCH_ENGAGED
+                or t_req >= en.crank_torque(p_hi, w_wheel, c, gear_cm18[gear[k]] * v18[k]) + closed_margin
+            ):
+                break
+            t_closed = _lazy_line(w_wheel, False, line_w, inv, cache_min, c)
         cm18 = gear_cm18[gear[k]] * v18[k] if w == w_wheel else en.speed_power(w, c)
         p = en.intake_pressure_for_torque(t_req if fired >= 1.0 else t_closed, w, c, cm18)
         short = 0.0
@@ -667,8 +742,9 @@ def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, out):
 
 
 @kernel(parallel=True)
-def _variants(recs, ratios, schedule_of_variant, gears, v_top_gear, dt, v, a, extended, out):
-    v18 = np.abs(v) ** 1.8  # c_m^1.8 = (S i / (pi r))^1.8 v^1.8: the speed's part, once for all variants
+def _variants(recs, ratios, schedule_of_variant, gears, v_top_gear, dt, v, a, v18, extended, out):
+    """:func:`_variant` for each variant, parallel over them. ``v18``: the speed's part of c_m^1.8 (cycle
+    intervals'), shared by all variants."""
     for m in prange(recs.size):
         s = schedule_of_variant[m]
         _variant(recs[m], ratios[m], gears[s], dt, v, a, v18, v_top_gear[s], extended, out[m])
@@ -682,10 +758,7 @@ def run_variants(cycle, recs, ratios, gears, schedule_of_variant, mode: str) -> 
     ``gears`` each variant follows. Returns (n_var, N_BATCH_OUT): fuel (kg), trace-miss seconds, largest
     shortfall (N m), largest speed deficit (m/s).
     """
-    t, vs = cycle.time_s, cycle.speed_mps
-    dt = np.diff(t)
-    v = 0.5 * (vs[1:] + vs[:-1])
-    a = np.diff(vs) / dt
+    dt, v, a, v18 = cycle_intervals(cycle)
     gear_idx = np.ascontiguousarray(gears[:, :-1] - 1, dtype=np.int64)
     v_top_gear = np.zeros((gear_idx.shape[0], ratios.shape[1]))  # fastest interval driven in each gear
     for s in range(gear_idx.shape[0]):
@@ -700,6 +773,7 @@ def run_variants(cycle, recs, ratios, gears, schedule_of_variant, mode: str) -> 
         dt,
         v,
         a,
+        v18,
         rules.canonical_mode(mode) == "realistic",
         out,
     )

@@ -106,6 +106,8 @@ def _closure(fn) -> list[tuple[str, str]]:
         # how it is compiled into its callers is part of what they compile from: an equation turned into an
         # IR-inlined one (or back) leaves its bytecode as it was
         how = f"|inline={getattr(f, '_vpsim_inline', None)}"
+        if hasattr(f, "_vpsim_options"):  # a kernel's own compiler options (fastmath, parallel, ...): not in
+            how += f"|options={f._vpsim_options}"  # its bytecode either
         parts.append((f"{f.__module__}.{f.__qualname__}", _source(f) + how))
         names = _code_names(f.__code__)
         values = [(n, f.__globals__[n]) for n in sorted(names) if n in f.__globals__]
@@ -196,4 +198,6 @@ def kernel(fn=None, **options):
     """``numba.njit`` with vpsim's options (on-disk cache, GIL released, NumPy's float error model)."""
     if fn is None:
         return functools.partial(kernel, **options)
+    if options:  # part of the kernel's cache stamp (:func:`kernel_digest`)
+        fn._vpsim_options = repr(sorted((k, repr(v)) for k, v in options.items()))
     return numba.njit(**{**_OPTIONS, **options})(fn)

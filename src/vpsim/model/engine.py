@@ -192,11 +192,20 @@ def pmep(p_i, c):
 
 
 @equation
+def speed_power_scaled(x):
+    """|x|^1.8, the power of Soltic's law (5): c_m^1.8 is homogeneous in the speed, so where the engine
+    speed is a factor times a vehicle speed (w_e = i v / r, engaged) c_m^1.8 is the factor's
+    :func:`speed_power` times this of v. A caller with many speeds and few factors (the backward method:
+    one factor per gear, the cycle's speeds shared by every run on it) takes the power once per speed."""
+    return abs(x) ** 1.8
+
+
+@equation
 def speed_power(w_e, c):
     """c_m^1.8 of (5), c_m = S |w_e| / pi: the one power of the speed in Soltic's law. The equations below
     that need it take it as ``cm18`` where a compiled caller has it already at this speed (one power per
     evaluation of the forward method's right side instead of three); left out, they compute it."""
-    return abs(c.stroke * w_e / math.pi) ** 1.8
+    return speed_power_scaled(c.stroke * w_e / math.pi)
 
 
 @equation
@@ -702,8 +711,12 @@ def _flat(*arrays, recs):
     # writable copies always: a read-only input would be another signature, compiled again
     flat = [np.array(np.broadcast_to(np.asarray(a, dtype=float), shape)).ravel() for a in arrays]
     if recs.size > 1:
-        recs = np.array(np.broadcast_to(recs, shape)).ravel()
-    return shape, flat, np.array(recs).view(np.ndarray)
+        recs = (recs if recs.shape == shape else np.broadcast_to(recs, shape)).ravel()
+    if not (recs.flags.writeable and recs.flags.c_contiguous):
+        # (a record array of many variants as it is: copying its dozens of fields per variant costs more
+        # than the loop itself)
+        recs = np.array(recs)
+    return shape, flat, recs.view(np.ndarray)
 
 
 def psi_array(p_r, c):

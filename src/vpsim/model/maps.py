@@ -21,7 +21,7 @@ import numpy as np
 
 from . import engine as en
 from . import tables
-from .record import engine_record
+from .record import engine_record, memo
 
 
 @runtime_checkable
@@ -194,7 +194,12 @@ def generate_engine_map(
     return GeneratedEngineMap(eng, speed, torque, table, w_line, t_line, t_closed, exact)
 
 
-@functools.lru_cache(maxsize=64)
 def cached_engine_map(eng) -> GeneratedEngineMap:
-    """:func:`generate_engine_map` with default resolution, cached per (immutable) engine parameter set."""
+    """:func:`generate_engine_map` with default resolution, cached per (immutable) engine parameter set: kept
+    on the engine object (an attribute look-up for every run of it), and shared by equal engines."""
+    return memo(eng, "engine_map", _engine_map_of_equal)
+
+
+@functools.lru_cache(maxsize=64)
+def _engine_map_of_equal(eng) -> GeneratedEngineMap:
     return generate_engine_map(eng)
