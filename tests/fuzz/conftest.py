@@ -17,21 +17,19 @@ settings.register_profile(
 )
 settings.load_profile("vpsim-fuzz")
 
-# the whole fuzz suite, on a 2-core CI machine (it takes about 45 s there)
-FUZZ_BUDGET_S = float(os.environ.get("VPSIM_FUZZ_BUDGET_S", "180"))
+# the fuzz suite's own time, printed at the end of a run (about 45-50 s on two quiet cores). It is reported,
+# not asserted: a timed test fails on a loaded machine, not on slow code (speed lives in the benchmarks)
 _spent: list[float] = []
 
 
 @pytest.fixture(autouse=True)
 def _fuzz_clock():
-    """Time each fuzz test; the session's teardown below checks the suite kept its budget."""
+    """Time each fuzz test, for the summary line below."""
     t0 = time.perf_counter()
     yield
     _spent.append(time.perf_counter() - t0)
 
 
-@pytest.fixture(scope="session", autouse=True)
-def _fuzz_budget():
-    yield
-    total = sum(_spent)
-    assert total < FUZZ_BUDGET_S, f"the fuzz suite took {total:.0f} s, over its {FUZZ_BUDGET_S:.0f} s budget"
+def pytest_terminal_summary(terminalreporter):
+    if _spent:
+        terminalreporter.write_line(f"fuzz suite: {len(_spent)} tests in {sum(_spent):.0f} s")
