@@ -96,9 +96,9 @@ def test_energy_balance_closes_with_the_engine_both_machines_and_the_battery(run
 
 def test_dynamic_programming_bounds_ecms_and_the_rules(runs):
     """Charge-sustaining fuel: DP (the optimum on its grid) <= ECMS and DP <= rules on every cycle where the
-    rules follow the trace as well as the DP. ECMS <= rules holds on UDDS; on HWFET and US06 the ECMS (its
-    equivalence factor the P2's) pulses the engine and cycles the battery more than the demand-following
-    rules, 4.1-4.3 % above them (the gap is reported, not hidden)."""
+    rules follow the trace as well as the DP. ECMS <= rules holds on UDDS (-6.6 %); on HWFET and US06 the ECMS
+    (its equivalence factor the P2's) still pulses the engine and cycles the battery more than the
+    demand-following rules, 2.7 % and 3.4 % above them (the gap is reported, not hidden; docs/model.md)."""
     for cycle in ("udds", "hwfet", "us06"):
         cs = {m: runs[cycle, m].electric["fuel_l_per_100km_cs"] for m in EMS}
         assert cs["dp"] <= cs["ecms"], (cycle, cs)
@@ -106,6 +106,31 @@ def test_dynamic_programming_bounds_ecms_and_the_rules(runs):
             assert cs["dp"] <= cs["rule"], (cycle, cs)
     udds = {m: runs["udds", m].electric["fuel_l_per_100km_cs"] for m in EMS}
     assert udds["ecms"] <= udds["rule"], udds
+
+
+def test_ecms_prices_the_charge_the_pack_keeps():
+    """The ECMS's battery term is the stored energy's change as the state of charge counts it (B3): charging
+    at 40 A with U_oc = 200 V for 1 s at s = 2.5, the pack (eta_c = 0.95) keeps 0.95 x 40 A s, so the term is
+    -2.5 x 0.95 x 200 x 40 / q_hv by hand; discharging, the whole U_oc I. Priced at U_oc I when charging, the
+    ECMS was credited with the charge the pack does not keep and cycled the pack."""
+    from vpsim.model import battery as bt
+    from vpsim.model import electric as el
+    from vpsim.model import hybrid as hy
+    from vpsim.model.record import kernel_records
+
+    c = kernel_records(SPLIT)[0]
+    e = el.electric_records(SPLIT)[0]
+    h = hy.hybrid_record(SPLIT)
+    assert e.coulombic_efficiency == pytest.approx(0.95)
+    q = SPLIT.engine.fuel_heating_value
+    for current, kept in ((-40.0, 0.95), (40.0, 1.0)):
+        point = [0.0] * 25
+        point[0], point[8], point[9] = 100.0, current, 200.0  # machine speed, battery current, U_oc
+        cost = hy.ecms_cost(tuple(point), 1.0, False, 2.5, c, e, h)
+        assert cost == pytest.approx(2.5 * kept * 200.0 * current / q, rel=1e-12)
+        # the same energy as the state of charge's change times the charge it holds at U_oc
+        dsoc = bt.soc_rate(current, e.capacity_as, e.coulombic_efficiency) * 1.0
+        assert cost == pytest.approx(-2.5 * dsoc * e.capacity_as * 200.0 / q, rel=1e-12)
 
 
 def test_dp_ends_charge_sustaining(runs):
@@ -157,9 +182,9 @@ def test_trace_misses_are_counted(runs):
 @pytest.mark.parametrize("cycle", ["udds", "hwfet", "us06"])
 def test_inverse_method_near_backward(runs, cycle):
     """The smoothing driver's trajectory with the same management and point: the rules within 3 % of the
-    backward method (they achieve 2.1 %), the ECMS within 5 % (it achieves 4.0 % on UDDS: its on/off decisions
-    move with the smoothed trajectory)."""
-    for ems, tol in (("rule", 0.03), ("ecms", 0.05)):
+    backward method (they achieve 2.1 %), the ECMS within 3.5 % (it achieves 1.9 % UDDS, 0.7 % HWFET, 3.05 %
+    US06: its on/off decisions move with the smoothed trajectory)."""
+    for ems, tol in (("rule", 0.03), ("ecms", 0.035)):
         inv = vpsim.simulate(cycle, "inverse", SPLIT, ems=ems)
         back = runs[cycle, ems].electric["fuel_l_per_100km_cs"]
         assert inv.electric["fuel_l_per_100km_cs"] == pytest.approx(back, rel=tol)

@@ -98,7 +98,7 @@ def dp_kernel(
                 pt = hy.p2_choice(interval, battery, on, te, c, e, m, tabs)
                 nxt = soc_grid[i] + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt[k]
                 s_next = 1 if u > 0 else 0
-                base = hy.ecms_cost(pt, dt[k], False, 0.0, c, h) + hy.cost_to_go(
+                base = hy.ecms_cost(pt, dt[k], False, 0.0, c, e, h) + hy.cost_to_go(
                     jcost[k + 1], s_next, nxt, soc0, dsoc, n
                 )
                 c0 = base + (h.engine_start_fuel if u > 0 else 0.0)  # from off: a start
@@ -174,11 +174,11 @@ def causal_kernel(
                 start = u > 0 and on == 0.0
                 if ems == hy.EMS_DP:
                     nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
-                    cost = hy.ecms_cost(pt, dt, start, 0.0, c, h) + hy.cost_to_go(
+                    cost = hy.ecms_cost(pt, dt, start, 0.0, c, e, h) + hy.cost_to_go(
                         jcost[k + 1], 1 if u > 0 else 0, nxt, soc_grid[0], soc_grid[1] - soc_grid[0], n_grid
                     )
                 else:
-                    cost = hy.ecms_cost(pt, dt, start, s_factor, c, h)
+                    cost = hy.ecms_cost(pt, dt, start, s_factor, c, e, h)
                 if cost < best:
                     best = cost
                     choice_on = o

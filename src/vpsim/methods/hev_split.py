@@ -103,7 +103,7 @@ def dp_kernel(v, a, dt, ratio, c, e, m, g, s, tabs, h, levels, lines, best, cap,
                 p_e = sp.engine_power_choice(u, levels, p_follow, p_high)
                 pt = sp.split_choice(interval, battery, on, p_e, c, e, m, g, s, tabs, eng, opt)
                 nxt = soc_grid[i] + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt[k]
-                base = hy.ecms_cost(pt, dt[k], False, 0.0, c, h) + hy.cost_to_go(
+                base = hy.ecms_cost(pt, dt[k], False, 0.0, c, e, h) + hy.cost_to_go(
                     jcost[k + 1], 1 if u > 0 else 0, nxt, soc0, dsoc, n
                 )
                 if pt[sp.P_FEASIBLE] <= 0.0:
@@ -196,11 +196,11 @@ def causal_kernel(
                 start = u > 0 and on == 0.0
                 if ems == hy.EMS_DP:
                     nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
-                    cost = hy.ecms_cost(pt, dt, start, 0.0, c, h) + hy.cost_to_go(
+                    cost = hy.ecms_cost(pt, dt, start, 0.0, c, e, h) + hy.cost_to_go(
                         jcost[k + 1], 1 if u > 0 else 0, nxt, soc_grid[0], soc_grid[1] - soc_grid[0], n_grid
                     )
                 else:
-                    cost = hy.ecms_cost(pt, dt, start, s_factor, c, h)
+                    cost = hy.ecms_cost(pt, dt, start, s_factor, c, e, h)
                 if cost < cheapest:
                     cheapest = cost
                     choice_on = o
