@@ -72,3 +72,35 @@ def test_real_hybrids_are_read(shared_dir):
     ioniq = hev.hev_parameters(recs["AE-U0G6GD048F#0"])
     assert ioniq.machine.rated_power == pytest.approx(32e3)  # the preset's test weight: its 32 kW
     assert ioniq.transmission.gearbox_ratios.__len__() == 6
+
+
+def test_from_epa_writes_a_hybrid_that_simulates_against_its_record(shared_dir, tmp_path, capsys):
+    from vpsim.cli.main import main
+    from vpsim.params import load_parameters
+
+    lst = _real_list(shared_dir)
+    for vid, layout_ in (("20-ZE1H", "hev_split"), ("TM-U1G6HA025A", "hev_p2")):
+        car = tmp_path / f"{vid}.toml"
+        assert main(["vehicle", "from-epa", str(lst), "--id", vid, "--config", "0", "--out", str(car)]) == 0
+        p = load_parameters(car)
+        assert p.powertrain.type == layout_
+        rec = read_test_car_list(lst).find(vid, 0)
+        want = hev.hev_parameters(rec).flat()
+        got = p.flat()
+        for sec, fields_ in hev.TOML_FIELDS:
+            for f in fields_:
+                k = f"{sec}.{f}"
+                if k in want and want[k] is not None and not (sec == "split" and layout_ != "hev_split"):
+                    w = want[k]  # (the file holds 6 significant digits)
+                    exact = isinstance(w, str | int) and not isinstance(w, float)
+                    assert got[k] == (w if exact else pytest.approx(w, rel=1e-5)), k
+        capsys.readouterr()
+        assert main(["simulate", "--vehicle", str(car), "--cycle", "udds", "--json"]) == 0
+        import json
+
+        s = json.loads(capsys.readouterr().out)
+        assert s["measured_mpg"] == pytest.approx(rec.measured_mpg["udds_hot"], rel=1e-6)
+        from vpsim.units import mpg_from_l_per_100km
+
+        cs = mpg_from_l_per_100km(s["fuel_l_per_100km_cs"])
+        assert s["measured_error_pct"] == pytest.approx(100 * (cs / s["measured_mpg"] - 1), rel=1e-9)

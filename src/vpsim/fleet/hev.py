@@ -452,3 +452,100 @@ __all__ = [
     "hot_udds",
     "layout",
 ]
+
+
+# --- the vehicle file ---------------------------------------------------------------------------------------
+
+TOML_FIELDS = (
+    (
+        "vehicle",
+        ("mass", "frontal_area", "drag_coefficient", "rolling_resistance", "air_density", "wheel_radius")
+        + ("road_load_a", "road_load_b", "road_load_c"),
+    ),
+    ("transmission", ("efficiency", "gearbox_ratios", "final_drive")),
+    (
+        "engine",
+        ("bore", "stroke", "cylinders", "inertia", "intake_manifold_volume", "max_throttle_area")
+        + ("min_throttle_area", "map_speed_range", "fuel_heating_value", "thermal_efficiency", "rated_power")
+        + ("boost_pressure", "boost_enrichment", "accessory_power"),
+    ),
+    ("machine", ("rated_power", "base_speed", "max_speed", "kind", "inertia", "loss_scale")),
+    ("battery", ("cell", "cells_in_series", "cells_in_parallel", "soc_initial", "soc_min", "soc_max")),
+    ("electric", ("accessory_power",)),
+    ("simulation", ("fuel_density",)),
+    ("hybrid", ("ems", "soc_target")),
+    (
+        "split",
+        ("sun_teeth", "ring_teeth", "mg2_ratio", "engine_max_speed", "generator_rated_power")
+        + ("generator_base_speed", "generator_max_speed", "generator_inertia"),
+    ),
+)
+# the measured tests under the names ``vpsim simulate --cycle`` gives the cycle the model runs
+TOML_TEST_NAME = {"udds_hot": "udds", "hwy": "hwy", "us06": "us06"}
+
+
+def hev_vehicle_toml(rec: HEVRecord, params, source: str = "", technology_note: str = "") -> str:
+    """An editable hybrid TOML (``vpsim simulate --vehicle``, type ``hev_split`` or ``hev_p2``) with the
+    record block; ``[record.measured_mpg]`` holds ``udds`` (the hot UDDS, FTP bags 3 + 4), ``hwy``, ``us06``:
+    ``vpsim simulate`` compares them with the charge-sustaining figure."""
+    from ..textio import printable
+    from .vehicle import RECORD_BEGIN, RECORD_END, _toml_value, record_block
+
+    sizes = "the layout's rule (vpsim.fleet.hev): the preset's, scaled"
+    notes = {
+        "vehicle.mass": "record: equivalent test weight",
+        "vehicle.road_load_a": "record: target coast-down A (N)",
+        "vehicle.road_load_b": "record: target coast-down B (N per m/s)",
+        "vehicle.road_load_c": "record: target coast-down C (N per (m/s)^2)",
+        "engine.bore": "record: displacement and cylinders",
+        "engine.rated_power": "record: rated power (the engine's, W)",
+        "engine.thermal_efficiency": technology_note or "the preset's",
+        "electric.accessory_power": technology_note or "the preset's (W)",
+        "machine.rated_power": f"{sizes} (W)",
+        "battery.cells_in_parallel": "the preset's pack, strings for the machine's rated power",
+        "split.generator_rated_power": f"{sizes} (W)",
+        "transmission.final_drive": (
+            "record: axle ratio" if rec.layout == "hev_split" else "record: N/V and axle ratio"
+        ),
+    }
+    lines = [
+        printable(
+            f"# {rec.make} {rec.model}: test vehicle {rec.vehicle_id}, configuration {rec.configuration}"
+        ),
+        printable(f"# built by vpsim vehicle from-epa from {source or 'an EPA test car list'}"),
+        printable(f"# layout {rec.layout}: {rec.layout_rule}"),
+        "# (the module vpsim.fleet.hev documents the mapping and its defaults)",
+        "# SI units. Edit freely; run with: vpsim simulate --vehicle THIS_FILE",
+        f'base = "{PRESET[rec.layout]}"',
+        f"name = {_toml_value(params.name)}",
+        "",
+        "[powertrain]",
+        f'type = "{rec.layout}"',
+        "",
+    ]
+    flat = params.flat()
+    for sec, fields_ in TOML_FIELDS:
+        if sec == "split" and rec.layout != "hev_split":
+            continue
+        lines.append(f"[{sec}]")
+        for f in fields_:
+            v = flat.get(f"{sec}.{f}")
+            if v is None:
+                continue
+            note = notes.get(f"{sec}.{f}")
+            val = _toml_value(list(v) if isinstance(v, tuple) else v)
+            lines.append(f"{f} = {val}" + (f"  # {note}" if note else ""))
+        lines.append("")
+    measured = {TOML_TEST_NAME[c]: v for c, v in rec.measured_mpg.items()}
+    block = record_block(
+        rec,
+        rec.road_load_si,
+        "measured_mpg",
+        measured,
+        "unadjusted; udds = the hot UDDS of the 4-bag FTP (bags 3 + 4), compared charge-sustaining",
+        {"powertrain": rec.layout},
+    )
+    lines.append(RECORD_BEGIN)
+    lines += [("# " + x) if x else "#" for x in block]
+    lines.append(RECORD_END)
+    return "\n".join(lines) + "\n"
