@@ -126,6 +126,10 @@ def fleet(
         if "measured" not in fsb:
             line += f"   {trio(fcb[c])}   {trio(fsb[c])}"
         click.echo(line)
+    hv = s["by_powertrain"]["hev"]
+    click.echo(f"full hybrids: {hv['n_vehicles']} vehicles ({hv['status']}), mpg charge-sustaining (ECMS)")
+    for c, v in hv["cycles"].items():
+        click.echo(f"{c:10s} {v['n']:5d} {trio(v)}")
     rep = {c: r for c, r in info.get("record_repeatability", {}).items() if r.get("rows")}
     if rep:
         beyond = "rows_beyond_12_pct_whatever_the_model"

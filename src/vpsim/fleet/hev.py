@@ -81,8 +81,11 @@ from .epa import (
 HEV_CYCLES = ("udds_hot", "hwy", "us06")
 # measured test -> vpsim cycle the model runs (the hot UDDS is the whole UDDS, run warm)
 SIM_CYCLE = {"udds_hot": "udds", "hwy": "hwfet", "us06": "us06"}
-CLASSES = ("hev_split", "hev_p2")
-PRESET = {"hev_split": "hev_split", "hev_p2": "hev_p2"}
+# the technology classes (:func:`hev_class`): the layouts, the P2 split by its gearbox after the one P2
+# class's errors were seen (fleet/tuned.py declares it)
+CLASSES = ("hev_split", "hev_p2", "hev_p2_converter")
+CONVERTER_CODES = ("A", "SA")  # a torque-converter automatic (the trucks' longitudinal 10-speeds)
+PRESET = {"hev_split": "hev_split", "hev_p2": "hev_p2"}  # layout -> preset
 COMPOSITE_TOLERANCE = 0.03  # |composite from the bags / RND_ADJ_FE - 1|: the rounding and the adjustment
 COLD_WEIGHT = 0.43  # the FTP composite's weights (40 CFR 600.113): 0.43 cold UDDS, 0.57 hot UDDS
 BAG_MILES = (3.59, 3.91)  # the 505 s and the 867 s phase of the UDDS
@@ -415,7 +418,13 @@ def hev_parameters(rec: HEVRecord, technology: dict | None = None):
 
 
 def hev_class(rec: HEVRecord) -> str:
-    """The technology class: the layout."""
+    """The technology class: ``hev_split``; ``hev_p2_converter`` for a P2 with a torque-converter automatic
+    (transmission code ``A`` or ``SA``: the Explorer, F-150 and Police Interceptor's 10R80-based and the
+    Tundra's 10-speed, longitudinal, a large engine; the model's P2 has no converter, and the converter's
+    slip at launch and its pump are in this class's technology); else ``hev_p2`` (Hyundai/Kia: a
+    6-speed with the machine in place of a converter)."""
+    if rec.layout == "hev_p2" and rec.transmission_code.upper() in CONVERTER_CODES:
+        return "hev_p2_converter"
     return rec.layout
 
 
@@ -549,3 +558,117 @@ def hev_vehicle_toml(rec: HEVRecord, params, source: str = "", technology_note: 
     lines += [("# " + x) if x else "#" for x in block]
     lines.append(RECORD_END)
     return "\n".join(lines) + "\n"
+
+
+# --- technology fit ----------------------------------------------------------------------------------------
+
+
+def _sim(rec: HEVRecord, name: str, params):
+    """One backward ECMS run of ``params`` on the cycle test ``name`` measures: (charge-sustaining L/100 km,
+    how long the trace's power was not deliverable)."""
+    from ..cycles import load_cycle
+    from ..simulation import simulate
+
+    r = simulate(load_cycle(SIM_CYCLE[name]), "backward", params, ems="ecms")
+    s = r.summary()
+    return float(s["fuel_l_per_100km_cs"]), float(r.deviations.demand_not_deliverable_s or 0.0)
+
+
+def grid_chunk(items: list[tuple[HEVRecord, tuple[str, ...]]]) -> list[dict]:
+    """Backward ECMS runs of each (record, tests) at every efficiency node and both accessory nodes:
+    ``log_fuel`` (len(EFFICIENCY_AXIS), 2) of ln charge-sustaining L/100 km, or ``error``."""
+    from .run import _kernels_on_one_thread, _one_line
+
+    out = []
+    with _kernels_on_one_thread():
+        for rec, cycles in items:
+            try:
+                base = hev_parameters(rec)
+                why = ""
+            except Exception as exc:
+                base, why = None, _one_line(exc)
+            for name in cycles:
+                row = {"key": rec.key, "cycle": name, "log_fuel": None, "error": ""}
+                try:
+                    if base is None:
+                        raise ValueError(why)
+                    g = np.empty((EFFICIENCY_AXIS.size, len(ACCESSORY_NODES_W)))
+                    for i, eta in enumerate(EFFICIENCY_AXIS):
+                        for j, acc in enumerate(ACCESSORY_NODES_W):
+                            p = base.with_changes(
+                                engine={"thermal_efficiency": float(eta)}, electric={"accessory_power": acc}
+                            )
+                            g[i, j] = math.log(_sim(rec, name, p)[0])
+                    if not np.all(np.isfinite(g)):
+                        raise ValueError("non-finite fuel on the technology grid")
+                    row["log_fuel"] = g
+                except Exception as exc:
+                    row["error"] = _one_line(exc)
+                out.append(row)
+    return out
+
+
+def surrogate(grid: np.ndarray) -> np.ndarray:
+    """L/100 km of each row on (EFFICIENCY_FINE, ACCESSORY_AXIS): ln fuel linear in the efficiency between
+    its nodes, fuel linear in the accessory power through its two nodes."""
+    n = grid.shape[0]
+    lo = np.empty((n, EFFICIENCY_FINE.size))
+    hi = np.empty_like(lo)
+    for k in range(n):
+        lo[k] = np.interp(EFFICIENCY_FINE, EFFICIENCY_AXIS, grid[k, :, 0])
+        hi[k] = np.interp(EFFICIENCY_FINE, EFFICIENCY_AXIS, grid[k, :, 1])
+    f0, f1 = np.exp(lo), np.exp(hi)
+    a0, a1 = ACCESSORY_NODES_W
+    slope = (f1 - f0) / (a1 - a0)
+    return f0[:, :, None] + slope[:, :, None] * (ACCESSORY_AXIS[None, None, :] - a0)
+
+
+def fit(grid: np.ndarray, log_measured: np.ndarray) -> tuple[dict, float]:
+    """The technology minimising mean |ln(predicted / measured fuel)| over the rows; (params, loss)."""
+    if grid.shape[0] == 0:
+        raise ValueError("no hybrid to fit the technology on")
+    f = np.maximum(surrogate(grid), 1e-6)
+    loss = np.mean(np.abs(np.log(f) - np.asarray(log_measured)[:, None, None]), axis=0)
+    i, j = np.unravel_index(int(np.argmin(loss)), loss.shape)
+    return {TECH_PARAMS[0]: float(EFFICIENCY_FINE[i]), TECH_PARAMS[1]: float(ACCESSORY_AXIS[j])}, float(
+        loss[i, j]
+    )
+
+
+def search_bounds() -> dict[str, tuple[float, float]]:
+    return {
+        TECH_PARAMS[0]: (float(EFFICIENCY_FINE[0]), float(EFFICIENCY_FINE[-1])),
+        TECH_PARAMS[1]: (float(ACCESSORY_AXIS[0]), float(ACCESSORY_AXIS[-1])),
+    }
+
+
+def on_bounds(params: dict) -> dict[str, str]:
+    out = {}
+    for name, (lo, hi) in search_bounds().items():
+        x = params.get(name)
+        if x is None:
+            continue
+        if x <= lo + 1e-9:
+            out[name] = "low"
+        elif x >= hi - 1e-9:
+            out[name] = "high"
+    return out
+
+
+def predict_chunk(items: list[tuple[HEVRecord, str, dict]]) -> list[dict]:
+    """One backward ECMS run per (record, test, technology): ``l_per_100km_cs``, ``trace_miss_s``, or
+    ``error``."""
+    from .run import _kernels_on_one_thread, _one_line
+
+    out = []
+    with _kernels_on_one_thread():
+        for rec, name, tech in items:
+            row = {"key": rec.key, "cycle": name, "error": ""}
+            try:
+                p = hev_parameters(rec, {k: tech[k] for k in TECH_PARAMS})
+                row["l_per_100km_cs"], row["trace_miss_s"] = _sim(rec, name, p)
+                row["machine_kw"] = p.machine.rated_power / 1e3
+            except Exception as exc:
+                row["error"] = _one_line(exc)
+            out.append(row)
+    return out
