@@ -104,3 +104,32 @@ def test_from_epa_writes_a_hybrid_that_simulates_against_its_record(shared_dir, 
 
         cs = mpg_from_l_per_100km(s["fuel_l_per_100km_cs"])
         assert s["measured_error_pct"] == pytest.approx(100 * (cs / s["measured_mpg"] - 1), rel=1e-9)
+
+
+def test_fit_recovers_a_known_technology():
+    """Synthetic fuel: F = W (0.44 / eta) + a P_acc, measured at eta 0.47, 600 W: the fit finds them on its
+    fine axes (ln F is not linear in eta, so within the interpolation's error)."""
+    import numpy as np
+
+    rng = np.random.default_rng(3)
+    n = 40
+    w = rng.uniform(3.0, 9.0, n)
+    a = rng.uniform(2e-4, 6e-4, n)
+
+    def fuel(eta, acc):
+        return w * 0.44 / eta + a * acc
+
+    grid = np.stack(
+        [
+            [[math.log(fuel(e, acc)[k]) for acc in hev.ACCESSORY_NODES_W] for e in hev.EFFICIENCY_AXIS]
+            for k in range(n)
+        ]
+    )
+    params, loss = hev.fit(grid, np.log(fuel(0.47, 600.0)))
+    assert params["engine.thermal_efficiency"] == pytest.approx(0.47, abs=0.005)
+    assert params["electric.accessory_power"] == pytest.approx(600.0, abs=50.0)
+    assert loss < 0.005
+    assert hev.on_bounds({"engine.thermal_efficiency": 0.54, "electric.accessory_power": 0.0}) == {
+        "engine.thermal_efficiency": "high",
+        "electric.accessory_power": "low",
+    }

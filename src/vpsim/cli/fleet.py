@@ -128,8 +128,9 @@ def fleet(
         click.echo(line)
     hv = s["by_powertrain"]["hev"]
     click.echo(f"full hybrids: {hv['n_vehicles']} vehicles ({hv['status']}), mpg charge-sustaining (ECMS)")
+    fsh = s["peer"]["fastsim_by_powertrain"]["hev"]
     for c, v in hv["cycles"].items():
-        click.echo(f"{c:10s} {v['n']:5d} {trio(v)}")
+        click.echo(f"{c:10s} {v['n']:5d} {trio(v)}" + ("" if "measured" in fsh else f"   {trio(fsh[c])}"))
     rep = {c: r for c, r in info.get("record_repeatability", {}).items() if r.get("rows")}
     if rep:
         beyond = "rows_beyond_12_pct_whatever_the_model"

@@ -111,8 +111,18 @@ def summary(run) -> dict:
         ("fastsim_by_powertrain", "fastsim"),
         ("fastsim_calibrated_by_powertrain", "fastsim_calibrated"),
     ):
-        # FASTSim's hybrid is not run on the hybrid records (not built): said so, nothing faked
-        out["peer"][key]["hev"] = {"measured": False, "reason": "FASTSim's hybrid is not run on the hybrids"}
+        # FASTSim's hybrid (vpsim.fleet.peer_hev) with its defaults; a calibrated one is not built: said so
+        if key == "fastsim_by_powertrain" and run.hev.get("peer_run"):
+            both = hv_ok[np.isfinite(hv_ok["fastsim_error_pct"].to_numpy(float))]
+            out["peer"][key]["hev"] = {
+                c: error_stats(both[both["cycle"] == c]["fastsim_error_pct"]) for c in HEV_CYCLES
+            }
+        elif key == "fastsim_by_powertrain":
+            why = run.hev.get("status") if run.peer.get("available") else run.peer.get("reason", "not run")
+            out["peer"][key]["hev"] = {"measured": False, "reason": why or "no full hybrid predicted"}
+        else:
+            not_built = "a calibrated FASTSim hybrid is not built"
+            out["peer"][key]["hev"] = {"measured": False, "reason": not_built}
         if run.peer.get("available") and len(ev_ok):
             both = ev_ok[np.isfinite(ev_ok[f"{col}_error_pct"].to_numpy(float))]
             out["peer"][key]["bev"] = {

@@ -93,6 +93,9 @@ HEV_COLUMNS = (
     "thermal_efficiency",
     "accessory_power_w",
     "trace_miss_s",
+    "fastsim_mpg",
+    "fastsim_error_pct",
+    "fastsim_status",
     "detail",
 )
 MODE = "extended"
@@ -480,7 +483,7 @@ def run_fleet(
         # 7. the full hybrids: the same procedure with the classes hev_split, hev_p2 (vpsim.fleet.hev)
         t0 = time.perf_counter()
         hevs = cars.hev_vehicles if limit is None else cars.hev_vehicles[:limit]
-        hev_out = _run_hevs(hevs, folds, group_by, executor, progress, timings)
+        hev_out = _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings)
         timings["hev_s"] = time.perf_counter() - t0
     rows = []
     for v, cs in work:
@@ -709,10 +712,11 @@ def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings) -> d
     return out
 
 
-def _run_hevs(hevs, folds, group_by, executor, progress, timings) -> dict:
+def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings) -> dict:
     """The full hybrids on their tests: technology per layout class (:data:`vpsim.fleet.hev.CLASSES`) fitted
     out of fold as the other classes' (folds over the hybrid families), then one backward ECMS run per
-    vehicle and test at its fold's technology, the charge-sustaining figure compared. Returns ``rows``,
+    vehicle and test at its fold's technology, the charge-sustaining figure compared; FASTSim's hybrid
+    (:mod:`vpsim.fleet.peer_hev`, its defaults) on the same records. Returns ``rows``,
     ``technology`` ("fold<k>.<class>"), ``technology_all``, ``folds``, ``groups`` and ``status``."""
     from . import hev as hm
 
@@ -772,6 +776,18 @@ def _run_hevs(hevs, folds, group_by, executor, progress, timings) -> dict:
         for r in part:
             preds[(r["key"], r["cycle"])] = r
     timings["hev_vpsim_s"] = time.perf_counter() - t0
+    peer_rows: dict = {}
+    if peer_state.get("available"):
+        from . import peer_hev as ph
+
+        t0 = time.perf_counter()
+        pitems = [(v, c) for v, cs in work for c in cs]
+        pch = [pitems[i : i + 2 * HEV_CHUNK] for i in range(0, len(pitems), 2 * HEV_CHUNK)]
+        for part in executor.map(ph.hev_peer_chunk, pch):
+            for r in part:
+                peer_rows[(r["key"], r["cycle"])] = r
+        timings["hev_peer_s"] = time.perf_counter() - t0
+    out["peer_run"] = bool(peer_rows)
     rows = []
     for v, cs in work:
         t = tech[(fold_of[v.key], class_of[v.key])]
@@ -798,8 +814,19 @@ def _run_hevs(hevs, folds, group_by, executor, progress, timings) -> dict:
                 "thermal_efficiency": t[hm.TECH_PARAMS[0]],
                 "accessory_power_w": t[hm.TECH_PARAMS[1]],
                 "trace_miss_s": math.nan,
+                "fastsim_mpg": math.nan,
+                "fastsim_error_pct": math.nan,
+                "fastsim_status": "not run",
                 "detail": "",
             }
+            pr = peer_rows.get((v.key, c))
+            if pr is not None:
+                mpg = pr.get("peer_mpg", math.nan)
+                if math.isfinite(mpg):
+                    row["fastsim_mpg"] = round(mpg, 4)
+                    row["fastsim_error_pct"] = round(100.0 * (mpg / meas_c - 1.0), 4)
+                miss = "trace_miss" if pr.get("trace_miss") else "ok"
+                row["fastsim_status"] = pr.get("peer_error") or miss
             pred = preds.get((v.key, c))
             err = failed.get((v.key, c)) or (pred or {}).get("error") or ("" if pred else "not run")
             if err:
