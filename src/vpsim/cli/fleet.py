@@ -154,8 +154,8 @@ def fleet(
         + ", ".join(f"{k} {v:.1f} s" for k, v in rt.items() if k != "total_s")
     )
     click.echo(
-        f"wrote {out}/vehicles.csv, vehicles_ev.csv, summary.json, run.json, report.md, excluded.csv, "
-        "technology.json, figures"
+        f"wrote {out}/vehicles.csv, vehicles_ev.csv, vehicles_hev.csv, summary.json, run.json, report.md, "
+        "excluded.csv, technology.json, figures"
     )
 
 
