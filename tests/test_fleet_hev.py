@@ -133,3 +133,27 @@ def test_fit_recovers_a_known_technology():
         "engine.thermal_efficiency": "high",
         "electric.accessory_power": "low",
     }
+
+
+def test_from_epa_takes_the_fleets_hybrid_fit(shared_dir, tmp_path, capsys):
+    import json
+
+    from vpsim.cli.main import main
+    from vpsim.params import load_parameters
+
+    lst = _real_list(shared_dir)
+    tech = tmp_path / "technology.json"
+    fit = {"engine.thermal_efficiency": 0.5175, "electric.accessory_power": 375.0}
+    tech.write_text(json.dumps({"hev": {"all_vehicles": {"hev_split": fit}}}))
+    car = tmp_path / "c.toml"
+    args = ["vehicle", "from-epa", str(lst), "--id", "20-ZE1H", "--config", "0", "--out", str(car)]
+    assert main([*args, "--technology", str(tech)]) == 0
+    p = load_parameters(car)
+    assert p.engine.thermal_efficiency == pytest.approx(0.5175)
+    assert p.electric.accessory_power == pytest.approx(375.0)
+    # a technology.json without a hybrid fit: one line naming what is missing
+    tech.write_text(json.dumps({"bev": {}}))
+    capsys.readouterr()
+    assert main([*args, "--technology", str(tech)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "hev.all_vehicles.hev_split" in err
