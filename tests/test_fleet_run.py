@@ -152,7 +152,7 @@ def _check_outputs(out, cycles):
         ("fastsim_calibrated_by_powertrain", "fastsim_calibrated"),
         ("fastsim_by_powertrain", "fastsim"),
     ):
-        assert set(s["peer"][key]) == {"conventional", "bev"}  # the battery-electric cars: vpsim.fleet.ev
+        assert set(s["peer"][key]) == {"conventional", "bev", "hev"}  # vpsim.fleet.ev, vpsim.fleet.hev
         assert s["peer"][key]["conventional"] == s["peer"][conventional]
     assert s["by_powertrain"]["conventional"]["cycles"] == s["cycles"]
     for peer in (fs, s["peer"]["fastsim_calibrated"]):
@@ -269,8 +269,13 @@ def test_fleet_on_the_real_list(shared_dir, tmp_path, capsys):
     assert main(args) == 0
     s, df = _check_outputs(out, ("ftp_bag2", "hwy"))
     assert s["n_vehicles"] == 25
-    assert s["excluded"]["hybrid"] > 20 and "electric" not in s["excluded"]  # the EVs are predicted
+    assert s["excluded"]["hybrid, no built layout"] > 10 and "electric" not in s["excluded"]  # EVs predicted
+    assert "hybrid" not in s["excluded"]  # the full hybrids are read (vpsim.fleet.hev), or excluded with why
     assert s["by_powertrain"]["bev"]["n_vehicles"] == 25  # --limit: the first 25 EVs too
+    hv = s["by_powertrain"]["hev"]
+    assert hv["n_vehicles"] == 25 and hv["status"] == "ok"  # --limit: the first 25 hybrids
+    for c in ("udds_hot", "hwy", "us06"):
+        assert tuple(hv["cycles"][c]) == STAT_KEYS and hv["cycles"][c]["n"] > 5
 
 
 def test_a_manual_gets_the_drivers_shift_point(tmp_path):

@@ -126,6 +126,11 @@ def fleet(
         if "measured" not in fsb:
             line += f"   {trio(fcb[c])}   {trio(fsb[c])}"
         click.echo(line)
+    hv = s["by_powertrain"]["hev"]
+    click.echo(f"full hybrids: {hv['n_vehicles']} vehicles ({hv['status']}), mpg charge-sustaining (ECMS)")
+    fsh = s["peer"]["fastsim_by_powertrain"]["hev"]
+    for c, v in hv["cycles"].items():
+        click.echo(f"{c:10s} {v['n']:5d} {trio(v)}" + ("" if "measured" in fsh else f"   {trio(fsh[c])}"))
     rep = {c: r for c, r in info.get("record_repeatability", {}).items() if r.get("rows")}
     if rep:
         beyond = "rows_beyond_12_pct_whatever_the_model"
@@ -149,8 +154,8 @@ def fleet(
         + ", ".join(f"{k} {v:.1f} s" for k, v in rt.items() if k != "total_s")
     )
     click.echo(
-        f"wrote {out}/vehicles.csv, vehicles_ev.csv, summary.json, run.json, report.md, excluded.csv, "
-        "technology.json, figures"
+        f"wrote {out}/vehicles.csv, vehicles_ev.csv, vehicles_hev.csv, summary.json, run.json, report.md, "
+        "excluded.csv, technology.json, figures"
     )
 
 

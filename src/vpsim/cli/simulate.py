@@ -101,6 +101,7 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
     from ..gears import load_schedule
     from ..params import HYBRIDS, load_parameters
     from ..simulation import simulate as run
+    from ..units import mpg_from_l_per_100km
     from .notices import announce_compilation
 
     announce_compilation()
@@ -140,6 +141,9 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         summary["measured_error_pct"] = (
             100.0 * (summary["mpge"] / measured_mpge - 1.0) if measured_mpge is not None else float("nan")
         )
+    if result.electric and measured is not None:  # a hybrid's record: compared charge-sustaining
+        cs_mpg = mpg_from_l_per_100km(summary["fuel_l_per_100km_cs"])
+        summary["measured_error_pct"] = 100.0 * (cs_mpg / measured - 1.0)
     written = []
     if out:
         # an undefined sample (intake pressure with the engine decoupled, say) is an empty cell, never nan/inf
@@ -176,6 +180,12 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
             f"  state of charge   {summary['soc_start']:.4f} -> {summary['soc_end']:.4f}; "
             f"{summary['engine_starts']} engine starts"
         )
+        if measured is not None:
+            err = number(summary["measured_error_pct"], "+.1f", "measured_error_pct")
+            click.echo(
+                f"  measured          {measured:8.2f} mpg (the record's test on this cycle); "
+                f"charge-sustaining predicted {err}{' %' if _ok(err) else ''}"
+            )
     elif result.electric:
         _echo_electric(summary)
         if measured_mpge is not None:

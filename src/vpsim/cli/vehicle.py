@@ -47,6 +47,9 @@ def from_epa(file, vehicle_id, config, out, technology):
     if getattr(rec, "powertrain", "conventional") == "bev":
         _from_epa_bev(rec, file, out, technology)
         return
+    if getattr(rec, "powertrain", "conventional") == "hev":
+        _from_epa_hev(rec, file, out, technology)
+        return
     tech, note = None, ""
     if technology:
         tech, note = read_technology(technology, "conventional", vehicle_class(rec))
@@ -97,5 +100,33 @@ def _from_epa_bev(rec, file, out, technology) -> None:
             f"wrote {out}: {rec.make} {rec.model} ({rec.key}), battery-electric, {rec.mass_kg:.0f} kg, "
             f"{m.rated_power / 1e3:.0f} kW, reduction {params.transmission.final_drive:.3g} on "
             f"{params.vehicle.wheel_radius:.3f} m wheels; measured {meas or 'nothing usable'}"
+        )
+    )
+
+
+def _from_epa_hev(rec, file, out, technology) -> None:
+    """A full hybrid's vehicle file (:mod:`vpsim.fleet.hev`); ``technology``: a fleet run's
+    technology.json, its hybrid fit on all vehicles of the layout's class."""
+    from ..fleet import hev
+    from ..fleet.report import check_complete
+    from ..textio import printable
+
+    tech, note = None, ""
+    if technology:
+        check_complete(Path(technology).parent, Path(technology).name)
+        cls = hev.hev_class(rec)
+        path = ("hev", "all_vehicles", cls)
+        fit = _fit(technology, path, " with a hybrid fit")
+        tech = _tech_values(technology, fit, hev.TECH_PARAMS, ".".join(path))
+        note = f"fleet fit ({cls} class, all vehicles) from {Path(technology).name}"
+    params = hev.hev_parameters(rec, technology=tech)
+    Path(out).write_text(hev.hev_vehicle_toml(rec, params, source=Path(file).name, technology_note=note))
+    meas = ", ".join(f"{hev.TOML_TEST_NAME[c]} {v:.1f} mpg" for c, v in rec.measured_mpg.items())
+    click.echo(
+        printable(
+            f"wrote {out}: {rec.make} {rec.model} ({rec.key}), {rec.layout}, {rec.mass_kg:.0f} kg, "
+            f"{rec.displacement_l:g} L engine {rec.rated_power_kw:.0f} kW, machine "
+            f"{params.machine.rated_power / 1e3:.0f} kW; measured {meas or 'nothing usable'} "
+            "(udds: the hot UDDS, FTP bags 3 + 4)"
         )
     )

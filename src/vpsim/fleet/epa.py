@@ -28,8 +28,11 @@ reason                          rule
 ``plug-in hybrid``              another test vehicle of the same make and model is a plug-in (its
                                 charge-depleting tests are often on another test vehicle than its gasoline
                                 tests)
-``hybrid``                      (hybrids are not flagged in a column) the model name holds ``hybrid``, the
-                                word ``HEV``/``FHEV``/``PHEV`` or a Lexus-style ``300h``
+``hybrid, <why>``               a full hybrid that :mod:`vpsim.fleet.hev` cannot read (``hev_vehicles``):
+                                a plug-in by name, a layout not built (Honda's two-motor e:HEV), no usable
+                                test; ``(screened: <rule>)`` says which rule flagged it a hybrid. A hybrid
+                                (not flagged in a column): the model name holds ``hybrid``, the word
+                                ``HEV``/``FHEV``/``PHEV`` or a Lexus-style ``300h``
                                 (:data:`HYBRID_NAME`); or city fuel economy (FTP ``RND_ADJ_FE``) >= highway
                                 (HWY ``RND_ADJ_FE``); or hot town fuel economy (FTP bag 2) >=
                                 :data:`HOT_TOWN_HYBRID_RATIO` x highway (a conventional car does clearly
@@ -107,6 +110,7 @@ COL = {
     "fuel": "Test Fuel Type Description",
     "category": "Test Category",
     "fe": "RND_ADJ_FE",
+    "bag1": "FE Bag 1",
     "bag2": "FE Bag 2",
     "bag3": "FE Bag 3",
     "bag4": "FE Bag 4",
@@ -116,6 +120,8 @@ COL = {
 }
 
 CERT_GASOLINE = "Tier 2 Cert Gasoline"
+# columns a list may lack (read as empty): bag 1 is read only for the hybrids' cold UDDS (vpsim.fleet.hev)
+OPTIONAL_COLUMNS = ("bag1",)
 
 # plausible ranges of the record's fields (inclusive); outside => "implausible <field>"
 PLAUSIBLE = {
@@ -140,6 +146,7 @@ NUMERIC = (
     "axle_ratio",
     "nv_ratio",
     "fe",
+    "bag1",
     "bag2",
     "bag3",
     "bag4",
@@ -308,13 +315,14 @@ class TestCarList:
     excluded_rows: list[dict]  # one dict per excluded vehicle or skipped/implausible test row
     n_rows: int
     ev_vehicles: list = field(default_factory=list)  # battery-electric records (vpsim.fleet.ev.EVRecord)
+    hev_vehicles: list = field(default_factory=list)  # full hybrids (vpsim.fleet.hev.HEVRecord)
 
     def find(self, vehicle_id: str, configuration: int | None = None):
         """The conventional record (:class:`VehicleRecord`) or battery-electric one
         (:class:`vpsim.fleet.ev.EVRecord`) of a test vehicle; one-line error if none or several."""
         hits = [
             v
-            for v in [*self.vehicles, *self.ev_vehicles]
+            for v in [*self.vehicles, *self.ev_vehicles, *self.hev_vehicles]
             if v.vehicle_id == vehicle_id and (configuration is None or v.configuration == configuration)
         ]
         if len(hits) == 1:
@@ -390,6 +398,9 @@ def read_test_car_list(path: str | Path) -> TestCarList:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise VpsimError(f"{path}: not a readable CSV test car list ({msg})") from None
     df.columns = [c.strip() for c in df.columns]
+    for k in OPTIONAL_COLUMNS:
+        if COL[k] not in df.columns:
+            df[COL[k]] = ""
     missing = [c for c in COL.values() if c not in df.columns]
     if missing:
         raise VpsimError(f"{path}: not an EPA test car list; missing column(s) {', '.join(missing)}")
@@ -436,6 +447,7 @@ def read_test_car_list(path: str | Path) -> TestCarList:
             model_kind[_model_key(groups[key][0])] = "plug-in hybrid"
     vehicles: list[VehicleRecord] = []
     ev_vehicles: list = []
+    hev_vehicles: list = []
     excluded: Counter = Counter()
     for (vid, cfg), tests in groups.items():
         kind = kinds[(vid, cfg)]
@@ -446,6 +458,15 @@ def read_test_car_list(path: str | Path) -> TestCarList:
             from .ev import ev_vehicle
 
             rec, reason, test_rows = ev_vehicle(vid, cfg, tests)
+        elif kind is not None and kind.split(":")[0] == "hybrid":  # a full hybrid: vpsim.fleet.hev
+            from .hev import hev_vehicle
+
+            rec, reason, test_rows = hev_vehicle(vid, cfg, tests)
+            if rec is not None:
+                hev_vehicles.append(rec)
+                excluded_rows += test_rows
+                continue
+            reason = f"{reason} (screened: {kind})"
         elif kind is not None:
             rec, reason, test_rows = None, kind, []
         else:
@@ -458,7 +479,7 @@ def read_test_car_list(path: str | Path) -> TestCarList:
             ev_vehicles.append(rec)
         else:
             vehicles.append(rec)
-    return TestCarList(str(path), vehicles, excluded, excluded_rows, len(rows), ev_vehicles)
+    return TestCarList(str(path), vehicles, excluded, excluded_rows, len(rows), ev_vehicles, hev_vehicles)
 
 
 def _excl(r: dict, reason: str, *, test: bool) -> dict:

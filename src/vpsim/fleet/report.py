@@ -39,8 +39,9 @@ CSV_COLUMNS = (
 )
 # exactly these; ``n_vehicles`` and ``cycles`` are the conventional fleet's, ``by_powertrain`` has both
 SUMMARY_KEYS = ("n_vehicles", "excluded", "held_out", "cycles", "peer", "validation", "by_powertrain")
-POWERTRAINS = ("conventional", "bev")
+POWERTRAINS = ("conventional", "bev", "hev")
 EV_CYCLES = ("udds", "hwy")
+HEV_CYCLES = ("udds_hot", "hwy", "us06")  # vpsim.fleet.hev.HEV_CYCLES (udds_hot: the 4-bag FTP's bags 3 + 4)
 STAT_KEYS = ("n", "median_error_pct", "median_abs_error_pct", "p90_abs_error_pct")
 FIGURES = ("predicted_vs_measured.png", "error_histograms.png", "error_by_group.png", "worst_vehicles.png")
 N_WORST = 20
@@ -99,10 +100,29 @@ def summary(run) -> dict:
             "cycles": {c: error_stats(ev_ok[ev_ok["cycle"] == c]["error_pct"]) for c in EV_CYCLES},
         },
     }
+    hv = run.hev_frame()
+    hv_ok = hv[np.isfinite(hv["error_pct"].to_numpy(float))]
+    out["by_powertrain"]["hev"] = {
+        "n_vehicles": int(hv_ok.drop_duplicates(["vehicle_id", "configuration"]).shape[0]),
+        "status": run.hev.get("status", "not run"),
+        "cycles": {c: error_stats(hv_ok[hv_ok["cycle"] == c]["error_pct"]) for c in HEV_CYCLES},
+    }
     for key, col in (
         ("fastsim_by_powertrain", "fastsim"),
         ("fastsim_calibrated_by_powertrain", "fastsim_calibrated"),
     ):
+        # FASTSim's hybrid (vpsim.fleet.peer_hev) with its defaults; a calibrated one is not built: said so
+        if key == "fastsim_by_powertrain" and run.hev.get("peer_run"):
+            both = hv_ok[np.isfinite(hv_ok["fastsim_error_pct"].to_numpy(float))]
+            out["peer"][key]["hev"] = {
+                c: error_stats(both[both["cycle"] == c]["fastsim_error_pct"]) for c in HEV_CYCLES
+            }
+        elif key == "fastsim_by_powertrain":
+            why = run.hev.get("status") if run.peer.get("available") else run.peer.get("reason", "not run")
+            out["peer"][key]["hev"] = {"measured": False, "reason": why or "no full hybrid predicted"}
+        else:
+            not_built = "a calibrated FASTSim hybrid is not built"
+            out["peer"][key]["hev"] = {"measured": False, "reason": not_built}
         if run.peer.get("available") and len(ev_ok):
             both = ev_ok[np.isfinite(ev_ok[f"{col}_error_pct"].to_numpy(float))]
             out["peer"][key]["bev"] = {
@@ -130,6 +150,12 @@ def _ev():
     from . import ev
 
     return ev
+
+
+def _hev():
+    from . import hev
+
+    return hev
 
 
 def ev_technology_bounds(run) -> dict:
@@ -759,6 +785,7 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
     cols = list(CSV_COLUMNS) + [c for c in df.columns if c not in CSV_COLUMNS]
     df[cols].to_csv(out / "vehicles.csv", index=False)
     run.ev_frame().to_csv(out / "vehicles_ev.csv", index=False)
+    run.hev_frame().to_csv(out / "vehicles_hev.csv", index=False)
     import pandas as pd
 
     pd.DataFrame(
@@ -780,6 +807,12 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
                     "search_bounds": {k: list(v) for k, v in _ev().search_bounds().items()},
                     "on_search_bound": ev_technology_bounds(run),
                     "peer_fastsim_calibrated_out_of_fold": run.ev.get("peer_technology", {}),
+                },
+                "hev": {
+                    "parameters": list(_hev().TECH_PARAMS),
+                    "out_of_fold": run.hev.get("technology", {}),
+                    "all_vehicles": run.hev.get("technology_all", {}),
+                    "search_bounds": {k: list(v) for k, v in _hev().search_bounds().items()},
                 },
             },
             indent=2,
@@ -903,6 +936,44 @@ def _powertrain_md(run, s) -> list[str]:
         reasons = {(p, side) for t in run.ev["technology"].values() for p, side in ev.on_bounds(t).items()}
         for p, side in sorted(reasons):
             L.append(f"\n`{p}` on its {side} bound: the bound stays: {ev.BOUND_REASONS.get((p, side), '')}.")
+    return L + _hev_md(run, s)
+
+
+def _hev_md(run, s) -> list[str]:
+    """The full hybrids' count and technology per fold and class (:mod:`vpsim.fleet.hev`)."""
+    hm = _hev()
+    b = s["by_powertrain"]["hev"]
+    L = [
+        "",
+        f"Full hybrids predicted: {b['n_vehicles']} ({b['status']}); backward, ECMS, the charge-sustaining "
+        "figure against the unadjusted test. `udds_hot`: the hot-start UDDS of the 4-bag FTP (bags 3 + 4, "
+        "or Ford's bag 2), not bags 2 and 3 alone (their charge swing sets their figure; docs/fleet.md). "
+        "Classes `hev_split`, `hev_p2`, `hev_p2_converter` (`vpsim.fleet.hev.hev_class`).",
+    ]
+    if run.hev.get("technology"):
+        L += [
+            "",
+            f"Hybrid technology per fold ({run.hev['folds']} folds of {run.hev['groups']} hybrid groups; "
+            "search bounds: "
+            + ", ".join(f"`{k}` {lo:g}-{hi:g}" for k, (lo, hi) in hm.search_bounds().items())
+            + "):",
+            "",
+            "| fold.class | thermal efficiency | accessories, W | training rows | on a bound |",
+            "|---|---|---|---|---|",
+        ]
+        for k, t in {
+            **run.hev["technology"],
+            **{f"all.{c}": t for c, t in run.hev["technology_all"].items()},
+        }.items():
+            hits = hm.on_bounds(t)
+            L.append(
+                f"| {k} | {t[hm.TECH_PARAMS[0]]:.4f} | {t[hm.TECH_PARAMS[1]]:.0f} | {t['n_train']} | "
+                + (", ".join(f"{p.split('.')[1]} {side}" for p, side in hits.items()) or "–")
+                + " |"
+            )
+        reasons = {(p, side) for t in run.hev["technology"].values() for p, side in hm.on_bounds(t).items()}
+        for p, side in sorted(reasons):
+            L.append(f"\n`{p}` on its {side} bound: the bound stays: {hm.BOUND_REASONS.get((p, side), '')}.")
     return L
 
 

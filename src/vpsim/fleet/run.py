@@ -71,6 +71,33 @@ EV_COLUMNS = (
     "fastsim_calibrated_error_pct",
     "detail",
 )
+HEV_CHUNK = 8  # hybrids per unit of work (each runs 12 ECMS grid points per test)
+HEV_COLUMNS = (
+    "vehicle_id",
+    "configuration",
+    "make",
+    "model",
+    "manufacturer",
+    "layout",
+    "cycle",
+    "measured_mpg",
+    "predicted_mpg",
+    "error_pct",
+    "fold",
+    "status",
+    "rated_power_kw",
+    "test_mass_kg",
+    "displacement_l",
+    "boosted",
+    "machine_kw",
+    "thermal_efficiency",
+    "accessory_power_w",
+    "trace_miss_s",
+    "fastsim_mpg",
+    "fastsim_error_pct",
+    "fastsim_status",
+    "detail",
+)
 MODE = "extended"
 CHUNK = 64  # vehicles per unit of work
 FORWARD_DRIVER = "2"  # the stiffer preset PI driver (a = 1 s): the test driver follows the trace closely
@@ -95,6 +122,8 @@ class FleetRun:
     peer_technology: dict = field(default_factory=dict)  # the calibrated FASTSim's, "fold<k>.<class>"
     # the battery-electric records (vpsim.fleet.ev): rows, their technology and folds (_run_evs)
     ev: dict = field(default_factory=dict)
+    # the full hybrids (vpsim.fleet.hev): rows, their technology and folds (_run_hevs)
+    hev: dict = field(default_factory=dict)
 
     def frame(self):
         import pandas as pd
@@ -106,6 +135,13 @@ class FleetRun:
         import pandas as pd
 
         return pd.DataFrame(self.ev.get("rows", []), columns=EV_COLUMNS)
+
+    def hev_frame(self):
+        """One row per full hybrid x test (``udds_hot``, ``hwy``, ``us06``): mpg measured and predicted
+        (charge-sustaining, ECMS)."""
+        import pandas as pd
+
+        return pd.DataFrame(self.hev.get("rows", []), columns=HEV_COLUMNS)
 
 
 def _vehicle_class(rec: VehicleRecord) -> str:
@@ -444,6 +480,11 @@ def run_fleet(
         evs = cars.ev_vehicles if limit is None else cars.ev_vehicles[:limit]
         ev_out = _run_evs(evs, folds, group_by, executor, peer_state, progress, timings)
         timings["ev_s"] = time.perf_counter() - t0
+        # 7. the full hybrids: the same procedure with the classes hev_split, hev_p2 (vpsim.fleet.hev)
+        t0 = time.perf_counter()
+        hevs = cars.hev_vehicles if limit is None else cars.hev_vehicles[:limit]
+        hev_out = _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings)
+        timings["hev_s"] = time.perf_counter() - t0
     rows = []
     for v, cs in work:
         for c in cs:
@@ -486,6 +527,7 @@ def run_fleet(
         n_groups=n_groups,
         peer_technology=peer_technology,
         ev=ev_out,
+        hev=hev_out,
     )
 
 
@@ -664,6 +706,141 @@ def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings) -> d
                 if col == "fastsim":
                     row["fastsim_status"] = pr.get("peer_error") or (
                         "trace_miss" if pr.get("trace_miss") else "ok"
+                    )
+            rows.append(row)
+    out["rows"] = rows
+    return out
+
+
+def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings) -> dict:
+    """The full hybrids on their tests: technology per layout class (:data:`vpsim.fleet.hev.CLASSES`) fitted
+    out of fold as the other classes' (folds over the hybrid families), then one backward ECMS run per
+    vehicle and test at its fold's technology, the charge-sustaining figure compared; FASTSim's hybrid
+    (:mod:`vpsim.fleet.peer_hev`, its defaults) on the same records. Returns ``rows``,
+    ``technology`` ("fold<k>.<class>"), ``technology_all``, ``folds``, ``groups`` and ``status``."""
+    from . import hev as hm
+
+    out = {"rows": [], "technology": {}, "technology_all": {}, "folds": 0, "groups": 0}
+    out.update(status="ok", n_records=len(hevs))
+    hevs = [v for v in hevs if any(c in v.measured_mpg for c in hm.HEV_CYCLES)]
+    if not hevs:
+        out["status"] = "no full hybrid with a hot UDDS, HWY or US06 test"
+        return out
+    groups = cal.vehicle_groups(hevs, group_by, labels=hm.family_labels)
+    n_groups = len(set(groups.values()))
+    k = n_groups if group_by == "manufacturer" else folds
+    if n_groups < max(k, 2):
+        out["status"] = f"{len(hevs)} full hybrid(s) in {n_groups} group(s): too few for {k} folds"
+        return out
+    fold_of = cal.assign_folds([v.key for v in hevs], k, groups=groups)
+    out.update(folds=k, groups=n_groups, fold_of=fold_of, group_of=groups)
+    work = [(v, tuple(c for c in hm.HEV_CYCLES if c in v.measured_mpg)) for v in hevs]
+    chunks = [work[i : i + HEV_CHUNK] for i in range(0, len(work), HEV_CHUNK)]
+    t0 = time.perf_counter()
+    grid_rows: list[dict] = []
+    for i, part in enumerate(executor.map(hm.grid_chunk, chunks)):
+        grid_rows += part
+        _progress(
+            "hybrids: technology grid, vehicles", min((i + 1) * HEV_CHUNK, len(work)), len(work), t0, progress
+        )
+    by_key = {v.key: v for v in hevs}
+    ok = [r for r in grid_rows if r["log_fuel"] is not None]
+    failed = {(r["key"], r["cycle"]): r["error"] for r in grid_rows if r["log_fuel"] is None}
+    if not ok:
+        out["status"] = "no full hybrid could be simulated: " + grid_rows[0]["error"]
+        return out
+    grid = np.stack([r["log_fuel"] for r in ok])
+    meas = np.array([_log_l100(by_key[r["key"]].measured_mpg[r["cycle"]]) for r in ok])
+    vfold = np.array([fold_of[r["key"]] for r in ok])
+    class_of = {v.key: hm.hev_class(v) for v in hevs}
+    vclass = np.array([class_of[r["key"]] for r in ok], dtype=object)
+    tech = cal.per_fold_and_class(lambda rows: hm.fit(grid[rows], meas[rows]), vfold, vclass, k, hm.CLASSES)
+    out["technology"] = {f"fold{f}.{c}": _rounded(t) for (f, c), t in sorted(tech.items())}
+    for c in hm.CLASSES:
+        rows = vclass == c
+        if rows.any():
+            params_all, loss_all = hm.fit(grid[rows], meas[rows])
+            out["technology_all"][c] = _rounded(
+                {**params_all, "train_loss": loss_all, "n_train": int(rows.sum())}
+            )
+    items = [
+        (v, c, tech[(fold_of[v.key], class_of[v.key])])
+        for v, cs in work
+        for c in cs
+        if (v.key, c) not in failed
+    ]
+    preds: dict = {}
+    for part in executor.map(
+        hm.predict_chunk, [items[i : i + 4 * HEV_CHUNK] for i in range(0, len(items), 4 * HEV_CHUNK)]
+    ):
+        for r in part:
+            preds[(r["key"], r["cycle"])] = r
+    timings["hev_vpsim_s"] = time.perf_counter() - t0
+    peer_rows: dict = {}
+    if peer_state.get("available"):
+        from . import peer_hev as ph
+
+        t0 = time.perf_counter()
+        pitems = [(v, c) for v, cs in work for c in cs]
+        pch = [pitems[i : i + 2 * HEV_CHUNK] for i in range(0, len(pitems), 2 * HEV_CHUNK)]
+        for part in executor.map(ph.hev_peer_chunk, pch):
+            for r in part:
+                peer_rows[(r["key"], r["cycle"])] = r
+        timings["hev_peer_s"] = time.perf_counter() - t0
+    out["peer_run"] = bool(peer_rows)
+    rows = []
+    for v, cs in work:
+        t = tech[(fold_of[v.key], class_of[v.key])]
+        for c in cs:
+            meas_c = v.measured_mpg[c]
+            row = {
+                "vehicle_id": v.vehicle_id,
+                "configuration": v.configuration,
+                "make": v.make,
+                "model": v.model,
+                "manufacturer": v.manufacturer,
+                "layout": v.layout,
+                "cycle": c,
+                "measured_mpg": round(meas_c, 4),
+                "predicted_mpg": math.nan,
+                "error_pct": math.nan,
+                "fold": fold_of[v.key],
+                "status": "ok",
+                "rated_power_kw": round(v.rated_power_kw, 2),
+                "test_mass_kg": round(v.mass_kg, 1),
+                "displacement_l": v.displacement_l,
+                "boosted": v.boosted,
+                "machine_kw": math.nan,
+                "thermal_efficiency": t[hm.TECH_PARAMS[0]],
+                "accessory_power_w": t[hm.TECH_PARAMS[1]],
+                "trace_miss_s": math.nan,
+                "fastsim_mpg": math.nan,
+                "fastsim_error_pct": math.nan,
+                "fastsim_status": "not run",
+                "detail": "",
+            }
+            pr = peer_rows.get((v.key, c))
+            if pr is not None:
+                mpg = pr.get("peer_mpg", math.nan)
+                if math.isfinite(mpg):
+                    row["fastsim_mpg"] = round(mpg, 4)
+                    row["fastsim_error_pct"] = round(100.0 * (mpg / meas_c - 1.0), 4)
+                miss = "trace_miss" if pr.get("trace_miss") else "ok"
+                row["fastsim_status"] = pr.get("peer_error") or miss
+            pred = preds.get((v.key, c))
+            err = failed.get((v.key, c)) or (pred or {}).get("error") or ("" if pred else "not run")
+            if err:
+                row["status"], row["detail"] = "failed", err
+            else:
+                mpg = mpg_from_l_per_100km(pred["l_per_100km_cs"])
+                row["predicted_mpg"] = round(mpg, 4)
+                row["error_pct"] = round(100.0 * (mpg / meas_c - 1.0), 4)
+                row["machine_kw"] = round(pred["machine_kw"], 2)
+                row["trace_miss_s"] = pred["trace_miss_s"]
+                if pred["trace_miss_s"] > 0:
+                    row["status"] = "trace_miss"
+                    row["detail"] = (
+                        f"the powertrain cannot give the trace's power for {pred['trace_miss_s']:g} s"
                     )
             rows.append(row)
     out["rows"] = rows
