@@ -108,17 +108,12 @@ def _from_epa_hev(rec, file, out, technology) -> None:
     """A full hybrid's vehicle file (:mod:`vpsim.fleet.hev`); ``technology``: a fleet run's
     technology.json, its hybrid fit on all vehicles of the layout's class."""
     from ..fleet import hev
-    from ..fleet.report import check_complete
+    from ..fleet.technology import read_technology
     from ..textio import printable
 
     tech, note = None, ""
     if technology:
-        check_complete(Path(technology).parent, Path(technology).name)
-        cls = hev.hev_class(rec)
-        path = ("hev", "all_vehicles", cls)
-        fit = _fit(technology, path, " with a hybrid fit")
-        tech = _tech_values(technology, fit, hev.TECH_PARAMS, ".".join(path))
-        note = f"fleet fit ({cls} class, all vehicles) from {Path(technology).name}"
+        tech, note = read_technology(technology, "hev", hev.hev_class(rec))
     params = hev.hev_parameters(rec, technology=tech)
     Path(out).write_text(hev.hev_vehicle_toml(rec, params, source=Path(file).name, technology_note=note))
     meas = ", ".join(f"{hev.TOML_TEST_NAME[c]} {v:.1f} mpg" for c, v in rec.measured_mpg.items())

@@ -1,10 +1,11 @@
 """Reading a ``vpsim fleet`` run's ``technology.json`` back (``vpsim vehicle from-epa --technology``).
 
 The file is checked before any value is used: it must come from a run that finished writing its folder
-(:func:`vpsim.fleet.report.check_complete`); its top-level keys, the battery-electric part's keys, the classes
-under ``all_vehicles`` and the keys of each class's fit must be ones a fleet run writes (a misspelt key read
-as absent would silently leave a default in its place: a wrong number); and each fitted value must be a number
-in its field's range (:func:`vpsim.params.check_field`: ``true`` is not 1, an efficiency of 1 is refused).
+(:func:`vpsim.fleet.report.check_complete`); its top-level keys, the battery-electric and hybrid parts'
+keys, the classes under ``all_vehicles`` and the keys of each class's fit must be ones a fleet run writes
+(a misspelt key read as absent would silently leave a default in its place: a wrong number); and each
+fitted value must be a number in its field's range (:func:`vpsim.params.check_field`: ``true`` is not 1,
+an efficiency of 1 is refused).
 Every problem is one line naming the file, the key and the keys expected.
 """
 
@@ -23,6 +24,7 @@ TOP_KEYS = (
     "on_search_bound",
     "peer_fastsim_calibrated_out_of_fold",
     "bev",
+    "hev",
 )
 BEV_KEYS = (
     "parameters",
@@ -32,6 +34,7 @@ BEV_KEYS = (
     "on_search_bound",
     "peer_fastsim_calibrated_out_of_fold",
 )
+HEV_KEYS = ("parameters", "out_of_fold", "all_vehicles", "search_bounds")
 FIT_INFO = ("train_loss", "n_train", "basis")  # how a class's fit was made: written beside its values
 # a technology.json written before the accessories were fitted has no engine.accessory_power: the default
 OPTIONAL = ("engine.accessory_power",)
@@ -52,12 +55,13 @@ def _table(path, data, where: str, allowed) -> dict:
 
 
 def read_technology(path, powertrain: str, cls: str) -> tuple[dict[str, float], str]:
-    """The fit on all vehicles of class ``cls`` (``powertrain`` ``"conventional"`` or ``"bev"``) in the
-    technology.json ``path``, and the note a vehicle file gives for it; one-line :class:`VpsimError` if the
-    file is from an unfinished run, not such a file, has keys no fleet run writes, or a value out of range."""
+    """The fit on all vehicles of class ``cls`` (``powertrain`` ``"conventional"``, ``"bev"`` or ``"hev"``)
+    in the technology.json ``path``, and the note a vehicle file gives for it; one-line :class:`VpsimError`
+    if the file is from an unfinished run, not such a file, has keys no fleet run writes, or a value out of
+    range."""
     from ..params import check_field
     from ..textio import check_path, read_json
-    from . import ev
+    from . import ev, hev
     from .calibrate import CLASSES, TECH_PARAMS
     from .report import check_complete
 
@@ -69,15 +73,18 @@ def read_technology(path, powertrain: str, cls: str) -> tuple[dict[str, float], 
     parts = {"": (data, CLASSES, TECH_PARAMS)}
     if "bev" in data:
         parts["bev."] = (_table(shown, data["bev"], "bev", BEV_KEYS), ev.CLASSES, ev.TECH_PARAMS)
+    if "hev" in data:
+        parts["hev."] = (_table(shown, data["hev"], "hev", HEV_KEYS), hev.CLASSES, hev.TECH_PARAMS)
     for prefix, (part, classes, names) in parts.items():
         if "all_vehicles" in part:
             fits = _table(shown, part["all_vehicles"], f"{prefix}all_vehicles", classes)
             for c, fit in fits.items():
                 _table(shown, fit, f"{prefix}all_vehicles.{c}", (*names, *FIT_INFO))
-    prefix = "bev." if powertrain == "bev" else ""
+    prefix = {"bev": "bev.", "hev": "hev."}.get(powertrain, "")
     if prefix not in parts:
+        kind = "a battery-electric" if powertrain == "bev" else "a hybrid"
         raise VpsimError(
-            f"{shown}: not a technology.json of vpsim fleet with a battery-electric fit (no bev)"
+            f"{shown}: not a technology.json of vpsim fleet with {kind} fit (no {prefix}all_vehicles.{cls})"
         )
     part, classes, names = parts[prefix]
     if "all_vehicles" not in part:
