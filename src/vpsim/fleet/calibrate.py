@@ -95,17 +95,9 @@ def search_bounds() -> dict[str, tuple[float, float]]:
 
 def on_bounds(params: dict) -> dict[str, str]:
     """{parameter: "low" | "high"} for each fitted value of ``params`` that sits on its search bound."""
-    out = {}
-    for name, (lo, hi) in search_bounds().items():
-        x = params.get(name)
-        if x is None:
-            continue
-        tol = 1e-9 * max(abs(lo), abs(hi), 1.0)
-        if x <= lo + tol:
-            out[name] = "low"
-        elif x >= hi - tol:
-            out[name] = "high"
-    return out
+    from .techgrid import bounds_hit
+
+    return bounds_hit(search_bounds(), params)
 
 
 def grid_variants() -> dict[str, np.ndarray]:

@@ -58,6 +58,7 @@ from .epa import (
     MPH_TO_MPS,
     CertificationRecord,
 )
+from .techgrid import TechGrid
 
 BASE_PRESET = "bev"
 EV_FUEL = "Electricity"
@@ -521,51 +522,10 @@ def grid_chunk(items: list[tuple[EVRecord, tuple[str, ...]]]) -> list[dict]:
     return out
 
 
-def surrogate(grid: np.ndarray) -> np.ndarray:
-    """Wall Wh/km of each row on (LOSS_SCALE_FINE, ACCESSORY_AXIS): ln energy linear in the scale between
-    its nodes, energy linear in the accessory power through its two nodes."""
-    n = grid.shape[0]
-    lo = np.empty((n, LOSS_SCALE_FINE.size))
-    hi = np.empty_like(lo)
-    for k in range(n):
-        lo[k] = np.interp(LOSS_SCALE_FINE, LOSS_SCALE_AXIS, grid[k, :, 0])
-        hi[k] = np.interp(LOSS_SCALE_FINE, LOSS_SCALE_AXIS, grid[k, :, 1])
-    e0, e1 = np.exp(lo), np.exp(hi)
-    a0, a1 = ACCESSORY_NODES_W
-    slope = (e1 - e0) / (a1 - a0)
-    return e0[:, :, None] + slope[:, :, None] * (ACCESSORY_AXIS[None, None, :] - a0)
-
-
-def fit(grid: np.ndarray, log_measured_wall: np.ndarray) -> tuple[dict, float]:
-    """The technology minimising mean |ln(predicted / measured wall energy)| over the rows; (params, loss)."""
-    if grid.shape[0] == 0:
-        raise ValueError("no electric vehicle to fit the technology on")
-    e = np.maximum(surrogate(grid), 1e-6)
-    loss = np.mean(np.abs(np.log(e) - np.asarray(log_measured_wall)[:, None, None]), axis=0)
-    i, j = np.unravel_index(int(np.argmin(loss)), loss.shape)
-    return {TECH_PARAMS[0]: float(LOSS_SCALE_FINE[i]), TECH_PARAMS[1]: float(ACCESSORY_AXIS[j])}, float(
-        loss[i, j]
-    )
-
-
-def search_bounds() -> dict[str, tuple[float, float]]:
-    return {
-        TECH_PARAMS[0]: (float(LOSS_SCALE_FINE[0]), float(LOSS_SCALE_FINE[-1])),
-        TECH_PARAMS[1]: (float(ACCESSORY_AXIS[0]), float(ACCESSORY_AXIS[-1])),
-    }
-
-
-def on_bounds(params: dict) -> dict[str, str]:
-    out = {}
-    for name, (lo, hi) in search_bounds().items():
-        x = params.get(name)
-        if x is None:
-            continue
-        if x <= lo + 1e-9:
-            out[name] = "low"
-        elif x >= hi - 1e-9:
-            out[name] = "high"
-    return out
+GRID = TechGrid(
+    TECH_PARAMS, LOSS_SCALE_AXIS, LOSS_SCALE_FINE, ACCESSORY_NODES_W, ACCESSORY_AXIS, "electric vehicle"
+)
+surrogate, fit, search_bounds, on_bounds = GRID.surrogate, GRID.fit, GRID.search_bounds, GRID.on_bounds
 
 
 def predict_chunk(items: list[tuple[EVRecord, str, dict]]) -> list[dict]:

@@ -77,6 +77,7 @@ from .epa import (
     TRANSMISSION_KIND,
     CertificationRecord,
 )
+from .techgrid import TechGrid
 
 HEV_CYCLES = ("udds_hot", "hwy", "us06")
 # measured test -> vpsim cycle the model runs (the hot UDDS is the whole UDDS, run warm)
@@ -608,51 +609,8 @@ def grid_chunk(items: list[tuple[HEVRecord, tuple[str, ...]]]) -> list[dict]:
     return out
 
 
-def surrogate(grid: np.ndarray) -> np.ndarray:
-    """L/100 km of each row on (EFFICIENCY_FINE, ACCESSORY_AXIS): ln fuel linear in the efficiency between
-    its nodes, fuel linear in the accessory power through its two nodes."""
-    n = grid.shape[0]
-    lo = np.empty((n, EFFICIENCY_FINE.size))
-    hi = np.empty_like(lo)
-    for k in range(n):
-        lo[k] = np.interp(EFFICIENCY_FINE, EFFICIENCY_AXIS, grid[k, :, 0])
-        hi[k] = np.interp(EFFICIENCY_FINE, EFFICIENCY_AXIS, grid[k, :, 1])
-    f0, f1 = np.exp(lo), np.exp(hi)
-    a0, a1 = ACCESSORY_NODES_W
-    slope = (f1 - f0) / (a1 - a0)
-    return f0[:, :, None] + slope[:, :, None] * (ACCESSORY_AXIS[None, None, :] - a0)
-
-
-def fit(grid: np.ndarray, log_measured: np.ndarray) -> tuple[dict, float]:
-    """The technology minimising mean |ln(predicted / measured fuel)| over the rows; (params, loss)."""
-    if grid.shape[0] == 0:
-        raise ValueError("no hybrid to fit the technology on")
-    f = np.maximum(surrogate(grid), 1e-6)
-    loss = np.mean(np.abs(np.log(f) - np.asarray(log_measured)[:, None, None]), axis=0)
-    i, j = np.unravel_index(int(np.argmin(loss)), loss.shape)
-    return {TECH_PARAMS[0]: float(EFFICIENCY_FINE[i]), TECH_PARAMS[1]: float(ACCESSORY_AXIS[j])}, float(
-        loss[i, j]
-    )
-
-
-def search_bounds() -> dict[str, tuple[float, float]]:
-    return {
-        TECH_PARAMS[0]: (float(EFFICIENCY_FINE[0]), float(EFFICIENCY_FINE[-1])),
-        TECH_PARAMS[1]: (float(ACCESSORY_AXIS[0]), float(ACCESSORY_AXIS[-1])),
-    }
-
-
-def on_bounds(params: dict) -> dict[str, str]:
-    out = {}
-    for name, (lo, hi) in search_bounds().items():
-        x = params.get(name)
-        if x is None:
-            continue
-        if x <= lo + 1e-9:
-            out[name] = "low"
-        elif x >= hi - 1e-9:
-            out[name] = "high"
-    return out
+GRID = TechGrid(TECH_PARAMS, EFFICIENCY_AXIS, EFFICIENCY_FINE, ACCESSORY_NODES_W, ACCESSORY_AXIS, "hybrid")
+surrogate, fit, search_bounds, on_bounds = GRID.surrogate, GRID.fit, GRID.search_bounds, GRID.on_bounds
 
 
 def predict_chunk(items: list[tuple[HEVRecord, str, dict]]) -> list[dict]:

@@ -1,0 +1,73 @@
+"""A class's two technology parameters fitted on a grid of real runs (the electric and hybrid fleets).
+
+Each vehicle is run at the nodes of its first parameter (``axis``) and at two accessory powers
+(``accessory_nodes_w``); the figure (wall energy, fuel) is then interpolated in its logarithm between the
+first parameter's nodes onto ``fine``, and linearly in the accessory power (the figure is linear in a constant
+load) onto ``accessory_axis``. The fit minimises the mean |ln(predicted / measured)| over a fold's training
+rows; every reported figure then comes from one real run at the fitted values, not from this surrogate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def bounds_hit(bounds: dict[str, tuple[float, float]], params: dict) -> dict[str, str]:
+    """{parameter: "low" | "high"} for each value of ``params`` that sits on its search bound."""
+    out = {}
+    for name, (lo, hi) in bounds.items():
+        x = params.get(name)
+        if x is None:
+            continue
+        tol = 1e-9 * max(abs(lo), abs(hi), 1.0)
+        if x <= lo + tol:
+            out[name] = "low"
+        elif x >= hi - tol:
+            out[name] = "high"
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class TechGrid:
+    names: tuple[str, str]  # (the first parameter, the accessory power)
+    axis: np.ndarray  # the first parameter's run nodes
+    fine: np.ndarray  # ... and the values the fit chooses among
+    accessory_nodes_w: tuple[float, float]
+    accessory_axis: np.ndarray
+    what: str  # the vehicles, for the error when a fold has none ("hybrid")
+
+    def surrogate(self, grid: np.ndarray) -> np.ndarray:
+        """The figure of each row (grid: rows x len(axis) x 2 of its logarithm) on (fine, accessory_axis)."""
+        n = grid.shape[0]
+        lo = np.empty((n, self.fine.size))
+        hi = np.empty_like(lo)
+        for k in range(n):
+            lo[k] = np.interp(self.fine, self.axis, grid[k, :, 0])
+            hi[k] = np.interp(self.fine, self.axis, grid[k, :, 1])
+        f0, f1 = np.exp(lo), np.exp(hi)
+        a0, a1 = self.accessory_nodes_w
+        slope = (f1 - f0) / (a1 - a0)
+        return f0[:, :, None] + slope[:, :, None] * (self.accessory_axis[None, None, :] - a0)
+
+    def fit(self, grid: np.ndarray, log_measured: np.ndarray) -> tuple[dict, float]:
+        """The technology minimising mean |ln(predicted / measured)| over the rows; (params, loss)."""
+        if grid.shape[0] == 0:
+            raise ValueError(f"no {self.what} to fit the technology on")
+        f = np.maximum(self.surrogate(grid), 1e-6)
+        loss = np.mean(np.abs(np.log(f) - np.asarray(log_measured)[:, None, None]), axis=0)
+        i, j = np.unravel_index(int(np.argmin(loss)), loss.shape)
+        params = {self.names[0]: float(self.fine[i]), self.names[1]: float(self.accessory_axis[j])}
+        return params, float(loss[i, j])
+
+    def search_bounds(self) -> dict[str, tuple[float, float]]:
+        """The range each parameter is searched in."""
+        return {
+            self.names[0]: (float(self.fine[0]), float(self.fine[-1])),
+            self.names[1]: (float(self.accessory_axis[0]), float(self.accessory_axis[-1])),
+        }
+
+    def on_bounds(self, params: dict) -> dict[str, str]:
+        """{parameter: "low" | "high"} for each fitted value that sits on its search bound."""
+        return bounds_hit(self.search_bounds(), params)
