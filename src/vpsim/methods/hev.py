@@ -32,6 +32,20 @@ from ..model import tables as tb
 from ..model import vehicle as vh
 from ..model._compile import kernel
 from ..model.tables import gear_index
+from . import _hybrid
+from ._hybrid import (
+    N_COMMON_SUMS,
+    N_TERMS,
+    S_BATTERY_S,
+    S_DIST,
+    S_FUEL,
+    S_MACHINE_S,
+    S_MAX_MISS,
+    S_MISS_S,
+    S_ON_S,
+    S_REGEN,
+    S_STARTS,
+)
 
 # rows of the per-interval series
 (
@@ -56,12 +70,7 @@ from ..model.tables import gear_index
     H_TCR,
 ) = range(19)
 N_ROWS = 19
-N_TERMS = len(hy.HYBRID_TERMS)
-# sums after the energy terms
-S_FUEL, S_DIST, S_STARTS, S_MISS_S, S_MAX_MISS, S_MACHINE_S, S_BATTERY_S, S_REGEN, S_ON_S = range(
-    N_TERMS, N_TERMS + 9
-)
-N_SUMS = N_TERMS + 9
+N_SUMS = N_COMMON_SUMS  # the running sums: the energy terms, then those of methods._hybrid
 MISS_TOLERANCE_N = 1e-9
 
 
@@ -330,53 +339,10 @@ _COLUMNS = {
 
 
 def _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu):
-    from ..result import ElectricBalance, Result, TraceMiss
-
-    ts = np.asarray(cycle.time_s, float)
-    idx = np.minimum(np.arange(ts.size), n - 1)
-    series = {k: rows[j, idx].copy() for k, j in _COLUMNS.items()}
-    series["time_s"] = ts.copy()
-    series["speed_mps"] = np.asarray(cycle.speed_mps, float).copy()
-    series["reference_speed_mps"] = series["speed_mps"].copy()
-    series["soc"] = np.append(rows[H_SOC, : ts.size - 1], soc_end)
-    for k in ("engine_on", "machine_at_limit", "battery_at_limit"):
-        series[k] = series[k] > 0.5
+    series = _hybrid.series(cycle, rows, _COLUMNS, H_SOC, soc_end, n)
     # the engine turns with the input shaft while it runs, and stands still while its clutch is open
     series["engine_speed_radps"] = np.where(series["engine_on"], series["machine_speed_radps"], 0.0)
-    terms = {name: float(sums[q]) for q, name in enumerate(hy.HYBRID_TERMS)}
-    fuel = float(sums[S_FUEL])
-    distance = float(sums[S_DIST])
-    electric = hy.electric_figures(
-        params, terms, fuel, distance, soc_start, soc_end, sums[S_REGEN], sums[S_STARTS], sums[S_ON_S], ems
-    )
-    balance = ElectricBalance(terms)  # indicated + chemical = the rest
-    trace = TraceMiss(
-        seconds=round(float(sums[S_MISS_S]), 9),
-        max_torque_shortfall_nm=float(sums[S_MAX_MISS]),
-        details={
-            "machine_at_limit_s": round(float(sums[S_MACHINE_S]), 6),
-            "battery_at_limit_s": round(float(sums[S_BATTERY_S]), 6),
-            "torque_beyond_full_load_s": round(float(sums[S_MISS_S]), 6),
-        },
-    )
-    return Result(
-        method="backward",
-        cycle=cycle.name,
-        driver=None,
-        mode=mode,
-        series=series,
-        fuel_kg=fuel,
-        distance_m=distance,
-        fuel_density_kg_per_l=params.simulation.fuel_density,
-        cpu_time_s=cpu,
-        steps=int(n),
-        trace_miss=trace,
-        energy=balance,
-        vehicle=params.name,
-        solver={"steps": int(n), "ems": ems},
-        limits={},
-        electric=electric,
-    )
+    return _hybrid.result(cycle, params, ems, mode, series, sums, soc_start, soc_end, n, cpu)
 
 
 def run_inverse(cycle, params, *, driver: str = "2", ems: str | None = None, mode: str = "realistic"):

@@ -33,6 +33,20 @@ from ..model import hybrid as hy
 from ..model import split as sp
 from ..model import tables as tb
 from ..model._compile import kernel
+from . import _hybrid
+from ._hybrid import (
+    N_COMMON_SUMS,
+    N_TERMS,
+    S_BATTERY_S,
+    S_DIST,
+    S_FUEL,
+    S_MACHINE_S,
+    S_MAX_MISS,
+    S_MISS_S,
+    S_ON_S,
+    S_REGEN,
+    S_STARTS,
+)
 
 # rows of the per-interval series
 (
@@ -60,12 +74,9 @@ from ..model._compile import kernel
     R_PM,
 ) = range(22)
 N_ROWS = 22
-N_TERMS = len(hy.HYBRID_TERMS)
-# sums after the energy terms
-(S_FUEL, S_DIST, S_STARTS, S_MISS_S, S_MAX_MISS, S_MACHINE_S, S_BATTERY_S, S_REGEN, S_ON_S, S_NONE_S) = range(
-    N_TERMS, N_TERMS + 10
-)
-N_SUMS = N_TERMS + 10
+# the running sums: the energy terms, those of methods._hybrid, then this layout's own
+S_NONE_S = N_COMMON_SUMS  # seconds with no engine choice the gear set can take
+N_SUMS = N_COMMON_SUMS + 1
 RULE_TRIES = 12  # the rule's engine power, a fifth less each time the gear set cannot take it
 
 
@@ -397,51 +408,9 @@ _COLUMNS = {
 
 
 def _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu):
-    from ..result import ElectricBalance, Result, TraceMiss
-
-    ts = np.asarray(cycle.time_s, float)
-    idx = np.minimum(np.arange(ts.size), n - 1)
-    series = {k: rows[j, idx].copy() for k, j in _COLUMNS.items()}
-    series["time_s"] = ts.copy()
-    series["speed_mps"] = np.asarray(cycle.speed_mps, float).copy()
-    series["reference_speed_mps"] = series["speed_mps"].copy()
-    series["soc"] = np.append(rows[R_SOC, : ts.size - 1], soc_end)
-    for k in ("engine_on", "machine_at_limit", "battery_at_limit"):
-        series[k] = series[k] > 0.5
-    terms = {name: float(sums[q]) for q, name in enumerate(hy.HYBRID_TERMS)}
-    fuel = float(sums[S_FUEL])
-    distance = float(sums[S_DIST])
-    electric = hy.electric_figures(
-        params, terms, fuel, distance, soc_start, soc_end, sums[S_REGEN], sums[S_STARTS], sums[S_ON_S], ems
-    )
-    trace = TraceMiss(
-        seconds=round(float(sums[S_MISS_S]), 9),
-        max_torque_shortfall_nm=float(sums[S_MAX_MISS]),
-        details={
-            "machine_at_limit_s": round(float(sums[S_MACHINE_S]), 6),
-            "battery_at_limit_s": round(float(sums[S_BATTERY_S]), 6),
-            "torque_beyond_full_load_s": round(float(sums[S_MISS_S]), 6),
-            "no_choice_within_gear_set_s": round(float(sums[S_NONE_S]), 6),
-        },
-    )
-    return Result(
-        method="backward",
-        cycle=cycle.name,
-        driver=None,
-        mode=mode,
-        series=series,
-        fuel_kg=fuel,
-        distance_m=distance,
-        fuel_density_kg_per_l=params.simulation.fuel_density,
-        cpu_time_s=cpu,
-        steps=int(n),
-        trace_miss=trace,
-        energy=ElectricBalance(terms),  # indicated + chemical = the rest
-        vehicle=params.name,
-        solver={"steps": int(n), "ems": ems},
-        limits={},
-        electric=electric,
-    )
+    series = _hybrid.series(cycle, rows, _COLUMNS, R_SOC, soc_end, n)
+    details = {"no_choice_within_gear_set_s": round(float(sums[S_NONE_S]), 6)}
+    return _hybrid.result(cycle, params, ems, mode, series, sums, soc_start, soc_end, n, cpu, details)
 
 
 def run_inverse(cycle, params, *, driver: str = "2", ems: str | None = None, mode: str = "realistic"):

@@ -1,0 +1,73 @@
+"""What the hybrid layouts' backward methods share after their kernels: the running sums' places and the
+:class:`vpsim.result.Result` they make of a run (the P2 of :mod:`vpsim.methods.hev`, the power split of
+:mod:`vpsim.methods.hev_split`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import hybrid as hy
+
+N_TERMS = len(hy.HYBRID_TERMS)
+# the running sums after the energy terms, in every layout's kernel (a layout may add its own after them)
+S_FUEL, S_DIST, S_STARTS, S_MISS_S, S_MAX_MISS, S_MACHINE_S, S_BATTERY_S, S_REGEN, S_ON_S = range(
+    N_TERMS, N_TERMS + 9
+)
+N_COMMON_SUMS = N_TERMS + 9
+
+
+def series(cycle, rows, columns: dict[str, int], soc_row: int, soc_end: float, n: int) -> dict:
+    """The run's series at the cycle's samples: each interval's row (the last repeated at the end), the
+    cycle's time and speed, the state of charge at each sample, the flags as booleans."""
+    ts = np.asarray(cycle.time_s, float)
+    idx = np.minimum(np.arange(ts.size), n - 1)
+    out = {k: rows[j, idx].copy() for k, j in columns.items()}
+    out["time_s"] = ts.copy()
+    out["speed_mps"] = np.asarray(cycle.speed_mps, float).copy()
+    out["reference_speed_mps"] = out["speed_mps"].copy()
+    out["soc"] = np.append(rows[soc_row, : ts.size - 1], soc_end)
+    for k in ("engine_on", "machine_at_limit", "battery_at_limit"):
+        out[k] = out[k] > 0.5
+    return out
+
+
+def result(cycle, params, ems, mode, series, sums, soc_start, soc_end, n, cpu, details=None):
+    """The backward run's :class:`vpsim.result.Result`: the energy balance of :data:`HYBRID_TERMS`
+    (indicated + chemical = the rest), the charge-sustaining figures, the trace miss with the time at the
+    machine's and the battery's limits (and a layout's own ``details``)."""
+    from ..result import ElectricBalance, Result, TraceMiss
+
+    terms = {name: float(sums[q]) for q, name in enumerate(hy.HYBRID_TERMS)}
+    fuel = float(sums[S_FUEL])
+    distance = float(sums[S_DIST])
+    electric = hy.electric_figures(
+        params, terms, fuel, distance, soc_start, soc_end, sums[S_REGEN], sums[S_STARTS], sums[S_ON_S], ems
+    )
+    trace = TraceMiss(
+        seconds=round(float(sums[S_MISS_S]), 9),
+        max_torque_shortfall_nm=float(sums[S_MAX_MISS]),
+        details={
+            "machine_at_limit_s": round(float(sums[S_MACHINE_S]), 6),
+            "battery_at_limit_s": round(float(sums[S_BATTERY_S]), 6),
+            "torque_beyond_full_load_s": round(float(sums[S_MISS_S]), 6),
+            **(details or {}),
+        },
+    )
+    return Result(
+        method="backward",
+        cycle=cycle.name,
+        driver=None,
+        mode=mode,
+        series=series,
+        fuel_kg=fuel,
+        distance_m=distance,
+        fuel_density_kg_per_l=params.simulation.fuel_density,
+        cpu_time_s=cpu,
+        steps=int(n),
+        trace_miss=trace,
+        energy=ElectricBalance(terms),
+        vehicle=params.name,
+        solver={"steps": int(n), "ems": ems},
+        limits={},
+        electric=electric,
+    )
