@@ -101,6 +101,19 @@ def scale_engine(base, *, bore: float, stroke: float, cylinders: int, inertia: f
     )
 
 
+def scaled_machine(machine, rated_power: float) -> dict[str, float]:
+    """A machine section scaled to ``rated_power`` at the same base and top speeds: its rotor's length (so
+    its torque and its inertia) in proportion to the power; ``rated_power`` and ``inertia`` of the result."""
+    k = rated_power / machine.rated_power
+    return {"rated_power": float(rated_power), "inertia": machine.inertia * k}
+
+
+def mass_ratio(mass_kg: float, vehicle, bounds: tuple[float, float]) -> float:
+    """A car's test mass over a reference vehicle section's mass, held within ``bounds``: the factor a
+    component sized by the car's weight is scaled by."""
+    return min(max(mass_kg / vehicle.mass, bounds[0]), bounds[1])
+
+
 def scaled_parameters(params, *, bore: float, stroke: float, cylinders: int, inertia: float | None = None):
     """``params`` with its engine scaled (:func:`scale_engine`), validated like any parameter set."""
     from dataclasses import asdict

@@ -331,8 +331,9 @@ def machine_sizes(rec: HEVRecord, base) -> dict[str, float]:
     if rec.layout == "hev_split":
         k = rec.rated_power_kw * 1e3 / base.engine.rated_power
         return {"machine": base.machine.rated_power * k, "generator": base.split.generator_rated_power * k}
-    k = min(max(rec.mass_kg / base.vehicle.mass, P2_MACHINE_SCALE[0]), P2_MACHINE_SCALE[1])
-    return {"machine": base.machine.rated_power * k}
+    from ..scaling import mass_ratio
+
+    return {"machine": base.machine.rated_power * mass_ratio(rec.mass_kg, base.vehicle, P2_MACHINE_SCALE)}
 
 
 def hev_parameters(rec: HEVRecord, technology: dict | None = None):
@@ -342,7 +343,7 @@ def hev_parameters(rec: HEVRecord, technology: dict | None = None):
     from ..cycles import load_cycle
     from ..errors import VpsimError
     from ..params import load_parameters
-    from ..scaling import scale_engine
+    from ..scaling import scale_engine, scaled_machine
     from .vehicle import (
         AIR_DENSITY,
         FRONTAL_AREA_M2,
@@ -362,7 +363,6 @@ def hev_parameters(rec: HEVRecord, technology: dict | None = None):
     bore, stroke = bore_stroke(rec.displacement_l, rec.cylinders)
     eng = scale_engine(base.engine, bore=bore, stroke=stroke, cylinders=rec.cylinders)
     sizes = machine_sizes(rec, base)
-    k_machine = sizes["machine"] / base.machine.rated_power
     sections = {
         "vehicle": {
             "mass": rec.mass_kg,
@@ -387,7 +387,7 @@ def hev_parameters(rec: HEVRecord, technology: dict | None = None):
             "fuel_heating_value": FUEL_LHV_J_PER_KG,
             "rated_power": rec.rated_power_kw * 1e3,
         },
-        "machine": {"rated_power": sizes["machine"], "inertia": base.machine.inertia * k_machine},
+        "machine": scaled_machine(base.machine, sizes["machine"]),
         "battery": {"cells_in_parallel": pack_strings(base, sizes["machine"])},
         "electric": {},
         "simulation": {"fuel_density": FUEL_DENSITY_KG_PER_L},
