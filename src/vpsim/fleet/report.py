@@ -572,11 +572,48 @@ def _diagonal(ax, lo, hi, title, measured_unit, predicted_unit):
     ax.legend(fontsize=7, loc="upper left")
 
 
-def figure_predicted_vs_measured(df, cycles, peer: bool, ev=None):
-    """One panel per conventional cycle (mpg) and, with battery-electric rows ``ev``, one per EV test
-    (MPGe: green diamonds)."""
+def figure_predicted_vs_measured(df, cycles, peer: bool, ev=None, hev=None):
+    """One panel per conventional cycle (mpg); with battery-electric rows ``ev``, one per EV test (MPGe:
+    green diamonds); with full-hybrid rows ``hev``, one per hybrid test (charge-sustaining mpg: purple
+    triangles, trace misses as red crosses; FASTSim's hybrid with its defaults beside them)."""
     ev_cycles = [c for c in EV_CYCLES if ev is not None and (ev["cycle"] == c).any()]
-    fig, axes = _axes_grid(len(cycles) + len(ev_cycles))
+    hev_cycles = [c for c in HEV_CYCLES if hev is not None and (hev["cycle"] == c).any()]
+    fig, axes = _axes_grid(len(cycles) + len(ev_cycles) + len(hev_cycles))
+    first = len(cycles) + len(ev_cycles)
+    for ax, c in zip(axes[first:], hev_cycles, strict=False):
+        sub = hev[(hev["cycle"] == c) & np.isfinite(hev["predicted_mpg"].to_numpy(float))]
+        vals = np.concatenate([sub["measured_mpg"], sub["predicted_mpg"]])
+        lo, hi = (0.9 * vals.min(), 1.05 * vals.max()) if vals.size else (0, 1)
+        if peer and np.isfinite(sub["fastsim_mpg"].to_numpy(float)).any():
+            ax.scatter(
+                sub["measured_mpg"],
+                sub["fastsim_mpg"],
+                s=14,
+                marker="s",
+                c="tab:orange",
+                alpha=0.45,
+                label="FASTSim 3.1 hybrid, defaults",
+            )
+        miss = (sub["status"] == "trace_miss").to_numpy()
+        ax.scatter(
+            sub["measured_mpg"][~miss],
+            sub["predicted_mpg"][~miss],
+            s=24,
+            marker="^",
+            c="tab:purple",
+            alpha=0.75,
+            label="vpsim hybrid (ECMS, charge-sustaining)",
+        )
+        if miss.any():
+            ax.scatter(
+                sub["measured_mpg"][miss],
+                sub["predicted_mpg"][miss],
+                s=20,
+                marker="x",
+                c="tab:red",
+                label="vpsim hybrid, trace miss",
+            )
+        _diagonal(ax, lo, hi, f"full hybrid, {c} (n = {len(sub)})", "mpg", "mpg")
     for ax, c in zip(axes[len(cycles) :], ev_cycles, strict=False):
         sub = ev[(ev["cycle"] == c) & np.isfinite(ev["predicted_mpge"].to_numpy(float))]
         vals = np.concatenate([sub["measured_mpge"], sub["predicted_mpge"]])
@@ -639,6 +676,9 @@ def figure_predicted_vs_measured(df, cycles, peer: bool, ev=None):
         _diagonal(ax, lo, hi, f"{c} (n = {len(sub)})", "mpg", "mpg")
     fig.suptitle(
         "Predicted against measured fuel economy (MPGe for the battery-electric cars), EPA test cars"
+        if not hev_cycles
+        else "Predicted against measured fuel economy (MPGe for the battery-electric cars; hybrids "
+        "charge-sustaining), EPA test cars"
     )
     return fig
 
@@ -826,7 +866,9 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
     peer = bool(run.peer.get("available"))
     w = worst(df, inputs=_inputs(run))
     figs = {
-        "predicted_vs_measured.png": figure_predicted_vs_measured(df, run.cycles, peer, run.ev_frame()),
+        "predicted_vs_measured.png": figure_predicted_vs_measured(
+            df, run.cycles, peer, run.ev_frame(), run.hev_frame()
+        ),
         "error_histograms.png": figure_histograms(df, run.cycles, peer),
         "error_by_group.png": figure_by_group(df, run.cycles),
         "worst_vehicles.png": figure_worst(w),
