@@ -535,6 +535,43 @@ def _rounded(t: dict) -> dict:
     return {k: (round(x, 6) if isinstance(x, float) else x) for k, x in t.items()}
 
 
+def _fit_classes(module, grid, meas, ok, class_of, fold_of, k, out) -> dict:
+    """The electric or hybrid fleet's technology (``module``: :mod:`vpsim.fleet.ev` or :mod:`.hev`, its
+    ``fit`` and ``CLASSES``): per fold and class out of fold, into ``out["technology"]``, and per class on
+    every vehicle into ``out["technology_all"]``; the out-of-fold fits {(fold, class): parameters}."""
+    vfold = np.array([fold_of[r["key"]] for r in ok])
+    vclass = np.array([class_of[r["key"]] for r in ok], dtype=object)
+    tech = cal.per_fold_and_class(
+        lambda rows: module.fit(grid[rows], meas[rows]), vfold, vclass, k, module.CLASSES
+    )
+    out["technology"] = {f"fold{f}.{c}": _rounded(t) for (f, c), t in sorted(tech.items())}
+    out["technology_all"] = {}
+    for c in module.CLASSES:
+        rows = vclass == c
+        if rows.any():
+            params_all, loss_all = module.fit(grid[rows], meas[rows])
+            out["technology_all"][c] = _rounded(
+                {**params_all, "train_loss": loss_all, "n_train": int(rows.sum())}
+            )
+    return tech
+
+
+def _predict(executor, predict_chunk, work, failed, tech, fold_of, class_of, chunk: int) -> dict:
+    """One real run per (vehicle, test) at its fold's class technology, in chunks on ``executor``:
+    {(key, cycle): row}."""
+    items = [
+        (v, c, tech[(fold_of[v.key], class_of[v.key])])
+        for v, cs in work
+        for c in cs
+        if (v.key, c) not in failed
+    ]
+    preds: dict = {}
+    for part in executor.map(predict_chunk, [items[i : i + chunk] for i in range(0, len(items), chunk)]):
+        for r in part:
+            preds[(r["key"], r["cycle"])] = r
+    return preds
+
+
 def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings) -> dict:
     """The battery-electric records on their two tests: technology of the class ``bev`` fitted out of fold
     exactly as the conventional classes' (folds of :func:`vpsim.fleet.calibrate.assign_folds` over the EV
@@ -578,31 +615,9 @@ def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings) -> d
         return out
     grid = np.stack([r["log_wall"] for r in ok])
     meas = np.array([math.log(evm.wall_wh_per_km(by_key[r["key"]].measured_mpge[r["cycle"]])) for r in ok])
-    vfold = np.array([fold_of[r["key"]] for r in ok])
     class_of = {v.key: evm.ev_class(v) for v in evs}
-    vclass = np.array([class_of[r["key"]] for r in ok], dtype=object)
-    tech = cal.per_fold_and_class(lambda rows: evm.fit(grid[rows], meas[rows]), vfold, vclass, k, evm.CLASSES)
-    out["technology"] = {f"fold{f}.{c}": _rounded(t) for (f, c), t in sorted(tech.items())}
-    out["technology_all"] = {}
-    for c in evm.CLASSES:
-        rows = vclass == c
-        if rows.any():
-            params_all, loss_all = evm.fit(grid[rows], meas[rows])
-            out["technology_all"][c] = _rounded(
-                {**params_all, "train_loss": loss_all, "n_train": int(rows.sum())}
-            )
-    items = [
-        (v, c, tech[(fold_of[v.key], class_of[v.key])])
-        for v, cs in work
-        for c in cs
-        if (v.key, c) not in failed
-    ]
-    preds: dict = {}
-    for part in executor.map(
-        evm.predict_chunk, [items[i : i + 4 * EV_CHUNK] for i in range(0, len(items), 4 * EV_CHUNK)]
-    ):
-        for r in part:
-            preds[(r["key"], r["cycle"])] = r
+    tech = _fit_classes(evm, grid, meas, ok, class_of, fold_of, k, out)
+    preds = _predict(executor, evm.predict_chunk, work, failed, tech, fold_of, class_of, 4 * EV_CHUNK)
     timings["ev_vpsim_s"] = time.perf_counter() - t0
     peer_rows: dict = {}
     peer_cal_rows: dict = {}
@@ -751,30 +766,9 @@ def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings) ->
         return out
     grid = np.stack([r["log_fuel"] for r in ok])
     meas = np.array([_log_l100(by_key[r["key"]].measured_mpg[r["cycle"]]) for r in ok])
-    vfold = np.array([fold_of[r["key"]] for r in ok])
     class_of = {v.key: hm.hev_class(v) for v in hevs}
-    vclass = np.array([class_of[r["key"]] for r in ok], dtype=object)
-    tech = cal.per_fold_and_class(lambda rows: hm.fit(grid[rows], meas[rows]), vfold, vclass, k, hm.CLASSES)
-    out["technology"] = {f"fold{f}.{c}": _rounded(t) for (f, c), t in sorted(tech.items())}
-    for c in hm.CLASSES:
-        rows = vclass == c
-        if rows.any():
-            params_all, loss_all = hm.fit(grid[rows], meas[rows])
-            out["technology_all"][c] = _rounded(
-                {**params_all, "train_loss": loss_all, "n_train": int(rows.sum())}
-            )
-    items = [
-        (v, c, tech[(fold_of[v.key], class_of[v.key])])
-        for v, cs in work
-        for c in cs
-        if (v.key, c) not in failed
-    ]
-    preds: dict = {}
-    for part in executor.map(
-        hm.predict_chunk, [items[i : i + 4 * HEV_CHUNK] for i in range(0, len(items), 4 * HEV_CHUNK)]
-    ):
-        for r in part:
-            preds[(r["key"], r["cycle"])] = r
+    tech = _fit_classes(hm, grid, meas, ok, class_of, fold_of, k, out)
+    preds = _predict(executor, hm.predict_chunk, work, failed, tech, fold_of, class_of, 4 * HEV_CHUNK)
     timings["hev_vpsim_s"] = time.perf_counter() - t0
     peer_rows: dict = {}
     if peer_state.get("available"):
