@@ -92,3 +92,40 @@ def test_all_first_gear_is_reported_as_engine_over_speed(tmp_path):
     dev = r.deviations
     assert dev.engine_speed_out_of_range_s > 100 and dev.max_engine_speed_radps > 1000
     assert dev.demand_not_deliverable_s >= dev.engine_speed_out_of_range_s
+
+
+def test_a_run_that_became_non_finite_is_refused_not_shown_as_zero(tmp_path, capsys):
+    """A final-drive ratio of 5e-324 passes the range check (> 0) but makes every torque infinite; the run
+    must end in one line naming what became non-finite, not 0 L/100 km (as a denormal MG1 base speed once
+    gave a power split)."""
+    import pytest
+
+    from vpsim.cli.main import main
+    from vpsim.errors import NonFiniteRunError
+
+    for base in ("hofman2011", "bev"):
+        car = tmp_path / f"{base}.toml"
+        car.write_text(f'base = "{base}"\n[transmission]\nfinal_drive = 5e-324\n')
+        # (np.errstate: the overflow's own warning, printed by the CLI, is an error under pytest)
+        with pytest.raises(NonFiniteRunError, match="non-finite: energy term"), np.errstate(all="ignore"):
+            vpsim.simulate("udds", "backward", car)
+        with np.errstate(all="ignore"):
+            assert main(["simulate", "--vehicle", str(car), "--cycle", "udds", "--json"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and "non-finite" in err and "Traceback" not in err
+
+
+def test_machine_ratings_a_model_cannot_divide_by_are_refused(tmp_path, capsys):
+    from vpsim.cli.main import main
+
+    for base, sec, name in (
+        ("hev_split", "split", "generator_base_speed"),
+        ("hev_split", "split", "generator_rated_power"),
+        ("bev", "machine", "base_speed"),
+        ("bev", "machine", "rated_power"),
+    ):
+        car = tmp_path / "car.toml"
+        car.write_text(f'base = "{base}"\n[{sec}]\n{name} = 2.225073858507e-311\n')
+        assert main(["simulate", "--vehicle", str(car), "--cycle", "udds", "--json"]) == 2
+        err = capsys.readouterr().err
+        assert f"{sec}.{name} = 2.22507e-311 is outside the plausible range" in err

@@ -23,3 +23,8 @@ class EngineFileError(VpsimError):
 
 class MachineFileError(EngineFileError):
     """An electric-machine data file (ADVISOR MC_*.m or GC_*.m) cannot be read safely or makes no sense."""
+
+
+class NonFiniteRunError(VpsimError):
+    """A run's state or totals became NaN or infinite: the parameters are outside what the model can
+    compute (a result is refused rather than shown with a wrong number)."""

@@ -429,13 +429,13 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "battery.soc_initial": (0.0, 1.0, True),
     "battery.soc_min": (0.0, 1.0, True),
     "battery.soc_max": (0.0, 1.0, True),
-    "machine.rated_power": (0.0, 2.0e6, False),
-    "machine.base_speed": (0.0, 5000.0, False),
-    "machine.max_speed": (0.0, 5000.0, False),
+    "machine.rated_power": (100.0, 2.0e6, True),  # W: lower bounds keep T_r = P_r / w_b finite
+    "machine.base_speed": (1.0, 5000.0, True),  # rad/s: about 10 rpm up
+    "machine.max_speed": (1.0, 5000.0, True),
     "machine.inertia": (0.0, 10.0, True),
     "machine.loss_scale": (0.0, 10.0, False),
     "electric.accessory_power": (0.0, 1.0e5, True),
-    "electric.charger_efficiency": (0.0, 1.0, False),
+    "electric.charger_efficiency": (0.1, 1.0, True),  # real chargers 0.8 to 0.95
     "electric.regen_share": (0.0, 1.0, True),
     "electric.regen_speed_low": (0.0, 50.0, True),
     "electric.regen_speed_high": (0.0, 50.0, True),
@@ -455,9 +455,9 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "hybrid.dp_soc_span": (0.01, 1.0, True),
     "split.mg2_ratio": (0.1, 20.0, True),
     "split.engine_max_speed": (100.0, 2000.0, True),
-    "split.generator_rated_power": (0.0, 1.0e6, False),
-    "split.generator_base_speed": (0.0, 5000.0, False),
-    "split.generator_max_speed": (0.0, 5000.0, False),
+    "split.generator_rated_power": (100.0, 1.0e6, True),
+    "split.generator_base_speed": (1.0, 5000.0, True),
+    "split.generator_max_speed": (1.0, 5000.0, True),
     "split.generator_inertia": (0.0, 10.0, True),
 }
 # Whole numbers: (low, high). Production piston engines have 1 to 16 cylinders and are two-stroke (1

@@ -401,6 +401,36 @@ def _limits(params) -> dict:
     }
 
 
+def _refuse_non_finite(r) -> None:
+    """Raise :class:`~vpsim.errors.NonFiniteRunError` when a run's totals (fuel, distance, energy terms, the
+    final state of charge) are NaN or infinite: a parameter set the model cannot compute (a machine rated
+    at 1e-320 W, say) must not come out as 0 L/100 km. Names the first sample where the state of charge
+    stopped being finite, where there is one."""
+    from .errors import NonFiniteRunError
+
+    bad = [k for k, v in (("fuel_kg", r.fuel_kg), ("distance_m", r.distance_m)) if not np.isfinite(v)]
+    if r.energy is not None:
+        terms = r.energy.terms if isinstance(r.energy, ElectricBalance) else asdict(r.energy)
+        bad += [f"energy term {k}" for k, v in terms.items() if not np.isfinite(v)]
+    soc_end = r.electric.get("soc_end")
+    if soc_end is not None and not np.isfinite(soc_end):
+        bad.append("final state of charge")
+    if not bad:
+        return
+    where = ""
+    soc = r.series.get("soc") if isinstance(r.series, dict) else None
+    ts = r.series.get("time_s") if isinstance(r.series, dict) else None
+    if soc is not None and ts is not None and len(soc) == len(ts):
+        nonfinite = np.flatnonzero(~np.isfinite(np.asarray(soc, float)))
+        if nonfinite.size:
+            where = f" (the state of charge from t = {float(ts[nonfinite[0]]):g} s)"
+    raise NonFiniteRunError(
+        f"the {r.method} run of {r.vehicle or 'the vehicle'} on {r.cycle} became non-finite: "
+        f"{', '.join(bad[:4])}{' ...' if len(bad) > 4 else ''}{where}; "
+        "expected parameters the model can compute (check machine ratings, speeds and ratios)"
+    )
+
+
 @dataclass(frozen=True)
 class Result:
     """Outcome of one simulation: time series (``series``), summary figures, energy balance."""
@@ -422,6 +452,9 @@ class Result:
     solver: dict = field(default_factory=dict)  # integrator statistics (steps, rejections, evaluations)
     limits: dict = field(default_factory=dict, repr=False)  # physical limits the run is assessed against
     electric: dict = field(default_factory=dict)  # an electric powertrain's figures (ELECTRIC_KEYS and more)
+
+    def __post_init__(self) -> None:
+        _refuse_non_finite(self)
 
     @property
     def deviations(self) -> Deviations:

@@ -162,6 +162,13 @@ class MachineSpec:
                 f"machine max_speed_radps = {self.max_speed_radps:g} is below base_speed_radps = "
                 f"{self.base_speed_radps:g}; expected max speed >= base speed"
             )
+        t_r = self.rated_power_w / self.base_speed_radps
+        copper = REFERENCE_SPEED_RADPS / self.base_speed_radps
+        if not (math.isfinite(t_r) and t_r > 0.0 and math.isfinite(copper)):
+            raise ParameterError(
+                f"machine rated torque P_r / w_b = {self.rated_power_w:g} W / {self.base_speed_radps:g} "
+                f"rad/s = {t_r:g} N*m; expected a finite torque > 0"
+            )
         if self.kind not in KINDS:
             raise ParameterError(f"machine kind = {self.kind!r}; expected one of {', '.join(KINDS)}")
         if self.coefficients is None:
