@@ -342,7 +342,15 @@ def cases() -> list[Case]:
             S,
             "extra fields on a row",
             [*fe, "bad.csv", "--id", "T004", "--out", "c.toml"],
-            match="line 9",  # the whole list is refused, naming the row's line
+            match="T004 is excluded: unreadable row: line 9",  # only the vehicle the row names is left out
+            setup=_list_edit("T004", {}, extra_cells=3),
+        ),
+        Case(
+            S,
+            "extra fields on another vehicle's row",
+            [*fe, "bad.csv", "--id", "T001", "--out", "c.toml"],
+            expect="ok",
+            outs=("c.toml",),
             setup=_list_edit("T004", {}, extra_cells=3),
         ),
         Case(S, "unknown --id", [*fe, "list.csv", "--id", "NOPE", "--out", "c.toml"], match="NOPE"),

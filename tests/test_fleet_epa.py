@@ -75,6 +75,34 @@ def test_bad_rows_are_excluded_with_their_reason(tmp_path):
         cars.find("X104")
 
 
+def test_a_row_with_extra_fields_leaves_out_its_vehicle_not_the_list(tmp_path):
+    """A stray separator in one row (more fields than the header) used to refuse the whole list; now only the
+    vehicle that row names is left out, with the line, and every other vehicle reads as before."""
+    good = read_test_car_list(write_list(tmp_path / "list.csv", bad_rows=False))
+    lines = (tmp_path / "list.csv").read_text().splitlines()
+    victim = CARS[1][0]
+    at = next(i for i, line in enumerate(lines) if f",{victim}," in line and ",HWY," in line)
+    lines[at] += ",x,y"  # two fields too many
+    lines.append("Ghost,,,," + ",".join(["z"] * (lines[0].count(",") + 2)))  # ragged, no vehicle
+    (tmp_path / "ragged.csv").write_text("\n".join(lines) + "\n")
+    cars = read_test_car_list(tmp_path / "ragged.csv")
+    assert {v.vehicle_id for v in cars.vehicles} == {v.vehicle_id for v in good.vehicles} - {victim}
+    kept = {v.vehicle_id: v.measured_mpg for v in good.vehicles if v.vehicle_id != victim}
+    assert {v.vehicle_id: v.measured_mpg for v in cars.vehicles} == kept
+    assert cars.excluded == {"unreadable row": 1}
+    ncols = lines[0].count(",") + 1
+    why = {r["vehicle_id"]: r["reason"] for r in cars.excluded_rows}
+    assert why[victim] == f"unreadable row: line {at + 1} has {ncols + 2} fields where the header has {ncols}"
+    ghost = [r for r in cars.excluded_rows if r["line"] == len(lines)]
+    assert len(ghost) == 1 and ghost[0]["reason"].startswith("unreadable row")
+    with pytest.raises(VpsimError, match=f"{victim} is excluded: unreadable row: line {at + 1}"):
+        cars.find(victim)
+    # the other vehicles' rows keep their own line numbers
+    assert [r["line"] for r in cars.excluded_rows if r["vehicle_id"] == victim] == [
+        next(i for i, line in enumerate(lines) if f",{victim}," in line) + 1
+    ]
+
+
 def test_implied_highway_efficiency_by_hand(tmp_path):
     # steady 60 mph on a made-up "cycle" would give F v / (fuel power); here the HWFET itself: check the
     # conventional made-up cars stay well below the hybrid limit and scale as 1/mpg

@@ -61,6 +61,8 @@ Each excluded vehicle, and each skipped or implausible test row, is also listed 
 
 from __future__ import annotations
 
+import csv
+import io
 import math
 import re
 from collections import Counter
@@ -389,15 +391,22 @@ def read_test_car_list(path: str | Path) -> TestCarList:
     import pandas as pd
 
     path = check_regular_file(path, VpsimError, "CSV test car list")  # before pandas opens a FIFO or device
+    ragged: list[tuple[int, list[str]]] = []  # (line, fields) of rows with more fields than the header
     try:
         sep = list_separator(path)
-        df = pd.read_csv(path, sep=sep, encoding="utf-8-sig", dtype=str, keep_default_na=False)
+        try:
+            df = pd.read_csv(path, sep=sep, encoding="utf-8-sig", dtype=str, keep_default_na=False)
+        except pd.errors.ParserError as exc:
+            if "Expected" not in str(exc):  # only a row with extra fields is one record's problem
+                raise
+            df, ragged = _read_ragged(path, sep)
     except OSError as exc:  # permission denied, an I/O error
         raise VpsimError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    except (UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+    except (UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError, csv.Error) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise VpsimError(f"{path}: not a readable CSV test car list ({msg})") from None
     df.columns = [c.strip() for c in df.columns]
+    lines = df.pop(_LINE).tolist() if _LINE in df.columns else None
     for k in OPTIONAL_COLUMNS:
         if COL[k] not in df.columns:
             df[COL[k]] = ""
@@ -416,9 +425,9 @@ def read_test_car_list(path: str | Path) -> TestCarList:
         for k in COL:
             if k not in NUMERIC:
                 r[k] = _text(r[k])
-        r["line"] = i + 2  # header is line 1
+        r["line"] = i + 2 if lines is None else lines[i]  # header is line 1
         rows.append(r)
-    if not rows:
+    if not rows and not ragged:
         raise VpsimError(f"{path}: no test rows below the header")
     groups: dict[tuple[str, int], list[dict]] = {}
     excluded_rows: list[dict] = []
@@ -438,6 +447,8 @@ def read_test_car_list(path: str | Path) -> TestCarList:
             )
             continue
         groups.setdefault((r["vehicle_id"], int(r["configuration"])), []).append(r)
+    excluded: Counter = Counter()
+    _exclude_ragged(ragged, list(df.columns), groups, excluded, excluded_rows)
     # what a vehicle's own tests say, then what the other test vehicles of the same model say (a plug-in's
     # charge-depleting tests are often on another test vehicle than its charge-sustaining ones)
     kinds = {key: _classify(tests) for key, tests in groups.items()}
@@ -448,7 +459,6 @@ def read_test_car_list(path: str | Path) -> TestCarList:
     vehicles: list[VehicleRecord] = []
     ev_vehicles: list = []
     hev_vehicles: list = []
-    excluded: Counter = Counter()
     for (vid, cfg), tests in groups.items():
         kind = kinds[(vid, cfg)]
         if (kind is None or kind.startswith("mild hybrid")) and _model_key(tests[0]) in model_kind:
@@ -480,6 +490,73 @@ def read_test_car_list(path: str | Path) -> TestCarList:
         else:
             vehicles.append(rec)
     return TestCarList(str(path), vehicles, excluded, excluded_rows, len(rows), ev_vehicles, hev_vehicles)
+
+
+_LINE = "\x00line"  # the line number column of a list read row by row (no header can be named so)
+RAGGED_REASON = "unreadable row"
+
+
+def _read_ragged(path: Path, sep: str):
+    """The list read row by row when some rows have more fields than the header (a stray separator, a
+    broken export): the others as a table (with their line numbers in column ``_LINE``), the ragged ones as
+    (line, fields), so that only the vehicles they belong to are left out, not the whole list."""
+    import pandas as pd
+
+    with path.open(encoding="utf-8-sig", newline="") as fh:
+        reader = csv.reader(fh, delimiter=sep)
+        header = next(reader, None)
+        if header is None:
+            raise pd.errors.EmptyDataError("no header")
+        n = len(header)
+        good, lines, ragged = [], [], []
+        line = 1
+        for row in reader:
+            if not row:  # a blank line (pandas skips them too and does not count them)
+                continue
+            line += 1
+            if len(row) > n:
+                ragged.append((line, row))
+            else:
+                good.append(row + [""] * (n - len(row)))
+                lines.append(line)
+    buf = io.StringIO()  # the good rows back through pandas' own reader: the same columns and text as
+    csv.writer(buf, delimiter=sep).writerows([header, *good])  # a list without ragged rows gives
+    buf.seek(0)
+    df = pd.read_csv(buf, sep=sep, dtype=str, keep_default_na=False)
+    df[_LINE] = lines
+    return df, ragged
+
+
+def _exclude_ragged(ragged, columns, groups, excluded: Counter, excluded_rows: list) -> None:
+    """Leave out each vehicle that a row with extra fields names (its Test Vehicle ID and configuration, read
+    at their columns' places): one of its tests cannot be read safely, so none of them is used. A ragged row
+    whose vehicle cannot be told is listed as an excluded test row."""
+    pos = {k: columns.index(COL[k]) if COL[k] in columns else -1 for k in ("vehicle_id", "configuration")}
+    for line, fields in ragged:
+        why = f"{RAGGED_REASON}: line {line} has {len(fields)} fields where the header has {len(columns)}"
+        vid = _text(fields[pos["vehicle_id"]]) if 0 <= pos["vehicle_id"] < len(fields) else ""
+        cfg = (
+            _num(fields[pos["configuration"]].strip())
+            if 0 <= pos["configuration"] < len(fields)
+            else math.nan
+        )
+        key = (vid, int(cfg)) if vid and math.isfinite(cfg) and cfg == int(cfg) else None
+        tests = groups.pop(key, None) if key is not None else None
+        if tests is not None:
+            excluded[RAGGED_REASON] += 1
+            excluded_rows.append(_excl(tests[0], why, test=False))
+            continue
+        excluded_rows.append(
+            {
+                "line": line,
+                "vehicle_id": vid,
+                "configuration": -1,
+                "make": "",
+                "model": "",
+                "test_number": "",
+                "reason": why,
+            }
+        )
 
 
 def _excl(r: dict, reason: str, *, test: bool) -> dict:
