@@ -418,3 +418,45 @@ def test_from_epa_names_why_every_row_of_a_vehicle_was_left_out(tmp_path, capsys
     lst = _edited(write_list(tmp_path / "list.csv"), tmp_path / "bad.csv", "T004", "configuration", value)
     code, _, err = run_cli(capsys, "vehicle", "from-epa", lst, "--id", "T004", "--out", tmp_path / "c.toml")
     assert code == 2 and f"vehicle T004: every test row is excluded ({reason})" in err, err
+
+
+@settings(max_examples=15)
+@given(
+    picks=st.lists(st.integers(min_value=0, max_value=10_000), min_size=1, max_size=3, unique=True),
+    extra=st.integers(min_value=1, max_value=40),
+    text=st.sampled_from(["x", "", '"a,b"', "1e999", ";"]),
+)
+def test_rows_with_extra_fields_leave_out_their_vehicles_only(tmp_path_factory, picks, extra, text):
+    """Any rows given extra fields (a stray separator, junk cells): the vehicles those rows name are excluded
+    as unreadable with their line, every other vehicle reads as from the clean list."""
+    from vpsim.fleet.epa import read_test_car_list
+
+    d = tmp_path_factory.mktemp("ragged")
+    lst = write_list(d / "list.csv")
+    with lst.open(newline="", encoding="utf-8-sig") as f:
+        rows = list(csv.reader(f))
+    i_id, i_cfg = rows[0].index("Test Vehicle ID"), rows[0].index("Test Veh Configuration #")
+    hit = sorted({1 + p % (len(rows) - 1) for p in picks})
+    for i in hit:
+        rows[i] += [text] * extra
+    with (d / "ragged.csv").open("w", newline="", encoding="utf-8") as f:
+        csv.writer(f).writerows(rows)
+    clean, ragged = read_test_car_list(lst), read_test_car_list(d / "ragged.csv")
+    gone = {(rows[i][i_id], int(rows[i][i_cfg])) for i in hit}
+    # (a vehicle of the same make and model as a left-out one may be classed differently without it: a
+    # plug-in's gasoline-only twin is one because of the plug-in's tests)
+    i_make, i_model = rows[0].index("Represented Test Veh Make"), rows[0].index("Represented Test Veh Model")
+    twins = {(rows[i][i_make].lower(), rows[i][i_model].lower()) for i in hit}
+    keep = lambda cars: {  # noqa: E731
+        (v.vehicle_id, v.configuration): v.as_dict()
+        for v in [*cars.vehicles, *cars.ev_vehicles, *cars.hev_vehicles]
+        if (v.vehicle_id, v.configuration) not in gone and (v.make.lower(), v.model.lower()) not in twins
+    }
+    assert keep(ragged) == keep(clean)
+    assert ragged.excluded["unreadable row"] == len(gone)
+    said = [r["reason"] for r in ragged.excluded_rows if r["reason"].startswith("unreadable row")]
+    # each vehicle is named once, at the first of its ragged rows
+    first = {}
+    for i in hit:
+        first.setdefault((rows[i][i_id], int(rows[i][i_cfg])), i + 1)
+    assert sorted(int(w.split("line ")[1].split()[0]) for w in said) == sorted(first.values())

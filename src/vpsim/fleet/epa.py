@@ -394,12 +394,10 @@ def read_test_car_list(path: str | Path) -> TestCarList:
     ragged: list[tuple[int, list[str]]] = []  # (line, fields) of rows with more fields than the header
     try:
         sep = list_separator(path)
-        try:
-            df = pd.read_csv(path, sep=sep, encoding="utf-8-sig", dtype=str, keep_default_na=False)
-        except pd.errors.ParserError as exc:
-            if "Expected" not in str(exc):  # only a row with extra fields is one record's problem
-                raise
+        if _has_ragged_rows(path, sep):  # (pandas would refuse the list, or shift a first such row silently)
             df, ragged = _read_ragged(path, sep)
+        else:
+            df = pd.read_csv(path, sep=sep, encoding="utf-8-sig", dtype=str, keep_default_na=False)
     except OSError as exc:  # permission denied, an I/O error
         raise VpsimError(f"{path}: cannot read ({exc.strerror or exc})") from None
     except (UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError, csv.Error) as exc:
@@ -496,6 +494,18 @@ _LINE = "\x00line"  # the line number column of a list read row by row (no heade
 RAGGED_REASON = "unreadable row"
 
 
+def _has_ragged_rows(path: Path, sep: str) -> bool:
+    """Whether a row has more fields than the header. pandas refuses such a list, or, when the first data row
+    is the one, takes its first field for an index and shifts every column of every row by one, silently."""
+    try:
+        with path.open(encoding="utf-8-sig", newline="") as fh:
+            reader = csv.reader(fh, delimiter=sep)
+            header = next(reader, None)
+            return header is not None and any(len(row) > len(header) for row in reader)
+    except (csv.Error, UnicodeDecodeError):  # (a NUL, a huge field, not UTF-8: pandas' reader says what)
+        return False
+
+
 def _read_ragged(path: Path, sep: str):
     """The list read row by row when some rows have more fields than the header (a stray separator, a
     broken export): the others as a table (with their line numbers in column ``_LINE``), the ragged ones as
@@ -529,34 +539,27 @@ def _read_ragged(path: Path, sep: str):
 
 def _exclude_ragged(ragged, columns, groups, excluded: Counter, excluded_rows: list) -> None:
     """Leave out each vehicle that a row with extra fields names (its Test Vehicle ID and configuration, read
-    at their columns' places): one of its tests cannot be read safely, so none of them is used. A ragged row
-    whose vehicle cannot be told is listed as an excluded test row."""
+    at their columns' places): one of its tests cannot be read safely, so none of them is used; the reason
+    names the vehicle's first such row. A ragged row whose vehicle cannot be told is listed on its own."""
     pos = {k: columns.index(COL[k]) if COL[k] in columns else -1 for k in ("vehicle_id", "configuration")}
+
+    def field_(fields, k):
+        return fields[pos[k]] if 0 <= pos[k] < len(fields) else ""
+
+    done: set = set()
     for line, fields in ragged:
         why = f"{RAGGED_REASON}: line {line} has {len(fields)} fields where the header has {len(columns)}"
-        vid = _text(fields[pos["vehicle_id"]]) if 0 <= pos["vehicle_id"] < len(fields) else ""
-        cfg = (
-            _num(fields[pos["configuration"]].strip())
-            if 0 <= pos["configuration"] < len(fields)
-            else math.nan
-        )
+        vid, cfg = _text(field_(fields, "vehicle_id")), _num(field_(fields, "configuration").strip())
         key = (vid, int(cfg)) if vid and math.isfinite(cfg) and cfg == int(cfg) else None
-        tests = groups.pop(key, None) if key is not None else None
-        if tests is not None:
-            excluded[RAGGED_REASON] += 1
-            excluded_rows.append(_excl(tests[0], why, test=False))
+        if key in done:
             continue
-        excluded_rows.append(
-            {
-                "line": line,
-                "vehicle_id": vid,
-                "configuration": -1,
-                "make": "",
-                "model": "",
-                "test_number": "",
-                "reason": why,
-            }
-        )
+        row = dict(line=line, vehicle_id=vid, configuration=-1, make="", model="", test_number="")
+        if key is not None:  # the vehicle, whether or not it has readable rows beside this one
+            done.add(key)
+            tests = groups.pop(key, None)
+            excluded[RAGGED_REASON] += 1
+            row = _excl(tests[0], why, test=False) if tests else dict(row, configuration=key[1])
+        excluded_rows.append(dict(row, reason=why))
 
 
 def _excl(r: dict, reason: str, *, test: bool) -> dict:
