@@ -44,14 +44,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import VpsimError
+from .model import electric as el
 from .model import engine as en
+from .model import hybrid as hy
 from .model import vehicle as vh
+from .model._compile import kernel
 from .model.record import record_array
 
 LAUNCH_SPEED = 250.0  # rad/s, engine speed held while the clutch slips at launch
 SHIFT_FRACTION = 0.9  # default upshift speed as a fraction of the max-power speed
 TARGET_KMH = 100.0
 _G = 1.0 + 1.0 / np.sqrt(2.0)  # gamma of ROS2
+BOOST_STEP = 2.0  # rad/s: the spacing of a P2 hybrid's boost-torque table
 
 
 @dataclass(frozen=True)
@@ -149,6 +154,7 @@ def acceleration_times(
     ratios = np.full((n, int(n_g.max())), np.nan)
     for k, p in enumerate(params_list):
         ratios[k, : n_g[k]] = p.transmission.ratios
+    boost, rotor_inertia = _boost_tables(params_list)
     full = _Designs(
         rec=np.concatenate([record_array(p) for p in params_list]).view(np.recarray),
         ratios=ratios,
@@ -156,6 +162,8 @@ def acceleration_times(
         rev_limit=rev_limit,
         w_shift=w_shift,
         w_launch=w_launch,
+        boost=boost,
+        rotor_inertia=rotor_inertia,
     )
     state = _State.start(full)
     reason = np.array([""] * n, dtype=object)
@@ -218,6 +226,8 @@ class _Designs:
     rev_limit: np.ndarray
     w_shift: np.ndarray
     w_launch: np.ndarray
+    boost: np.ndarray  # (designs, BOOST_POINTS): a P2 machine's boost torque on BOOST_STEP speeds; 0 without
+    rotor_inertia: np.ndarray  # the P2 machine's rotor, kg m^2 (0 without)
 
     def subset(self, sel) -> _Designs:
         return _Designs(
@@ -227,7 +237,17 @@ class _Designs:
             self.rev_limit[sel],
             self.w_shift[sel],
             self.w_launch[sel],
+            self.boost[sel],
+            self.rotor_inertia[sel],
         )
+
+    def _boost(self, w_m):
+        """The P2 machine's boost torque at input speed w_m, linear in the table (0 beyond it)."""
+        x = np.clip(w_m / BOOST_STEP, 0.0, self.boost.shape[1] - 1.0)
+        j = np.minimum(x.astype(int), self.boost.shape[1] - 2)
+        f = x - j
+        rows = np.arange(w_m.size)
+        return self.boost[rows, j] * (1.0 - f) + self.boost[rows, j + 1] * f
 
     def _engine_speed(self, v, i, slip):
         return np.where(
@@ -239,11 +259,16 @@ class _Designs:
         c = self.rec
         w_e = self._engine_speed(v, i, slip)
         t_cr = en.crank_torque(p, w_e, c)  # (2)-(8)
-        m_eff = np.where(slip, c.mass, vh.equivalent_mass(i, c))
+        # a P2 hybrid's machine turns with the gearbox input (behind the slipping clutch at launch) and adds
+        # its boost torque there; its rotor's inertia is seen at the wheels (E1). Both 0 without a machine
+        w_m = vh.engine_speed(v, i, c)
+        t_in = t_cr + self._boost(w_m)
+        rotor = el.rotor_mass(i, True, c, _Rotor(self.rotor_inertia))
+        m_eff = np.where(slip, c.mass, vh.equivalent_mass(i, c)) + rotor
         # launching forward: rolling resistance acts from the start (as static friction it holds a car whose
         # drive force is smaller: see the ``stuck`` check)
         road = vh.aero_force(v, c) + vh.rolling_force_in_motion(v, c)
-        dv = (vh.engine_to_wheel_force(t_cr, i, c) - road) / m_eff
+        dv = (vh.engine_to_wheel_force(t_in, i, c) - road) / m_eff
         dp, _ = en.manifold_pressure_rate_array(p, c.max_throttle_area, w_e, c)
         return dv, dp
 
@@ -265,6 +290,47 @@ class _Designs:
         b1, b2 = f2v - 2.0 * k1v, f2p - 2.0 * k1p
         k2v, k2p = (m22 * b1 - m12 * b2) / det, (m11 * b2 - m21 * b1) / det
         return v + h * (1.5 * k1v + 0.5 * k2v), p + h * (1.5 * k1p + 0.5 * k2p)
+
+
+@dataclass(frozen=True)
+class _Rotor:
+    """The field of the electric record :func:`vpsim.model.electric.rotor_mass` reads, as an array."""
+
+    machine_inertia: np.ndarray
+
+
+def _boost_tables(params_list):
+    """(boost torque table, rotor inertia) of every design: a P2 hybrid's machine at its envelope limit cut to
+    the pack's discharge limit at ``battery.soc_initial`` (:func:`vpsim.model.hybrid.boost_torque`), on speeds
+    0, BOOST_STEP, ... up to its top speed; zeros for a car without one. A power split is refused."""
+    n = len(params_list)
+    top = [p.machine.max_speed for p in params_list if p.powertrain.type == "hev_p2"]
+    n_w = int(np.ceil(max(top, default=0.0) / BOOST_STEP)) + 2
+    table = np.zeros((n, n_w))
+    inertia = np.zeros(n)
+    speeds = np.arange(n_w) * BOOST_STEP
+    for k, p in enumerate(params_list):
+        kind = p.powertrain.type
+        if kind == "hev_split":
+            raise VpsimError(
+                "0-100 km/h of the power-split hybrid is not modelled (the conventional car and the P2 "
+                "hybrid are); switch the acceleration objective off"
+            )
+        if kind == "bev":
+            raise VpsimError("0-100 km/h of the battery-electric car is not modelled (the engine cars are)")
+        if kind != "hev_p2":
+            continue
+        e, m, tabs = el.electric_records(p)
+        _boost_kernel(speeds, p.battery.soc_initial, e, m, tabs.astuple(), table[k])
+        inertia[k] = p.machine.inertia
+    return table, inertia
+
+
+@kernel(_nrt=False)
+def _boost_kernel(speeds, soc, e, m, tabs, out):
+    """out[j] = the P2 machine's boost torque at speeds[j] (:func:`vpsim.model.hybrid.boost_torque`)."""
+    for j in range(speeds.size):
+        out[j] = hy.boost_torque(speeds[j], soc, e, m, tabs)
 
 
 @dataclass

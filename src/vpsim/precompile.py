@@ -86,6 +86,7 @@ KERNEL_MODULES = (
     "vpsim.methods.bev",
     "vpsim.methods.hev",
     "vpsim.methods.hev_split",
+    "vpsim.performance",
 )
 
 
@@ -130,6 +131,9 @@ def run_group(group: str) -> None:
         for ems in ("ecms", "dp"):  # the hybrid (rule and ecms share one kernel)
             vpsim.simulate(cycle, method="backward", params="hev_p2", ems=ems)
         vpsim.simulate(cycle, method="inverse", params="hev_p2")
+        from vpsim.performance import acceleration_time
+
+        acceleration_time(vpsim.load_parameters("hev_p2"))  # the P2's boost-torque table
     elif group == "split":  # the power-split hybrid (rule and ecms share one kernel)
         for ems in ("ecms", "dp"):
             vpsim.simulate(cycle, method="backward", params="hev_split", ems=ems)

@@ -386,3 +386,13 @@ def electric_figures(params, terms, fuel_kg, distance_m, soc_start, soc_end, reg
         "engine_on_s": float(on_s),
         "ems": ems,
     }
+
+
+@equation
+def boost_torque(w, soc, e, m, tabs):
+    """The most torque the P2 machine adds at the gearbox input speed w: its motoring envelope T_max(w), cut
+    to what the pack can give at charge ``soc`` beside the accessories (E3), (B1)-(B3) through
+    :func:`vpsim.model.electric.machine_and_battery`. What a full-throttle run adds to the engine's torque."""
+    env_speed, env_max, env_min = tabs[7], tabs[8], tabs[9]
+    t_min, t_max = el.envelope(w, m, e, env_speed, env_max, env_min)
+    return el.machine_and_battery(t_max, False, 0.0, w, soc, e, m, tabs)[0]

@@ -13,7 +13,18 @@ import numpy as np
 import pandas as pd
 
 FUEL = "fuel_l_per_100km"
+FUEL_CS = "fuel_l_per_100km_cs"  # a hybrid's charge-sustaining fuel (vpsim.sweep.hybrid)
 ACCEL = "accel_0_100_s"
+
+
+def _fuel_column(df: pd.DataFrame) -> str:
+    """The fuel a figure shows: a hybrid sweep's charge-sustaining fuel, otherwise the cycle's fuel."""
+    return FUEL_CS if FUEL_CS in df else FUEL
+
+
+def _feasible(df: pd.DataFrame) -> pd.DataFrame:
+    """A hybrid sweep's feasible rows (``feasible``); every row of another sweep."""
+    return df[df["feasible"].astype(bool)] if "feasible" in df else df
 
 
 def _ok(df: pd.DataFrame) -> pd.DataFrame:
@@ -89,22 +100,30 @@ def plot_pareto(
     method: str | None = None,
     driver: str | None = None,
     ax=None,
+    label_front=None,
 ):
     """Fuel on one cycle against the 0-100 km/h time: every design, the Pareto front, the baseline.
 
+    A hybrid sweep's table shows its charge-sustaining fuel and leaves its infeasible rows out (counted in the
+    legend). ``label_front``: a function of a front row giving its label (e.g. the design's values).
     Returns ``(ax, front)`` with the front as a DataFrame (fastest first).
     """
     import matplotlib.pyplot as plt
 
-    d, cycle, method = _pick(_ok(df), cycle, method, driver)
+    fuel = _fuel_column(df)
+    picked, cycle, method = _pick(_ok(df), cycle, method, driver)
+    d = _feasible(picked)
+    n_infeasible = len(picked) - len(d)
     d = d[np.isfinite(d[ACCEL].astype(float))] if not d.empty else d
-    front = pareto_front(d) if not d.empty else d
+    front = pareto_front(d, y=fuel) if not d.empty else d
     if ax is None:
         _, ax = plt.subplots(figsize=(7, 4.5))
-    ax.scatter(d[ACCEL], d[FUEL], s=12, color="0.6", alpha=0.7, label=f"designs ({len(d)})")
+    ax.scatter(d[ACCEL], d[fuel], s=12, color="0.6", alpha=0.7, label=f"designs ({len(d)})")
+    if n_infeasible:  # no fuel figure to place: counted in the legend
+        ax.scatter([], [], marker="x", color="0.6", label=f"infeasible, not shown ({n_infeasible})")
     ax.plot(
         front[ACCEL],
-        front[FUEL],
+        front[fuel],
         "-o",
         color="C3",
         ms=4,
@@ -116,7 +135,7 @@ def plot_pareto(
     if not base.empty:
         ax.scatter(
             base[ACCEL],
-            base[FUEL],
+            base[fuel],
             marker="*",
             s=220,
             color="gold",
@@ -124,8 +143,18 @@ def plot_pareto(
             zorder=5,
             label="baseline",
         )
+    if label_front and not front.empty:
+        for k, (_, row) in enumerate(front.iterrows()):  # above and below the front in turn
+            ax.annotate(
+                label_front(row),
+                (row[ACCEL], row[fuel]),
+                xytext=(4, 6 if k % 2 == 0 else -12),
+                textcoords="offset points",
+                fontsize=7,
+            )
     ax.set_xlabel("0-100 km/h at full throttle (s)")
-    ax.set_ylabel(f"fuel consumption on {cycle} (L/100 km)")
+    what = "charge-sustaining fuel" if fuel == FUEL_CS else "fuel consumption"
+    ax.set_ylabel(f"{what} on {cycle} (L/100 km)")
     ax.set_title(f"fuel against acceleration ({method} on {cycle})", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
@@ -150,11 +179,22 @@ def write_sweep_figures(df: pd.DataFrame, out: str | Path) -> list[Path]:
     written.append(p)
     d = _ok(df)
     if ACCEL in d and np.isfinite(d[ACCEL].astype(float)).any():
+        label = _hybrid_label if FUEL_CS in df else None
         for cyc in dict.fromkeys(d["cycle"]):
-            ax, _ = plot_pareto(df, cycle=cyc)
+            ax, _ = plot_pareto(df, cycle=cyc, label_front=label)
             p = out / f"pareto_{cyc}.png"
             ax.figure.tight_layout()
             ax.figure.savefig(p, dpi=120)
             plt.close(ax.figure)
             written.append(p)
     return written
+
+
+def _hybrid_label(row) -> str:
+    """A hybrid design's sizing in short: engine displacement, machine power, cells."""
+    parts = [f"{row['displacement_l']:.2f} L"]
+    if "machine.rated_power" in row:
+        parts.append(f"{row['machine.rated_power'] / 1e3:g} kW")
+    if "battery.cells_in_series" in row:
+        parts.append(f"{int(row['battery.cells_in_series'])} cells")
+    return ", ".join(parts)

@@ -95,9 +95,12 @@ _META_COLUMNS = {
 
 
 def result_schema(spec: SweepSpec) -> dict[str, str]:
-    """Column name -> type of the result table for ``spec``."""
+    """Column name -> type of the result table for ``spec`` (a hybrid base's columns too: sweep/hybrid.py)."""
+    from .hybrid import HYBRID_COLUMNS
+
     params = {a.name: ("str" if a.kind == "ratios" else a.kind) for a in spec.axes}
-    return _ID_COLUMNS | params | {"displacement_l": "float"} | OBJECTIVES | _META_COLUMNS
+    extra = HYBRID_COLUMNS if spec.hybrid else {}
+    return _ID_COLUMNS | params | {"displacement_l": "float"} | OBJECTIVES | extra | _META_COLUMNS
 
 
 # --- work units -------------------------------------------------------------------------------------------
@@ -128,6 +131,8 @@ class Chunk:
     run_id: str
     schema: dict
     single_thread: bool = False  # limit compiled kernels to one thread (one worker process per core)
+    hybrid: bool = False  # a hybrid base: rows through vpsim.sweep.hybrid, with the management ``ems``
+    ems: str | None = None
 
     @property
     def n_rows(self) -> int:
@@ -167,7 +172,7 @@ def plan(spec: SweepSpec) -> Plan:
 
     base = spec.parameters()
     cycles = tuple(load_cycle(c) for c in spec.cycles)
-    if spec.gears == "baseline":
+    if spec.gears == "baseline" and not spec.hybrid:  # a hybrid runs on its own gear rule
         schedules = tuple(default_schedule(c, base, cached_engine_map(base.engine)) for c in cycles)
     else:
         schedules = (None,) * len(cycles)
@@ -182,6 +187,7 @@ def plan(spec: SweepSpec) -> Plan:
                 dvals = {k: v for k, v in flat.items() if k.startswith(f"drivers.{d}.")} if d else None
                 combos.append((ci, m, d, dvals))
     base_values = design_values(flat, {})
+    base_values["engine.scale"] = 1.0  # a sizing rule's value at the base (spec.apply_changes)
     for a in spec.axes:
         if a.name.startswith("transmission.gearbox_ratios["):
             base_values[a.name] = base_values["transmission.gearbox_ratios"][
@@ -208,7 +214,14 @@ def _cost_model(spec: SweepSpec) -> Callable[[Task], float]:
     batch = batch_available() and spec.gears == "baseline"
     accel = _ACCEL_COST if spec.acceleration.enabled else 0.0
 
+    if spec.hybrid:
+        from .hybrid import ROW_COST
+
+        hybrid_row = ROW_COST[spec.ems or spec.parameters().hybrid.ems]
+
     def cost(t: Task) -> float:
+        if spec.hybrid:
+            return _DESIGN_COST + hybrid_row * len(t.rows) + accel
         rows = sum(_BATCH_ROW_COST if (r[2] == "backward" and batch) else _ROW_COST[r[2]] for r in t.rows)
         return _DESIGN_COST + rows + accel
 
@@ -262,6 +275,8 @@ def make_chunks(
             run_id,
             schema,
             single_thread,
+            spec.hybrid,
+            spec.ems,
         )
         for g in chunks
     ]
@@ -326,7 +341,7 @@ def _compute_chunk(chunk: Chunk) -> pd.DataFrame:
         for t, pid in items:
             p = params(t)
             out[pid] = (
-                _one_row(cycle, schedule, method, driver, p, chunk.mode)
+                _one_row(cycle, schedule, method, driver, p, chunk.mode, chunk)
                 if p is not None
                 else {"error": setup_error[t.design]}
             )
@@ -369,6 +384,10 @@ def _compute_chunk(chunk: Chunk) -> pd.DataFrame:
         for col, typ in OBJECTIVES.items():
             if col in df and typ == "float":
                 df.loc[failed, col] = np.nan
+    if chunk.hybrid:
+        from .hybrid import flag_feasibility
+
+        df = flag_feasibility(df)
     df = conform(df, chunk.schema)
     df.attrs["wall_s"] = now - t_start
     return df
@@ -390,6 +409,8 @@ def _changes_grid(changes, base) -> bool:
     """A design that changes the whole gearbox, a CVT's step or its range (another ratio grid): not one
     ratio matrix with the rest of its batch."""
     if "transmission.gearbox_ratios" in changes or "transmission.cvt_ratio_step" in changes:
+        return True
+    if "engine.scale" in changes:  # a sizing rule (spec.apply_changes), not a column of the batch
         return True
     return base.transmission.is_cvt and any(k.startswith("transmission.gearbox_ratios[") for k in changes)
 
@@ -485,12 +506,17 @@ def _batch_rows(cycle, schedule, chunk: Chunk, items, method: str, driver: str) 
     }
 
 
-def _one_row(cycle, schedule, method: str, driver: str, params, mode: str) -> dict:
+def _one_row(cycle, schedule, method: str, driver: str, params, mode: str, chunk=None) -> dict:
     t0 = time.perf_counter()
     row: dict = {}
     try:
         with _captured_warnings() as caught:
-            row.update(_simulate_row(cycle, method, driver, params, mode, schedule))
+            if chunk is not None and chunk.hybrid:
+                from .hybrid import simulate_row
+
+                row.update(simulate_row(cycle, method, driver, params, mode, chunk.ems, OBJECTIVES))
+            else:
+                row.update(_simulate_row(cycle, method, driver, params, mode, schedule))
         if caught:
             row["warning"] = _one_line(caught[0].message)
     except Exception as exc:  # a solver failure or an infeasible input is a result

@@ -64,7 +64,10 @@ from ..simulation import METHODS, MODES
 
 SAMPLINGS = ("factorial", "lhs")
 GEARS = ("baseline", "per_design")
-SECTIONS = ("vehicle", "transmission", "engine", "simulation")
+SECTIONS = ("vehicle", "transmission", "engine", "simulation", "machine", "battery", "hybrid")
+# sizing axes that are not fields but rules (apply_changes): the engine's displacement over the base's
+SIZING_AXES = ("engine.scale",)
+HYBRID_TYPES = ("hev_p2", "hev_split")
 MAX_POINTS = 5_000_000
 _TOP_KEYS = {
     "name",
@@ -80,6 +83,7 @@ _TOP_KEYS = {
     "baseline",
     "parameters",
     "acceleration",
+    "ems",
 }
 _AXIS_KEYS = {"range", "n", "values"}
 _ACCEL_KEYS = {"enabled", "shift_speed", "shift_fraction", "launch_speed"}
@@ -166,6 +170,8 @@ class SweepSpec:
     gears: str = "baseline"
     baseline: bool = True
     acceleration: AccelerationSettings = field(default_factory=AccelerationSettings)
+    ems: str | None = None  # a hybrid base's energy management (None: the base's own)
+    hybrid: bool = False  # the base is a hybrid: its charge-sustaining columns and feasibility flag
     name: str = "sweep"
     source: str = "spec"  # where it came from, for messages
 
@@ -252,6 +258,7 @@ class SweepSpec:
                         'gear schedule, so use gears = "per_design"'
                     )
         accel = _accel(data.get("acceleration", {}), where)
+        ems = _ems(data.get("ems"), params, methods, accel, names, where)
         name = data.get("name", "sweep")
         if not isinstance(name, str):
             raise SpecError(f"{where}: name = {name!r} must be a string")
@@ -268,6 +275,8 @@ class SweepSpec:
             gears=gears,
             baseline=baseline,
             acceleration=accel,
+            ems=ems,
+            hybrid=params.powertrain.type in HYBRID_TYPES,
             name=name,
             source=where,
         )
@@ -348,6 +357,8 @@ class SweepSpec:
             "parameters": params,
             "acceleration": {k: v for k, v in self.acceleration.as_dict().items() if v is not None},
         }
+        if self.ems is not None:
+            d["ems"] = self.ems
         if self.samples is not None:
             d["samples"] = self.samples
         return d
@@ -372,9 +383,29 @@ def make_spec(**keys) -> SweepSpec:
 
 
 def apply_changes(params: Parameters, changes: dict) -> Parameters:
-    """The base parameters with one design point's changes, validated (raises ParameterError)."""
+    """The base parameters with one design point's changes, validated (raises ParameterError).
+
+    Sizing rules (:mod:`vpsim.scaling`): ``engine.scale`` is the displacement over the base's, reached by the
+    bore (x sqrt(scale); stroke and cylinders kept, so the speed range and the full-load BMEP stay and the
+    full-load torque scales with it), throttle areas, manifold and inertia following
+    (:func:`vpsim.scaling.scale_engine`); a changed ``machine.rated_power`` takes the rotor's inertia with
+    it (:func:`vpsim.scaling.scaled_machine`) unless ``machine.inertia`` is swept too."""
     sections: dict[str, dict] = {}
     gears: dict[int, float] = {}
+    if "engine.scale" in changes:
+        from ..scaling import scaled_parameters
+
+        changes = dict(changes)
+        k = changes.pop("engine.scale")
+        if not (isinstance(k, int | float) and math.isfinite(k) and k > 0):
+            raise SpecError(f"engine.scale = {k!r} must be a positive displacement ratio")
+        e = params.engine
+        params = scaled_parameters(params, bore=e.bore * math.sqrt(k), stroke=e.stroke, cylinders=e.cylinders)
+    if "machine.rated_power" in changes and "machine.inertia" not in changes:
+        from ..scaling import scaled_machine
+
+        changes = dict(changes)
+        sections["machine"] = scaled_machine(params.machine, changes.pop("machine.rated_power"))
     for name, value in changes.items():
         m = _GEAR_RE.match(name)
         if m:
@@ -467,6 +498,8 @@ def _axis(name: str, entry, params: Parameters, where: str) -> Axis:
             raise SpecError(
                 f"{at}: gear {g} does not exist; the base has gears 1..{params.transmission.n_gears}"
             )
+        kind = "float"
+    elif name in SIZING_AXES:  # a rule, not a field (apply_changes)
         kind = "float"
     else:
         sec = name.split(".", 1)[0]
@@ -562,6 +595,37 @@ def _check_gear_axes(names: list[str], where: str) -> None:
         raise SpecError(
             f"{where}: parameters: sweep either transmission.gearbox_ratios or single gears, not both"
         )
+
+
+def _ems(value, params: Parameters, methods, accel, names, where: str) -> str | None:
+    """A hybrid base's energy management for every row (``ems``); checks what the hybrid cannot run."""
+    kind = params.powertrain.type
+    if kind not in HYBRID_TYPES:
+        if value is not None:
+            raise SpecError(f"{where}: ems applies to a hybrid base; {params.name!r} is {kind}")
+        return None
+    from ..model.hybrid import EMS_CODES
+
+    if value is not None and value not in EMS_CODES:
+        raise SpecError(f"{where}: ems = {value!r}; expected one of {', '.join(EMS_CODES)}")
+    if "forward" in methods:
+        raise SpecError(f"{where}: methods: the hybrid runs on the backward and inverse methods, not forward")
+    if (value or params.hybrid.ems) == "dp" and set(methods) != {"backward"}:
+        raise SpecError(
+            f'{where}: ems = "dp" runs on the backward method only (a known cycle): methods = ["backward"]'
+        )
+    if accel.enabled and kind == "hev_split":
+        raise SpecError(
+            f"{where}: acceleration: 0-100 km/h of the power-split hybrid is not modelled; "
+            "set acceleration = false"
+        )
+    if "engine.scale" in names and any(
+        n in names for n in ("engine.bore", "engine.stroke", "engine.cylinders")
+    ):
+        raise SpecError(
+            f"{where}: parameters: sweep engine.scale or the engine's bore, stroke and cylinders, not both"
+        )
+    return value
 
 
 def _accel(entry, where: str) -> AccelerationSettings:
