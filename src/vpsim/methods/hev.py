@@ -14,7 +14,7 @@ current and every energy term; the state of charge moves on by (B3).
   (:func:`causal_kernel` with the cost-to-go).
 
 The inverse method (:func:`run_inverse`) drives the smoothing driver's trajectory with the same management
-and operating point; the forward method of the hybrid is not built yet (``vpsim.simulate`` says so).
+and operating point; the forward method calls the same per-step choice (:mod:`vpsim.methods.hev_forward`).
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ cost and equivalence factor, the DP's cost-to-go, grid and terminal cost, the J1
   (:func:`dp_kernel`), then drives the cycle from the true state with it (:func:`causal_kernel`).
 
 The inverse method (:func:`run_inverse`) drives the smoothing driver's trajectory with the same management
-and point. The forward method is not built (``vpsim.simulate`` says so).
+and point. The forward method calls the same per-step choice (:mod:`vpsim.methods.hev_forward`).
 """
 
 from __future__ import annotations
