@@ -86,6 +86,7 @@ KERNEL_MODULES = (
     "vpsim.methods.bev",
     "vpsim.methods.hev",
     "vpsim.methods.hev_split",
+    "vpsim.methods.hev_forward",
 )
 
 
@@ -130,10 +131,12 @@ def run_group(group: str) -> None:
         for ems in ("ecms", "dp"):  # the hybrid (rule and ecms share one kernel)
             vpsim.simulate(cycle, method="backward", params="hev_p2", ems=ems)
         vpsim.simulate(cycle, method="inverse", params="hev_p2")
+        vpsim.simulate(cycle, method="forward", params="hev_p2")
     elif group == "split":  # the power-split hybrid (rule and ecms share one kernel)
         for ems in ("ecms", "dp"):
             vpsim.simulate(cycle, method="backward", params="hev_split", ems=ems)
         vpsim.simulate(cycle, method="inverse", params="hev_split")
+        vpsim.simulate(cycle, method="forward", params="hev_split")
     elif group == "rosenbrock":
         for mode in ("paper", "realistic"):
             vpsim.simulate(cycle, method="forward", mode=mode)

@@ -388,14 +388,3 @@ def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", sched
         "vehicle_speed_end_mps": float(speeds[-1]),
     }
     return dataclasses.replace(r, method="forward", driver=None, series=series, steps=int(n), solver=solver)
-
-
-def warm_up() -> None:
-    """Compile (or load from the cache) both layouts' forward kernels on a short cycle."""
-    from ..cycles import Cycle
-    from ..params import load_parameters
-
-    cyc = Cycle("warm-up", np.array([0.0, 1.0, 2.0]), np.array([0.0, 1.0, 0.0]))
-    for name in ("hev_p2", "hev_split"):
-        for ems in ("rule", "ecms"):
-            run(cyc, load_parameters(name), ems=ems)
