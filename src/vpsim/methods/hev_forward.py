@@ -246,8 +246,17 @@ def split_kernel(
 def driver_record(params) -> tuple[float, float, float, float, float]:
     """(K_p, K_i, command low, command high, 1 / T_t) of the forward driver: the battery-electric car's gains
     (``electric.forward_kp``, ``forward_ki``, per unit mass), a command range of +-1 g (the pedal's full
-    range, as the engine car's driver), tracking time T_t half the integral time K_p / K_i."""
+    range, as the engine car's driver), tracking time T_t half the integral time K_p / K_i. Refused (one line)
+    where the driver, sampled every step, would be unstable (:func:`sampled_loop_radius`)."""
     ep = params.electric
+    radius = sampled_loop_radius(ep.forward_kp, ep.forward_ki, ep.forward_max_step)
+    if not radius < 1.0:
+        raise VpsimError(
+            f"electric.forward_kp = {ep.forward_kp:g} 1/s and forward_ki = {ep.forward_ki:g} 1/s^2 with "
+            f"forward_max_step = {ep.forward_max_step:g} s: the hybrid's forward driver, deciding once a "
+            f"step, is unstable (its loop's largest |eigenvalue| {radius:.3g} >= 1); lower forward_max_step "
+            "or the gains"
+        )
     g = float(params.vehicle.gravity)
     return (
         float(ep.forward_kp),
@@ -256,6 +265,14 @@ def driver_record(params) -> tuple[float, float, float, float, float]:
         g,
         2.0 * float(ep.forward_ki) / float(ep.forward_kp),
     )
+
+
+def sampled_loop_radius(kp: float, ki: float, h: float) -> float:
+    """The largest |eigenvalue| of the driver's speed loop sampled every h (the car an integrator of the
+    command held over the step, the PI's integral moved on by Euler): e' = (1 - kp h) e - h z,
+    z' = z + ki h e. Below 1 the loop settles (0.5, a double root, at the defaults 4 1/s, 4 1/s^2, 0.25 s)."""
+    a = np.array([[1.0 - kp * h, -h], [ki * h, 1.0]])
+    return float(np.max(np.abs(np.linalg.eigvals(a))))
 
 
 def step_grid(time_s, max_step: float) -> np.ndarray:
