@@ -50,7 +50,7 @@ from . import _hybrid, hev, hev_split
 SECANT_STEPS = 8  # at most, for the acceleration the powertrain delivers where it falls short
 BALANCE_N = 1e-6  # N: the delivered force balances the demand to within this
 # the forward run's own figures, after the layout's sums
-F_LIMITED_S, F_MAX_ERROR = 0, 1
+F_LIMITED_S, F_MAX_ERROR, F_MAX_SHORT = 0, 1, 2
 
 
 @equation
@@ -142,6 +142,7 @@ def p2_kernel(
         pt = hy.p2_choice(interval, battery, on_c, te, c, e, m, tabs)
         if pt[13] > hy.MISS_TOLERANCE_N:  # the powertrain falls short: the acceleration it delivers
             extra[F_LIMITED_S] += dt
+            extra[F_MAX_SHORT] = max(extra[F_MAX_SHORT], el.shaft_torque(pt[13], ratio, c))
             a0, g0 = a, pt[13]
             a = no_rollback(hy.delivered_acceleration(a, pt[13], c), v, dt)
             for _ in range(SECANT_STEPS):
@@ -217,6 +218,7 @@ def split_kernel(
         pt = sp.split_choice(interval, battery, on_c, p_e, c, e, m, g, s, tabs, eng, opt)
         if pt[13] > hy.MISS_TOLERANCE_N:  # the powertrain falls short: the acceleration it delivers
             extra[F_LIMITED_S] += dt
+            extra[F_MAX_SHORT] = max(extra[F_MAX_SHORT], el.shaft_torque(pt[13], ratio, c))
             a0, g0 = a, pt[13]
             a = no_rollback(hy.delivered_acceleration(a, pt[13], c), v, dt)
             for _ in range(SECANT_STEPS):
@@ -316,7 +318,7 @@ def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", sched
     drv = driver_record(params)
     n = grid.size - 1
     speeds = np.empty(grid.size)
-    extra = np.zeros(2)
+    extra = np.zeros(3)
     no_cost = np.zeros((1, 2, 2))
     split = params.powertrain.type == "hev_split"
     if split:
@@ -406,4 +408,17 @@ def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", sched
         "powertrain_limited_s": round(float(extra[F_LIMITED_S]), 6),
         "vehicle_speed_end_mps": float(speeds[-1]),
     }
-    return dataclasses.replace(r, method="forward", driver=None, series=series, steps=int(n), solver=solver)
+    # the demand not deliverable: the time the powertrain gave less than the driver asked (the car then
+    # behind its command), and the largest torque short then (at the P2's input shaft, the split's ring, as
+    # the backward method counts it)
+    limited = round(float(extra[F_LIMITED_S]), 6)
+    trace = dataclasses.replace(
+        r.trace_miss,
+        seconds=limited,
+        max_torque_shortfall_nm=float(extra[F_MAX_SHORT]),
+        max_speed_error_mps=float(extra[F_MAX_ERROR]),
+        details={**r.trace_miss.details, "torque_beyond_full_load_s": limited},
+    )
+    return dataclasses.replace(
+        r, method="forward", driver=None, series=series, steps=int(n), solver=solver, trace_miss=trace
+    )
