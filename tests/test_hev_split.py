@@ -225,21 +225,22 @@ def test_an_empty_soc_window_is_refused_in_one_line():
         SPLIT.with_changes(transmission={"gearbox_ratios": [2.0, 1.0]})
 
 
-def test_the_forward_method_and_a_dp_off_the_backward_method_are_refused():
-    with pytest.raises(VpsimError, match="forward method is not built yet"):
-        vpsim.simulate("udds", "forward", SPLIT)
+def test_a_dp_off_the_backward_method_is_refused():
+    with pytest.raises(VpsimError, match="backward method only"):
+        vpsim.simulate("udds", "forward", SPLIT, ems="dp")
     with pytest.raises(VpsimError, match="backward method only"):
         vpsim.simulate("udds", "inverse", SPLIT, ems="dp")
     with pytest.raises(VpsimError, match="unknown energy management"):
         vpsim.simulate("udds", "backward", SPLIT, ems="magic")
 
 
-def test_cli_simulate_hev_split_ecms_and_refuses_forward(tmp_path, capsys):
+def test_cli_simulate_hev_split_ecms_and_refuses_a_forward_dp(tmp_path, capsys):
     from vpsim.cli.main import main
 
     assert main(["simulate", "--vehicle", "hev_split", "--cycle", "udds", "--ems", "ecms", "--json"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["ems"] == "ecms" and math.isfinite(s["fuel_l_per_100km_cs"]) and s["engine_starts"] > 0
-    assert main(["simulate", "--vehicle", "hev_split", "--cycle", "udds", "--method", "forward"]) == 2
+    args = ["simulate", "--vehicle", "hev_split", "--cycle", "udds", "--method", "forward", "--ems", "dp"]
+    assert main(args) == 2
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("vpsim: error")]
-    assert len(err) == 1 and "forward method is not built yet" in err[0]
+    assert len(err) == 1 and "backward method only" in err[0]

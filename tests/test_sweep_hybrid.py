@@ -53,7 +53,7 @@ def test_sizing_rules():
         ({"base": "hofman2011", "ems": "dp"}, "ems applies to a hybrid base"),
         ({"base": "hev_p2", "ems": "dp", "methods": ["backward", "inverse"]}, "backward method only"),
         ({"base": "hev_p2", "ems": "mpc"}, "expected one of rule, ecms, dp"),
-        ({"base": "hev_p2", "methods": ["forward"]}, "not forward"),
+        ({"base": "hev_p2", "methods": ["forward"], "ems": "dp"}, "backward method only"),
         ({"base": "hev_split"}, "power-split hybrid is not modelled; set acceleration = false"),
         (
             {"base": "hev_p2", "parameters": {"engine.scale": [0.8], "engine.bore": [0.07]}},
@@ -142,3 +142,12 @@ def test_the_example_spec_and_its_figure(tmp_path):
     assert "charge-sustaining" in ax.get_ylabel()
     written = write_sweep_figures(df, tmp_path)
     assert (tmp_path / "pareto_udds.png") in written
+
+
+def test_a_forward_hybrid_row_is_the_forward_run():
+    spec = make_spec(
+        base="hev_p2", ems="ecms", cycles=["udds"], methods=["forward"], parameters={}, acceleration=False
+    )
+    df = run_sweep(spec, workers=1).results
+    r = vpsim.simulate("udds", "forward", "hev_p2", ems="ecms")
+    assert df["fuel_l_per_100km_cs"].iloc[0] == r.summary()["fuel_l_per_100km_cs"] and df["feasible"].all()

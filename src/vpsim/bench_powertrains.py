@@ -80,12 +80,12 @@ def hev_peer_ms(settings: Settings, progress) -> dict:
 
 
 def hev_rows(settings: Settings, progress) -> dict:
-    """vpsim's P2 hybrid (hev_p2) on UDDS, backward method, each energy management but the DP: median ms of
+    """vpsim's P2 hybrid (hev_p2) on UDDS, backward and forward methods, rule and ECMS: median ms of
     one run with its inputs prepared (the gear schedule, as for the engine car's rows), and of a whole
     ``simulate`` call (the schedule derived inside)."""
     from .cycles import load_cycle
     from .gears import default_schedule
-    from .methods import hev
+    from .methods import hev, hev_forward
     from .model.maps import cached_engine_map
     from .params import load_parameters
     from .simulation import simulate
@@ -99,4 +99,10 @@ def hev_rows(settings: Settings, progress) -> dict:
         median, runs = _timed(lambda e=ems: hev.run(cyc, p, ems=e, schedule=schedule), settings)
         whole, _ = _timed(lambda e=ems: simulate(cyc, "backward", p, ems=e), settings)
         out[ems] = {"median_ms": median * 1e3, "runs": runs, "simulate_median_ms": whole * 1e3}
+    # the forward method (vpsim.methods.hev_forward): the same car and schedule, the PI driver and the
+    # causal management at the 0.25 s step
+    for ems in ("rule", "ecms"):
+        median, runs = _timed(lambda e=ems: hev_forward.run(cyc, p, ems=e, schedule=schedule), settings)
+        whole, _ = _timed(lambda e=ems: simulate(cyc, "forward", p, ems=e), settings)
+        out[f"forward_{ems}"] = {"median_ms": median * 1e3, "runs": runs, "simulate_median_ms": whole * 1e3}
     return out

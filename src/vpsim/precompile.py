@@ -87,6 +87,7 @@ KERNEL_MODULES = (
     "vpsim.methods.hev",
     "vpsim.methods.hev_split",
     "vpsim.performance",
+    "vpsim.methods.hev_forward",
 )
 
 
@@ -134,10 +135,12 @@ def run_group(group: str) -> None:
         from vpsim.performance import acceleration_time
 
         acceleration_time(vpsim.load_parameters("hev_p2"))  # the P2's boost-torque table
+        vpsim.simulate(cycle, method="forward", params="hev_p2")
     elif group == "split":  # the power-split hybrid (rule and ecms share one kernel)
         for ems in ("ecms", "dp"):
             vpsim.simulate(cycle, method="backward", params="hev_split", ems=ems)
         vpsim.simulate(cycle, method="inverse", params="hev_split")
+        vpsim.simulate(cycle, method="forward", params="hev_split")
     elif group == "rosenbrock":
         for mode in ("paper", "realistic"):
             vpsim.simulate(cycle, method="forward", mode=mode)

@@ -111,11 +111,12 @@ def _simulate_bev(cycle, method, params, driver, mode, gears, options):
 
 def _simulate_hev(cycle, method, params, driver, mode, gears, options):
     """The hybrids, P2 (:mod:`vpsim.methods.hev`) and power-split (:mod:`vpsim.methods.hev_split`): the
-    backward and inverse methods with their energy management."""
-    if method == "forward":
+    backward and inverse methods with their energy management, and the forward method of both
+    (:mod:`vpsim.methods.hev_forward`)."""
+    if method == "forward" and driver is not None:
         raise VpsimError(
-            "the hybrid runs on the backward and inverse methods in this version; its forward method is not "
-            "built yet"
+            "the hybrid's forward driver takes its gains from electric.forward_kp and forward_ki; "
+            "it takes no --driver"
         )
     if method == "backward" and driver is not None:
         raise VpsimError("the backward method tracks the cycle exactly and takes no driver")
@@ -137,4 +138,8 @@ def _simulate_hev(cycle, method, params, driver, mode, gears, options):
         driver = "2" if driver is None else str(driver)
         params.driver(driver)  # validates
         return hev.run_inverse(cycle, params, driver=driver, ems=ems, mode=mode)
+    if method == "forward":
+        from .methods import hev_forward
+
+        return hev_forward.run(cycle, params, ems=ems, mode=mode)
     return hev.run(cycle, params, ems=ems, mode=mode)

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model import electric as el
 from ..model import hybrid as hy
+from ..model.engine import equation
 
 N_TERMS = len(hy.HYBRID_TERMS)
 # the running sums after the energy terms, in every layout's kernel (a layout may add its own after them)
@@ -71,3 +73,29 @@ def result(cycle, params, ems, mode, series, sums, soc_start, soc_end, n, cpu, d
         limits={},
         electric=electric,
     )
+
+
+@equation
+def book_step(sums, pt, terms, vv, dt, ratio, on, c, h):
+    """Add one step's figures to the running sums: a start (counted, its fuel), the energy terms ``terms`` of
+    the point ``pt`` (a layout's powers) over dt, the fuel, the distance at speed ``vv``, the trace miss, the
+    time at the machine's and battery's limits and with the engine on, the regenerated energy. ``on``: the
+    engine's state before the step. Returns (engine running, force missing)."""
+    running = pt[16]
+    if running > 0.0 and on == 0.0:
+        sums[S_STARTS] += 1.0
+        sums[S_FUEL] += h.engine_start_fuel
+    missing = pt[13] if pt[13] > hy.MISS_TOLERANCE_N else 0.0
+    for q in range(N_TERMS):
+        sums[q] += terms[q] * dt
+    sums[S_FUEL] += pt[6] * dt
+    sums[S_DIST] += vv * dt
+    if missing > 0.0:
+        sums[S_MISS_S] += dt
+        sums[S_MAX_MISS] = max(sums[S_MAX_MISS], el.shaft_torque(missing, ratio, c))
+    sums[S_MACHINE_S] += pt[14] * dt
+    sums[S_BATTERY_S] += pt[15] * dt
+    sums[S_ON_S] += running * dt
+    if pt[11] < 0.0:
+        sums[S_REGEN] += -pt[11] * dt
+    return running, missing

@@ -14,7 +14,7 @@ current and every energy term; the state of charge moves on by (B3).
   (:func:`causal_kernel` with the cost-to-go).
 
 The inverse method (:func:`run_inverse`) drives the smoothing driver's trajectory with the same management
-and operating point; the forward method of the hybrid is not built yet (``vpsim.simulate`` says so).
+and operating point; the forward method calls the same per-step choice (:mod:`vpsim.methods.hev_forward`).
 """
 
 from __future__ import annotations
@@ -31,21 +31,10 @@ from ..model import hybrid as hy
 from ..model import tables as tb
 from ..model import vehicle as vh
 from ..model._compile import kernel
+from ..model.engine import equation
 from ..model.tables import gear_index
 from . import _hybrid
-from ._hybrid import (
-    N_COMMON_SUMS,
-    N_TERMS,
-    S_BATTERY_S,
-    S_DIST,
-    S_FUEL,
-    S_MACHINE_S,
-    S_MAX_MISS,
-    S_MISS_S,
-    S_ON_S,
-    S_REGEN,
-    S_STARTS,
-)
+from ._hybrid import N_COMMON_SUMS
 
 # rows of the per-interval series
 (
@@ -151,7 +140,6 @@ def causal_kernel(
     on = 0.0
     on_time = 0.0
     j = 0
-    n_grid = soc_grid.size
     for k in range(time_s.size - 1):
         dt = time_s[k + 1] - time_s[k]
         v = 0.5 * (speed[k + 1] + speed[k])
@@ -160,83 +148,63 @@ def causal_kernel(
         ratio = ratios[g]
         w = vh.engine_speed(v, ratio, c)
         t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
-        runs = hy.can_run(w, c)
         # what the interval and the charge fix, once for all the choices
         interval = hy.p2_interval(v, a, ratio, c, e, m, tabs)
         battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
-        choice_on = 0.0
-        choice_te = 0.0
-        if ems == hy.EMS_RULE:
-            t_in = el.shaft_torque(vh.wheel_force(v, a, c), ratio, c)
-            if hy.rule_wants_engine(on, on_time, t_in * w, soc, h) and runs:
-                choice_on = 1.0
-                choice_te = hy.rule_engine_torque(t_in, w, soc, t_low, t_high, h)
-        else:
-            s_factor = hy.equivalence_factor(soc, h)
-            best = math.inf
-            for u in range(levels + 1):
-                if u > 0 and not runs:
-                    break
-                o = 1.0 if u > 0 else 0.0
-                te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else 0.0
-                pt = hy.p2_choice(interval, battery, o, te, c, e, m, tabs)
-                start = u > 0 and on == 0.0
-                if ems == hy.EMS_DP:
-                    nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
-                    cost = hy.ecms_cost(pt, dt, start, 0.0, c, e, h) + hy.cost_to_go(
-                        jcost[k + 1], 1 if u > 0 else 0, nxt, soc_grid[0], soc_grid[1] - soc_grid[0], n_grid
-                    )
-                else:
-                    cost = hy.ecms_cost(pt, dt, start, s_factor, c, e, h)
-                if cost < best:
-                    best = cost
-                    choice_on = o
-                    choice_te = te
-                if u > 0 and hy.higher_torques_dominated(pt, battery):
-                    break
+        choice_on, choice_te = hy.p2_choose(
+            interval,
+            battery,
+            soc,
+            on,
+            on_time,
+            dt,
+            ems,
+            levels,
+            t_low,
+            t_high,
+            c,
+            e,
+            m,
+            tabs,
+            h,
+            soc_grid,
+            jcost,
+            k + 1,
+        )
         pt = hy.p2_choice(interval, battery, choice_on, choice_te, c, e, m, tabs)
-        running = pt[16]
-        if running > 0.0 and on == 0.0:
-            sums[S_STARTS] += 1.0
-            sums[S_FUEL] += h.engine_start_fuel
+        terms = hy.hybrid_powers(pt, v, a, c, e)
+        running, missing = _hybrid.book_step(sums, pt, terms, interval[0], dt, ratio, on, c, h)
         on_time = on_time + dt if running > 0.0 else 0.0
         on = running
-        missing = pt[13] if pt[13] > MISS_TOLERANCE_N else 0.0
-        terms = hy.hybrid_powers(pt, v, a, c, e)
-        for q in range(N_TERMS):
-            sums[q] += terms[q] * dt
-        sums[S_FUEL] += pt[6] * dt
-        sums[S_DIST] += (v if v > 0.0 else 0.0) * dt
-        if missing > 0.0:
-            sums[S_MISS_S] += dt
-            short = el.shaft_torque(missing, ratio, c)
-            sums[S_MAX_MISS] = max(sums[S_MAX_MISS], short)
-        sums[S_MACHINE_S] += pt[14] * dt
-        sums[S_BATTERY_S] += pt[15] * dt
-        sums[S_ON_S] += running * dt
-        if pt[11] < 0.0:
-            sums[S_REGEN] += -pt[11] * dt
-        rows[H_T, k] = 0.5 * (time_s[k + 1] + time_s[k])
-        rows[H_V, k] = v
-        rows[H_A, k] = a
-        rows[H_GEAR, k] = g + 1.0
-        rows[H_W, k] = pt[0]
-        rows[H_TE, k] = pt[3]
-        rows[H_TM, k] = pt[7]
-        rows[H_P, k] = pt[5] if running > 0.0 else math.nan
-        rows[H_MDOT, k] = pt[6]
-        rows[H_I, k] = pt[8]
-        rows[H_UOC, k] = pt[9]
-        rows[H_U, k] = pt[9] - pt[10] * pt[8]
-        rows[H_SOC, k] = soc
-        rows[H_BRAKE, k] = pt[12]
-        rows[H_MISS, k] = el.shaft_torque(missing, ratio, c)
-        rows[H_ON, k] = running
-        rows[H_LIM_M, k] = pt[14]
-        rows[H_LIM_B, k] = pt[15]
-        rows[H_TCR, k] = pt[4]
+        store_row(rows, k, 0.5 * (time_s[k + 1] + time_s[k]), v, a, g, pt, running, missing, ratio, soc, c)
         soc += bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
     return soc
+
+
+@equation
+def store_row(rows, k, t, v, a, g, pt, running, missing, ratio, soc, c):
+    """Row k of the series: time, speed, acceleration, gear g (0-based), the point ``pt``'s machine speed,
+    torques, intake pressure (NaN with the engine off), fuel flow, battery current and voltages, the charge
+    at the step's start, the brakes, the torque short, the flags."""
+    rows[H_T, k] = t
+    rows[H_V, k] = v
+    rows[H_A, k] = a
+    rows[H_GEAR, k] = g + 1.0
+    rows[H_W, k] = pt[0]
+    rows[H_TE, k] = pt[3]
+    rows[H_TM, k] = pt[7]
+    rows[H_P, k] = pt[5] if running > 0.0 else math.nan
+    rows[H_MDOT, k] = pt[6]
+    rows[H_I, k] = pt[8]
+    rows[H_UOC, k] = pt[9]
+    rows[H_U, k] = pt[9] - pt[10] * pt[8]
+    rows[H_SOC, k] = soc
+    rows[H_BRAKE, k] = pt[12]
+    rows[H_MISS, k] = el.shaft_torque(missing, ratio, c)
+    rows[H_ON, k] = running
+    rows[H_LIM_M, k] = pt[14]
+    rows[H_LIM_B, k] = pt[15]
+    rows[H_TCR, k] = pt[4]
 
 
 # --- Python side ------------------------------------------------------------------------------------------

@@ -15,7 +15,7 @@ cost and equivalence factor, the DP's cost-to-go, grid and terminal cost, the J1
   (:func:`dp_kernel`), then drives the cycle from the true state with it (:func:`causal_kernel`).
 
 The inverse method (:func:`run_inverse`) drives the smoothing driver's trajectory with the same management
-and point. The forward method is not built (``vpsim.simulate`` says so).
+and point. The forward method calls the same per-step choice (:mod:`vpsim.methods.hev_forward`).
 """
 
 from __future__ import annotations
@@ -33,20 +33,9 @@ from ..model import hybrid as hy
 from ..model import split as sp
 from ..model import tables as tb
 from ..model._compile import kernel
+from ..model.engine import equation
 from . import _hybrid
-from ._hybrid import (
-    N_COMMON_SUMS,
-    N_TERMS,
-    S_BATTERY_S,
-    S_DIST,
-    S_FUEL,
-    S_MACHINE_S,
-    S_MAX_MISS,
-    S_MISS_S,
-    S_ON_S,
-    S_REGEN,
-    S_STARTS,
-)
+from ._hybrid import N_COMMON_SUMS
 
 # rows of the per-interval series
 (
@@ -77,7 +66,6 @@ N_ROWS = 22
 # the running sums: the energy terms, those of methods._hybrid, then this layout's own
 S_NONE_S = N_COMMON_SUMS  # seconds with no engine choice the gear set can take
 N_SUMS = N_COMMON_SUMS + 1
-RULE_TRIES = 12  # the rule's engine power, a fifth less each time the gear set cannot take it
 
 
 @kernel(_nrt=False)
@@ -163,7 +151,6 @@ def causal_kernel(
     soc = soc0
     on = 0.0
     on_time = 0.0
-    n_grid = soc_grid.size
     for k in range(time_s.size - 1):
         dt = time_s[k + 1] - time_s[k]
         v = 0.5 * (speed[k + 1] + speed[k])
@@ -173,99 +160,70 @@ def causal_kernel(
         p_high = sp.engine_power_limit(interval[10], cap[0], cap[1], inv_cap) if runs else 0.0
         p_follow = sp.demand_power(interval, e, p_high)
         battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
-        choice_on = 0.0
-        choice_p = 0.0
-        found = False
-        if ems == hy.EMS_RULE:
-            demand = interval[4] * interval[1]  # the ring's power demand
-            if hy.rule_wants_engine(on, on_time, demand, soc, h) and runs:
-                # the demand plus the charging power of the rule's load-point shift, as a torque at unit
-                # speed (a power), within 0 and the engine's top power; where the gear set cannot take
-                # it, a fifth less, up to RULE_TRIES times
-                p_try = hy.rule_engine_torque(demand, 1.0, soc, 0.0, p_high, h)
-                for _ in range(RULE_TRIES):
-                    pt = sp.split_choice(interval, battery, 1.0, p_try, c, e, m, g, s, tabs, eng, opt)
-                    if pt[sp.P_FEASIBLE] > 0.0:
-                        choice_on, choice_p, found = 1.0, p_try, True
-                        break
-                    p_try *= 0.8
-            if not found:
-                found = sp.split_choice(interval, battery, 0.0, 0.0, c, e, m, g, s, tabs, eng, opt)[24] > 0.0
-        else:
-            s_factor = hy.equivalence_factor(soc, h)
-            cheapest = math.inf
-            for u in range(levels + 2):
-                if u > 0 and not runs:
-                    break
-                o = 1.0 if u > 0 else 0.0
-                p_e = sp.engine_power_choice(u, levels, p_follow, p_high)
-                pt = sp.split_choice(interval, battery, o, p_e, c, e, m, g, s, tabs, eng, opt)
-                if pt[sp.P_FEASIBLE] <= 0.0:
-                    if u > 1:  # levels rise: MG1 holds, and the pack takes, no more of a larger power either
-                        break
-                    continue
-                start = u > 0 and on == 0.0
-                if ems == hy.EMS_DP:
-                    nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
-                    cost = hy.ecms_cost(pt, dt, start, 0.0, c, e, h) + hy.cost_to_go(
-                        jcost[k + 1], 1 if u > 0 else 0, nxt, soc_grid[0], soc_grid[1] - soc_grid[0], n_grid
-                    )
-                else:
-                    cost = hy.ecms_cost(pt, dt, start, s_factor, c, e, h)
-                if cost < cheapest:
-                    cheapest = cost
-                    choice_on = o
-                    choice_p = p_e
-                    found = True
-                if u > 1 and sp.higher_powers_dominated(pt, battery):
-                    break
+        choice_on, choice_p, found = sp.split_choose(
+            interval,
+            battery,
+            soc,
+            on,
+            on_time,
+            dt,
+            ems,
+            levels,
+            runs,
+            p_follow,
+            p_high,
+            c,
+            e,
+            m,
+            g,
+            s,
+            tabs,
+            h,
+            eng,
+            opt,
+            soc_grid,
+            jcost,
+            k + 1,
+        )
         pt = sp.split_choice(interval, battery, choice_on, choice_p, c, e, m, g, s, tabs, eng, opt)
-        running = pt[16]
         if not found:  # no choice within the gear set's limits: the engine off, counted
             sums[S_NONE_S] += dt
-        if running > 0.0 and on == 0.0:
-            sums[S_STARTS] += 1.0
-            sums[S_FUEL] += h.engine_start_fuel
+        terms = sp.split_powers(pt, v, a, c, e, s)
+        running, missing = _hybrid.book_step(sums, pt, terms, interval[0], dt, ratio, on, c, h)
         on_time = on_time + dt if running > 0.0 else 0.0
         on = running
-        missing = pt[13] if pt[13] > hy.MISS_TOLERANCE_N else 0.0
-        terms = sp.split_powers(pt, v, a, c, e, s)
-        for q in range(N_TERMS):
-            sums[q] += terms[q] * dt
-        sums[S_FUEL] += pt[6] * dt
-        sums[S_DIST] += interval[0] * dt
-        if missing > 0.0:
-            sums[S_MISS_S] += dt
-            sums[S_MAX_MISS] = max(sums[S_MAX_MISS], el.shaft_torque(missing, ratio, c))
-        sums[S_MACHINE_S] += pt[14] * dt
-        sums[S_BATTERY_S] += pt[15] * dt
-        sums[S_ON_S] += running * dt
-        if pt[11] < 0.0:
-            sums[S_REGEN] += -pt[11] * dt
-        rows[R_T, k] = 0.5 * (time_s[k + 1] + time_s[k])
-        rows[R_V, k] = v
-        rows[R_A, k] = a
-        rows[R_WC, k] = pt[sp.P_WC]
-        rows[R_WS, k] = pt[sp.P_WS]
-        rows[R_WM, k] = pt[0]
-        rows[R_TE, k] = pt[3]
-        rows[R_TG, k] = pt[sp.P_TG]
-        rows[R_TM, k] = pt[7]
-        rows[R_P, k] = pt[5] if running > 0.0 else math.nan
-        rows[R_MDOT, k] = pt[6]
-        rows[R_I, k] = pt[8]
-        rows[R_UOC, k] = pt[9]
-        rows[R_U, k] = pt[9] - pt[10] * pt[8]
-        rows[R_SOC, k] = soc
-        rows[R_BRAKE, k] = pt[12]
-        rows[R_MISS, k] = el.shaft_torque(missing, ratio, c)
-        rows[R_ON, k] = running
-        rows[R_LIM_M, k] = pt[14]
-        rows[R_LIM_B, k] = pt[15]
-        rows[R_PG, k] = pt[sp.P_PG]
-        rows[R_PM, k] = pt[11]
+        store_row(rows, k, 0.5 * (time_s[k + 1] + time_s[k]), v, a, pt, running, missing, ratio, soc, c)
         soc += bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
     return soc
+
+
+@equation
+def store_row(rows, k, t, v, a, pt, running, missing, ratio, soc, c):
+    """Row k of the series: time, speed, acceleration, the point ``pt``'s speeds, torques, intake pressure
+    (NaN with the engine off), fuel flow, battery current and voltages, the charge at the step's start, the
+    brakes, the torque short, the flags, the machines' powers."""
+    rows[R_T, k] = t
+    rows[R_V, k] = v
+    rows[R_A, k] = a
+    rows[R_WC, k] = pt[sp.P_WC]
+    rows[R_WS, k] = pt[sp.P_WS]
+    rows[R_WM, k] = pt[0]
+    rows[R_TE, k] = pt[3]
+    rows[R_TG, k] = pt[sp.P_TG]
+    rows[R_TM, k] = pt[7]
+    rows[R_P, k] = pt[5] if running > 0.0 else math.nan
+    rows[R_MDOT, k] = pt[6]
+    rows[R_I, k] = pt[8]
+    rows[R_UOC, k] = pt[9]
+    rows[R_U, k] = pt[9] - pt[10] * pt[8]
+    rows[R_SOC, k] = soc
+    rows[R_BRAKE, k] = pt[12]
+    rows[R_MISS, k] = el.shaft_torque(missing, ratio, c)
+    rows[R_ON, k] = running
+    rows[R_LIM_M, k] = pt[14]
+    rows[R_LIM_B, k] = pt[15]
+    rows[R_PG, k] = pt[sp.P_PG]
+    rows[R_PM, k] = pt[11]
 
 
 # --- Python side ------------------------------------------------------------------------------------------

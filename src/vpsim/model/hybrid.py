@@ -37,6 +37,8 @@ Energy management (``hybrid.ems``):
 
 from __future__ import annotations
 
+import math
+
 from . import battery as bt
 from . import electric as el
 from . import engine as en
@@ -396,3 +398,54 @@ def boost_torque(w, soc, e, m, tabs):
     env_speed, env_max, env_min = tabs[7], tabs[8], tabs[9]
     t_min, t_max = el.envelope(w, m, e, env_speed, env_max, env_min)
     return el.machine_and_battery(t_max, False, 0.0, w, soc, e, m, tabs)[0]
+
+
+# --- the P2's choice at one step, and what a forward run's car does with it -------------------------------
+
+
+@equation
+def p2_choose(
+    interval, battery, soc, on, on_time, dt, ems, levels, t_low, t_high, c, e, m, tabs, h, soc_grid, jcost, k1
+):
+    """The management's choice (engine on, its torque) at one step of the P2 (:func:`p2_interval`, the pack
+    in state ``battery``), from what it knows then: the charge, the engine's state and running time, the
+    step dt; the DP's cost-to-go ``jcost[k1]`` on ``soc_grid`` (``ems`` dp only). Every method's P2 calls it
+    per step."""
+    w, t_in, runs = interval[1], interval[4], interval[5]
+    choice_on = 0.0
+    choice_te = 0.0
+    if ems == EMS_RULE:
+        if rule_wants_engine(on, on_time, t_in * w, soc, h) and runs:
+            choice_on = 1.0
+            choice_te = rule_engine_torque(t_in, w, soc, t_low, t_high, h)
+        return choice_on, choice_te
+    s_factor = equivalence_factor(soc, h)
+    best = math.inf
+    for u in range(levels + 1):
+        if u > 0 and not runs:
+            break
+        o = 1.0 if u > 0 else 0.0
+        te = engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else 0.0
+        pt = p2_choice(interval, battery, o, te, c, e, m, tabs)
+        start = u > 0 and on == 0.0
+        if ems == EMS_DP:
+            nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
+            cost = ecms_cost(pt, dt, start, 0.0, c, e, h) + cost_to_go(
+                jcost[k1], 1 if u > 0 else 0, nxt, soc_grid[0], soc_grid[1] - soc_grid[0], soc_grid.size
+            )
+        else:
+            cost = ecms_cost(pt, dt, start, s_factor, c, e, h)
+        if cost < best:
+            best = cost
+            choice_on = o
+            choice_te = te
+        if u > 0 and higher_torques_dominated(pt, battery):
+            break
+    return choice_on, choice_te
+
+
+@equation
+def delivered_acceleration(a, missing, c):
+    """The acceleration of a car whose wheels get ``missing`` newtons less than the demand m a + road load
+    of acceleration a (18): a - F_miss / m (a forward run's car, where the powertrain falls short)."""
+    return a - missing / c.mass

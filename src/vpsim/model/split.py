@@ -343,3 +343,87 @@ def best_efficiency_line(engine_map, w_lo, w_hi):
         fuel = np.where(ok, np.asarray(engine_map.fuel_flow(np.where(ok, t, 0.0), speeds), float), np.inf)
         best[j] = speeds[int(np.argmin(fuel))]
     return powers, best, speeds, np.maximum.accumulate(p_full)
+
+
+# --- the management's choice at one step (every method's power split calls it) ---------------------------
+
+RULE_TRIES = 12  # the rule's engine power, a fifth less each time the gear set cannot take it
+
+
+@equation
+def split_choose(
+    interval,
+    battery,
+    soc,
+    on,
+    on_time,
+    dt,
+    ems,
+    levels,
+    runs,
+    p_follow,
+    p_high,
+    c,
+    e,
+    m,
+    g,
+    s,
+    tabs,
+    h,
+    eng,
+    opt,
+    soc_grid,
+    jcost,
+    k1,
+):
+    """The management's choice at one step of the power split (:func:`split_interval`, the
+    pack in state ``battery``): (engine on, its power, whether any choice is within the gear set's limits),
+    from what it knows then (the DP's cost-to-go ``jcost[k1]`` for ``ems`` dp). Every method calls it."""
+    n_grid = soc_grid.size
+    choice_on = 0.0
+    choice_p = 0.0
+    found = False
+    if ems == hy.EMS_RULE:
+        demand = interval[4] * interval[1]  # the ring's power demand
+        if hy.rule_wants_engine(on, on_time, demand, soc, h) and runs:
+            # the demand plus the charging power of the rule's load-point shift, as a torque at unit
+            # speed (a power), within 0 and the engine's top power; where the gear set cannot take
+            # it, a fifth less, up to RULE_TRIES times
+            p_try = hy.rule_engine_torque(demand, 1.0, soc, 0.0, p_high, h)
+            for _ in range(RULE_TRIES):
+                pt = split_choice(interval, battery, 1.0, p_try, c, e, m, g, s, tabs, eng, opt)
+                if pt[P_FEASIBLE] > 0.0:
+                    choice_on, choice_p, found = 1.0, p_try, True
+                    break
+                p_try *= 0.8
+        if not found:
+            found = split_choice(interval, battery, 0.0, 0.0, c, e, m, g, s, tabs, eng, opt)[24] > 0.0
+    else:
+        s_factor = hy.equivalence_factor(soc, h)
+        cheapest = math.inf
+        for u in range(levels + 2):
+            if u > 0 and not runs:
+                break
+            o = 1.0 if u > 0 else 0.0
+            p_e = engine_power_choice(u, levels, p_follow, p_high)
+            pt = split_choice(interval, battery, o, p_e, c, e, m, g, s, tabs, eng, opt)
+            if pt[P_FEASIBLE] <= 0.0:
+                if u > 1:  # levels rise: MG1 holds, and the pack takes, no more of a larger power either
+                    break
+                continue
+            start = u > 0 and on == 0.0
+            if ems == hy.EMS_DP:
+                nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
+                cost = hy.ecms_cost(pt, dt, start, 0.0, c, e, h) + hy.cost_to_go(
+                    jcost[k1], 1 if u > 0 else 0, nxt, soc_grid[0], soc_grid[1] - soc_grid[0], n_grid
+                )
+            else:
+                cost = hy.ecms_cost(pt, dt, start, s_factor, c, e, h)
+            if cost < cheapest:
+                cheapest = cost
+                choice_on = o
+                choice_p = p_e
+                found = True
+            if u > 1 and higher_powers_dominated(pt, battery):
+                break
+    return choice_on, choice_p, found

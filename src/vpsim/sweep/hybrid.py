@@ -44,7 +44,7 @@ def simulate_row(cycle, method: str, driver: str, params, mode: str, ems: str | 
     from ..simulation import simulate
 
     kw = {"ems": ems} if ems is not None else {}
-    if method != "backward":
+    if method == "inverse":  # (the hybrid's forward run drives with the electric car's PI gains, no --driver)
         kw["driver"] = driver
     r = simulate(cycle, method, params, mode=mode, **kw)
     s = r.summary()

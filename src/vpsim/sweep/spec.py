@@ -608,8 +608,6 @@ def _ems(value, params: Parameters, methods, accel, names, where: str) -> str | 
 
     if value is not None and value not in EMS_CODES:
         raise SpecError(f"{where}: ems = {value!r}; expected one of {', '.join(EMS_CODES)}")
-    if "forward" in methods:
-        raise SpecError(f"{where}: methods: the hybrid runs on the backward and inverse methods, not forward")
     if (value or params.hybrid.ems) == "dp" and set(methods) != {"backward"}:
         raise SpecError(
             f'{where}: ems = "dp" runs on the backward method only (a known cycle): methods = ["backward"]'

@@ -1,0 +1,127 @@
+"""The hybrids (P2 and power split) on the forward method: a PI driver and the causal management drive the
+car, whose speed is integrated from the force its powertrain delivers."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+import vpsim
+from vpsim.cycles import Cycle, load_cycle
+from vpsim.errors import VpsimError
+from vpsim.params import load_parameters
+from vpsim.result import BAND_KMH
+
+CARS = {name: load_parameters(name) for name in ("hev_p2", "hev_split")}
+CYCLES = ("udds", "hwfet", "us06")
+EMS = ("rule", "ecms")
+
+
+@pytest.fixture(scope="module")
+def runs():
+    out = {}
+    for car, p in CARS.items():
+        for cyc in CYCLES:
+            for ems in EMS:
+                out[car, cyc, ems] = (
+                    vpsim.simulate(cyc, "backward", p, ems=ems),
+                    vpsim.simulate(cyc, "forward", p, ems=ems),
+                )
+    return out
+
+
+def test_energy_balance_closes_and_the_kinetic_term_is_the_speed_left_at_the_end(runs):
+    """The terms booked step by step close to rounding; and the vehicle's kinetic energy booked, sum m a v dt,
+    is what the integrated speed says: 1/2 m v_end^2 (the cycle starts at rest), the energy the driver's
+    speed error leaves in the car."""
+    for key, (_, fwd) in runs.items():
+        assert fwd.method == "forward"
+        assert abs(fwd.energy.relative_residual) < 1e-12, (key, fwd.energy)
+        v_end = fwd.series["speed_mps"][-1]
+        mass = CARS[key[0]].vehicle.mass
+        assert fwd.energy.terms["vehicle_kinetic"] == pytest.approx(0.5 * mass * v_end**2, abs=1e-6), key
+
+
+# the forward car's charge-sustaining fuel against the backward method's; the one exception: the power split
+# on US06, where the backward method misses 10-15 s of the trace at full power (120-150 kJ of wheel work it
+# does not deliver) and the forward car, behind the trace there, delivers it catching up (measured +3.5-3.6 %)
+TOLERANCE = {("hev_split", "us06"): 0.04}
+
+
+@pytest.mark.parametrize("car", sorted(CARS))
+@pytest.mark.parametrize("cycle", CYCLES)
+def test_forward_within_3_percent_of_backward(runs, car, cycle):
+    for ems in EMS:
+        back, fwd = runs[car, cycle, ems]
+        assert fwd.electric["fuel_l_per_100km_cs"] == pytest.approx(
+            back.electric["fuel_l_per_100km_cs"], rel=TOLERANCE.get((car, cycle), 0.03)
+        ), ems
+        assert fwd.electric["engine_starts"] > 0
+        assert abs(fwd.electric["soc_end"] - back.electric["soc_end"]) < 0.03
+
+
+def test_the_speed_stays_in_the_band_where_the_powertrain_can_follow(runs):
+    """Outside the +-2 km/h band only while the powertrain was at its limit (the driver asked more than it
+    gives); on UDDS and HWFET never, with the largest error within the band."""
+    band = BAND_KMH / 3.6
+    for key, (_, fwd) in runs.items():
+        s = fwd.summary()
+        assert s["speed_not_followed_s"] <= fwd.solver["powertrain_limited_s"], key
+        err = np.abs(fwd.series["speed_mps"] - fwd.series["reference_speed_mps"])
+        # the largest error over every step, at least the largest at the cycle's samples
+        assert s["max_speed_error_mps"] == pytest.approx(fwd.solver["max_speed_error_mps"])
+        assert s["max_speed_error_mps"] >= err.max() - 1e-12
+        if key[1] != "us06":
+            assert s["speed_not_followed_s"] == 0.0 and fwd.solver["max_speed_error_mps"] < band, key
+
+
+def test_a_demand_the_powertrain_cannot_give_is_counted(runs):
+    """Where the driver asked more than the powertrain gives (the split's MG1 and pack on US06's hardest
+    accelerations), the time is the run's demand not deliverable; the P2 on UDDS never."""
+    s = runs["hev_split", "us06", "ecms"][1].summary()
+    assert s["demand_not_deliverable_s"] > 5.0 and s["max_torque_shortfall_nm"] > 0.0
+    assert s["torque_beyond_full_load_s"] == s["demand_not_deliverable_s"]
+    assert runs["hev_p2", "udds", "ecms"][1].summary()["demand_not_deliverable_s"] == 0.0
+
+
+def test_same_summary_keys_as_the_backward_method(runs):
+    back, fwd = runs["hev_p2", "udds", "ecms"]
+    assert set(fwd.summary()) == set(back.summary())
+    assert fwd.summary()["ems"] == "ecms" and math.isfinite(fwd.summary()["fuel_l_per_100km_cs"])
+
+
+@pytest.mark.parametrize("car", sorted(CARS))
+def test_the_controller_is_causal(car):
+    """A run on the first 300 s of UDDS is the full run's first 300 s, bit for bit: nothing later in the cycle
+    reaches the driver or the management (the P2's gears are given as the full cycle's schedule)."""
+    from vpsim.gears import default_schedule
+    from vpsim.methods import hev_forward
+    from vpsim.model.maps import cached_engine_map
+
+    full = load_cycle("udds")
+    cut = Cycle("udds-300", full.time_s[:301], full.speed_mps[:301])
+    p = CARS[car]
+    sched = default_schedule(full, p, cached_engine_map(p.engine))
+    a = hev_forward.run(full, p, ems="ecms", schedule=sched)
+    b = hev_forward.run(cut, p, ems="ecms", schedule=sched)
+    for k in ("speed_mps", "soc", "engine_on", "machine_torque_nm", "fuel_flow_kgps"):
+        np.testing.assert_array_equal(a.series[k][:300], b.series[k][:300], err_msg=k)
+
+
+def test_dp_and_a_driver_are_refused_with_one_line():
+    with pytest.raises(VpsimError, match="backward method only"):
+        vpsim.simulate("udds", "forward", CARS["hev_p2"], ems="dp")
+    with pytest.raises(VpsimError, match="forward_kp"):
+        vpsim.simulate("udds", "forward", CARS["hev_split"], driver=2)
+
+
+def test_cli_runs_the_forward_hybrid(capsys):
+    from vpsim.cli.main import main
+
+    args = ["simulate", "--vehicle", "hev_p2", "--cycle", "hwfet", "--method", "forward", "--ems", "rule"]
+    assert main([*args, "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["method"] == "forward" and s["ems"] == "rule" and s["engine_starts"] > 0
