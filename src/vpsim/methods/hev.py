@@ -143,14 +143,19 @@ def causal_kernel(
     soc_start,
     rows,
     sums,
+    exhaustive,
 ):
     """Drive the cycle with the management ``ems`` (rule, ecms, or dp with the cost-to-go ``jcost``); fill
-    ``rows`` and the sums. Returns the final state of charge."""
+    ``rows`` and the sums. Returns the final state of charge. ``exhaustive``: the ECMS tries every torque
+    level even where a walk finds the same one (:func:`vpsim.model.hybrid.ecms_cheapest_level`; the
+    reference the walk is tested against)."""
     inv_line = tb.inverse_spacing(line_speed)
     soc = soc_start
     on = 0.0
     on_time = 0.0
     j = 0
+    level = 0
+    walk = hy.running_cost_convex(c, e) and not exhaustive
     n_grid = soc_grid.size
     for k in range(time_s.size - 1):
         dt = time_s[k + 1] - time_s[k]
@@ -171,6 +176,21 @@ def causal_kernel(
             if hy.rule_wants_engine(on, on_time, t_in * w, soc, h) and runs:
                 choice_on = 1.0
                 choice_te = hy.rule_engine_torque(t_in, w, soc, t_low, t_high, h)
+        elif ems == hy.EMS_ECMS and walk:
+            # engine off, then the cheapest running level by a walk from the last running level (from the
+            # demand's level after a stop): the exhaustive search's choice (hy.running_cost_convex)
+            s_factor = hy.equivalence_factor(soc, h)
+            pt = hy.p2_choice(interval, battery, 0.0, 0.0, c, e, m, tabs)
+            best = hy.ecms_cost(pt, dt, False, s_factor, c, e, h)
+            if runs:
+                guess = level if on > 0.0 else hy.nearest_level(interval[4], levels, t_low, t_high)
+                cost, lv = hy.ecms_cheapest_level(
+                    interval, battery, on == 0.0, s_factor, dt, levels, t_low, t_high, guess, c, e, m, tabs, h
+                )
+                if cost < best:
+                    choice_on = 1.0
+                    choice_te = hy.engine_torque_level(lv, levels, t_low, t_high)
+                    level = lv
         else:
             s_factor = hy.equivalence_factor(soc, h)
             best = math.inf
@@ -264,11 +284,14 @@ def _inputs(cycle, params, schedule=None):
     )
 
 
-def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", schedule=None):
+def run(
+    cycle, params, *, ems: str | None = None, mode: str = "realistic", schedule=None, exhaustive: bool = False
+):
     """The P2 hybrid of ``params`` on ``cycle`` (backward method) with the management ``ems`` (default
     ``params.hybrid.ems``); a :class:`vpsim.result.Result`. ``schedule``: the gear rule's schedule of this
     cycle and car (:func:`vpsim.gears.default_schedule`) if already at hand (a benchmark's prepared inputs,
-    as the engine car's backward method takes them); derived here otherwise."""
+    as the engine car's backward method takes them); derived here otherwise. ``exhaustive``: the ECMS tries
+    every torque level (the reference its walk is tested against; the same choices)."""
     ems = ems or params.hybrid.ems
     if ems not in hy.EMS_CODES:
         raise VpsimError(f"unknown energy management {ems!r}; expected one of {', '.join(hy.EMS_CODES)}")
@@ -312,6 +335,7 @@ def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", sched
         soc_start,
         rows,
         sums,
+        exhaustive,
     )
     cpu = time.process_time() - t0
     return _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu)
@@ -345,7 +369,15 @@ def _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu):
     return _hybrid.result(cycle, params, ems, mode, series, sums, soc_start, soc_end, n, cpu)
 
 
-def run_inverse(cycle, params, *, driver: str = "2", ems: str | None = None, mode: str = "realistic"):
+def run_inverse(
+    cycle,
+    params,
+    *,
+    driver: str = "2",
+    ems: str | None = None,
+    mode: str = "realistic",
+    exhaustive: bool = False,
+):
     """The P2 hybrid on the inverse method: the smoothing driver's trajectory v_d(t) (34)-(35), sampled on
     :func:`vpsim.drivers.smoothing.inverse_grid`, driven by the same management and operating point as the
     backward method (each grid interval at its mean speed and constant acceleration, to second order in the
@@ -390,6 +422,7 @@ def run_inverse(cycle, params, *, driver: str = "2", ems: str | None = None, mod
         params.battery.soc_initial,
         rows,
         sums,
+        exhaustive,
     )
     cpu = time.process_time() - t0
     starts = np.searchsorted(grid, ts[:-1])  # the grid intervals that start at the cycle's samples

@@ -204,6 +204,74 @@ def ecms_cost(point, dt, start, s_factor, c, e, h):
 
 
 @equation
+def running_cost_convex(c, e):
+    """Whether the ECMS's cost of the running choices is convex in the engine's torque, so that the cheapest
+    of its levels is found by walking downhill (:func:`ecms_cheapest_level`) instead of trying them all.
+
+    It is where the fuel is affine in the torque (the BQM (19): p_i affine in T_cr, the fuel (7) affine in
+    p_i; not with a boosted engine's enrichment, whose cap bends it down) and the machine's DC power convex
+    in its torque (the scalable loss model: k0 + k_sw |tau| + k_cu tau^2 ..., not a measured map's
+    bilinear table): the machine's torque is the demand less the engine's (linear; a braking demand's
+    regenerative share makes it piecewise linear and convex), the pack's current convex and increasing in
+    its power (B2) and the chemical power convex and increasing in the current (B3, charge at eta_c < 1),
+    and where the machine or the pack is at its limit the cost is the fuel plus a constant, or a trace
+    miss's price falling steeper than the fuel rises."""
+    return c.enrichment_slope == 0.0 and e.measured_machine <= 0.0
+
+
+@inline
+def ecms_level_cost(j, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h):
+    """(ECMS cost, higher torques dominated) of the running choice at torque level j."""
+    pt = p2_choice(interval, battery, 1.0, engine_torque_level(j, levels, t_low, t_high), c, e, m, tabs)
+    return ecms_cost(pt, dt, start, s_factor, c, e, h), higher_torques_dominated(pt, battery)
+
+
+@equation
+def ecms_cheapest_level(
+    interval, battery, start, s_factor, dt, levels, t_low, t_high, guess, c, e, m, tabs, h
+):
+    """(cost, level) of the cheapest running choice of the ECMS where its cost is convex in the engine's
+    torque (:func:`running_cost_convex`): from the level ``guess``, downhill to the first level whose
+    neighbours cost no less. The level the exhaustive search (every level upward, the first strict minimum,
+    none above a dominated one) finds: ties go to the lower level, and no walk goes above a dominated one."""
+    j = min(max(guess, 0), levels - 1)
+    cj, dom = ecms_level_cost(
+        j, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h
+    )
+    if j + 1 < levels and not dom:
+        cu, du = ecms_level_cost(
+            j + 1, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h
+        )
+        if cu < cj:
+            j, cj, dom = j + 1, cu, du
+            while j + 1 < levels and not dom:
+                cu, du = ecms_level_cost(
+                    j + 1, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h
+                )
+                if not cu < cj:
+                    break
+                j, cj, dom = j + 1, cu, du
+            return cj, j
+    while j > 0:
+        cd, _ = ecms_level_cost(
+            j - 1, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h
+        )
+        if cd > cj:
+            break
+        j, cj = j - 1, cd
+    return cj, j
+
+
+@equation
+def nearest_level(t, levels, t_low, t_high):
+    """The torque level (:func:`engine_torque_level`) nearest to torque t."""
+    if t_high <= t_low:
+        return 0
+    x = (t - t_low) / (t_high - t_low) * (levels - 1.0)
+    return int(min(max(x + 0.5, 0.0), levels - 1.0))
+
+
+@equation
 def rule_engine_torque(t_in, w, soc, t_low, t_high, h):
     """The rule's engine torque: the input demand plus a charging power that grows from 0 at soc_target to
     charge_power at soc_low (a load-point shift), within the engine's lines."""
