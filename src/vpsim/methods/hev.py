@@ -171,50 +171,53 @@ def causal_kernel(
         battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
         choice_on = 0.0
         choice_te = 0.0
-        if ems == hy.EMS_RULE:
-            t_in = el.shaft_torque(vh.wheel_force(v, a, c), ratio, c)
-            if hy.rule_wants_engine(on, on_time, t_in * w, soc, h) and runs:
-                choice_on = 1.0
-                choice_te = hy.rule_engine_torque(t_in, w, soc, t_low, t_high, h)
-        elif ems == hy.EMS_ECMS and walk:
-            # engine off, then the cheapest running level by a walk from the last running level (from the
-            # demand's level after a stop): the exhaustive search's choice (hy.running_cost_convex)
+        if ems == hy.EMS_ECMS and walk:
+            # engine off, then the cheapest running level by a walk from the last step's (its point kept):
+            # the exhaustive search's choice, where the cost is convex (hy.running_cost_convex)
             s_factor = hy.equivalence_factor(soc, h)
             pt = hy.p2_choice(interval, battery, 0.0, 0.0, c, e, m, tabs)
             best = hy.ecms_cost(pt, dt, False, s_factor, c, e, h)
             if runs:
-                guess = level if on > 0.0 else hy.nearest_level(interval[4], levels, t_low, t_high)
-                cost, lv = hy.ecms_cheapest_level(
-                    interval, battery, on == 0.0, s_factor, dt, levels, t_low, t_high, guess, c, e, m, tabs, h
+                cost, level, p_run = hy.ecms_cheapest_level(
+                    interval, battery, on == 0.0, s_factor, dt, levels, t_low, t_high, level, c, e, m, tabs, h
                 )
                 if cost < best:
-                    choice_on = 1.0
-                    choice_te = hy.engine_torque_level(lv, levels, t_low, t_high)
-                    level = lv
+                    pt = p_run
         else:
-            s_factor = hy.equivalence_factor(soc, h)
-            best = math.inf
-            for u in range(levels + 1):
-                if u > 0 and not runs:
-                    break
-                o = 1.0 if u > 0 else 0.0
-                te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else 0.0
-                pt = hy.p2_choice(interval, battery, o, te, c, e, m, tabs)
-                start = u > 0 and on == 0.0
-                if ems == hy.EMS_DP:
-                    nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
-                    cost = hy.ecms_cost(pt, dt, start, 0.0, c, e, h) + hy.cost_to_go(
-                        jcost[k + 1], 1 if u > 0 else 0, nxt, soc_grid[0], soc_grid[1] - soc_grid[0], n_grid
-                    )
-                else:
-                    cost = hy.ecms_cost(pt, dt, start, s_factor, c, e, h)
-                if cost < best:
-                    best = cost
-                    choice_on = o
-                    choice_te = te
-                if u > 0 and hy.higher_torques_dominated(pt, battery):
-                    break
-        pt = hy.p2_choice(interval, battery, choice_on, choice_te, c, e, m, tabs)
+            if ems == hy.EMS_RULE:
+                t_in = el.shaft_torque(vh.wheel_force(v, a, c), ratio, c)
+                if hy.rule_wants_engine(on, on_time, t_in * w, soc, h) and runs:
+                    choice_on = 1.0
+                    choice_te = hy.rule_engine_torque(t_in, w, soc, t_low, t_high, h)
+            else:
+                s_factor = hy.equivalence_factor(soc, h)
+                best = math.inf
+                for u in range(levels + 1):
+                    if u > 0 and not runs:
+                        break
+                    o = 1.0 if u > 0 else 0.0
+                    te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else 0.0
+                    pt = hy.p2_choice(interval, battery, o, te, c, e, m, tabs)
+                    start = u > 0 and on == 0.0
+                    if ems == hy.EMS_DP:
+                        nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
+                        cost = hy.ecms_cost(pt, dt, start, 0.0, c, e, h) + hy.cost_to_go(
+                            jcost[k + 1],
+                            1 if u > 0 else 0,
+                            nxt,
+                            soc_grid[0],
+                            soc_grid[1] - soc_grid[0],
+                            n_grid,
+                        )
+                    else:
+                        cost = hy.ecms_cost(pt, dt, start, s_factor, c, e, h)
+                    if cost < best:
+                        best = cost
+                        choice_on = o
+                        choice_te = te
+                    if u > 0 and hy.higher_torques_dominated(pt, battery):
+                        break
+            pt = hy.p2_choice(interval, battery, choice_on, choice_te, c, e, m, tabs)
         running = pt[16]
         if running > 0.0 and on == 0.0:
             sums[S_STARTS] += 1.0

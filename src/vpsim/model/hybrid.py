@@ -221,54 +221,46 @@ def running_cost_convex(c, e):
 
 @inline
 def ecms_level_cost(j, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h):
-    """(ECMS cost, higher torques dominated) of the running choice at torque level j."""
+    """(ECMS cost, higher torques dominated, the point) of the running choice at torque level j."""
     pt = p2_choice(interval, battery, 1.0, engine_torque_level(j, levels, t_low, t_high), c, e, m, tabs)
-    return ecms_cost(pt, dt, start, s_factor, c, e, h), higher_torques_dominated(pt, battery)
+    return ecms_cost(pt, dt, start, s_factor, c, e, h), higher_torques_dominated(pt, battery), pt
 
 
 @equation
 def ecms_cheapest_level(
     interval, battery, start, s_factor, dt, levels, t_low, t_high, guess, c, e, m, tabs, h
 ):
-    """(cost, level) of the cheapest running choice of the ECMS where its cost is convex in the engine's
-    torque (:func:`running_cost_convex`): from the level ``guess``, downhill to the first level whose
-    neighbours cost no less. The level the exhaustive search (every level upward, the first strict minimum,
-    none above a dominated one) finds: ties go to the lower level, and no walk goes above a dominated one."""
+    """(cost, level, its point) of the cheapest running choice of the ECMS where its cost is convex in the
+    engine's torque (:func:`running_cost_convex`): from the level ``guess``, downhill to the first level
+    whose neighbours cost no less. The level the exhaustive search (every level upward, the first strict
+    minimum, none above a dominated one) finds: ties go to the lower level, and no walk goes above a
+    dominated one."""
     j = min(max(guess, 0), levels - 1)
-    cj, dom = ecms_level_cost(
+    cj, dom, pj = ecms_level_cost(
         j, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h
     )
     if j + 1 < levels and not dom:
-        cu, du = ecms_level_cost(
+        cu, du, pu = ecms_level_cost(
             j + 1, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h
         )
         if cu < cj:
-            j, cj, dom = j + 1, cu, du
+            j, cj, dom, pj = j + 1, cu, du, pu
             while j + 1 < levels and not dom:
-                cu, du = ecms_level_cost(
+                cu, du, pu = ecms_level_cost(
                     j + 1, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h
                 )
                 if not cu < cj:
                     break
-                j, cj, dom = j + 1, cu, du
-            return cj, j
+                j, cj, dom, pj = j + 1, cu, du, pu
+            return cj, j, pj
     while j > 0:
-        cd, _ = ecms_level_cost(
+        cd, _, pd = ecms_level_cost(
             j - 1, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h
         )
         if cd > cj:
             break
-        j, cj = j - 1, cd
-    return cj, j
-
-
-@equation
-def nearest_level(t, levels, t_low, t_high):
-    """The torque level (:func:`engine_torque_level`) nearest to torque t."""
-    if t_high <= t_low:
-        return 0
-    x = (t - t_low) / (t_high - t_low) * (levels - 1.0)
-    return int(min(max(x + 0.5, 0.0), levels - 1.0))
+        j, cj, pj = j - 1, cd, pd
+    return cj, j, pj
 
 
 @equation
