@@ -268,22 +268,29 @@ def causal_kernel(
 def _inputs(cycle, params, schedule=None):
     from ..gears import default_schedule
     from ..model.maps import cached_engine_map
-    from ..model.record import kernel_records
-    from ..model.record import ratios as total_ratios
+    from ..model.record import memo
 
     engine_map = cached_engine_map(params.engine)
     if schedule is None:
         schedule = default_schedule(cycle, params, engine_map)
+    return (engine_map, schedule, *memo(params, "p2_records", _records))
+
+
+def _records(params):
+    """(c, e, m, tables, h, total ratios, DP grid) of a parameter set, built once per set (as the power
+    split's inputs): a run on a prepared schedule then spends no time rebuilding them."""
+    from ..model.record import kernel_records
+    from ..model.record import ratios as total_ratios
+
     e, m, tabs = el.electric_records(params)
     return (
-        engine_map,
-        schedule,
         kernel_records(params)[0],
         e,
         m,
         tabs.astuple(),
         hy.hybrid_record(params),
         np.asarray(total_ratios(params.transmission), float),
+        hy.dp_grid(params),
     )
 
 
@@ -298,14 +305,13 @@ def run(
     ems = ems or params.hybrid.ems
     if ems not in hy.EMS_CODES:
         raise VpsimError(f"unknown energy management {ems!r}; expected one of {', '.join(hy.EMS_CODES)}")
-    engine_map, schedule, c, e, m, tabs, h, ratios = _inputs(cycle, params, schedule)
+    engine_map, schedule, c, e, m, tabs, h, ratios, grid = _inputs(cycle, params, schedule)
     t0 = time.process_time()
     ts, vs = np.asarray(cycle.time_s, float), np.asarray(cycle.speed_mps, float)
     n = ts.size - 1
     soc_start = params.battery.soc_initial
     levels = params.hybrid.torque_levels
     lines = (engine_map.max_torque_speed, engine_map.max_torque_values, engine_map.min_torque_values)
-    grid = hy.dp_grid(params)
     if ems == "dp":
         dt = np.diff(ts)
         v = 0.5 * (vs[1:] + vs[:-1])
@@ -400,7 +406,7 @@ def run_inverse(
     ts, vs = np.asarray(cycle.time_s, float), np.asarray(cycle.speed_mps, float)
     grid = inverse_grid(ts, params.simulation.inverse_max_step)
     smooth = np.maximum(SmoothingDriver(ts, vs, a).evaluate(grid)[0], 0.0)
-    engine_map, schedule, c, e, m, tabs, h, ratios = _inputs(cycle, params)
+    engine_map, schedule, c, e, m, tabs, h, ratios, soc_grid = _inputs(cycle, params)
     t0 = time.process_time()
     n = grid.size - 1
     rows = np.empty((N_ROWS, n))
@@ -420,7 +426,7 @@ def run_inverse(
         hy.EMS_CODES[ems],
         params.hybrid.torque_levels,
         *lines,
-        hy.dp_grid(params),
+        soc_grid,
         np.zeros((1, 2, 2)),
         params.battery.soc_initial,
         rows,
