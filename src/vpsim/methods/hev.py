@@ -171,9 +171,10 @@ def causal_kernel(
         battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
         choice_on = 0.0
         choice_te = 0.0
-        if ems == hy.EMS_ECMS and walk:
+        if ems == hy.EMS_ECMS and walk and hy.pack_covers_no_drive(interval, battery, e, m, tabs):
             # engine off, then the cheapest running level by a walk from the last step's (its point kept):
-            # the exhaustive search's choice, where the cost is convex (hy.running_cost_convex)
+            # the exhaustive search's choice, where the cost is convex (hy.running_cost_convex, and a pack
+            # not at its empty end: hy.pack_covers_no_drive)
             s_factor = hy.equivalence_factor(soc, h)
             pt = hy.p2_choice(interval, battery, 0.0, 0.0, c, e, m, tabs)
             best = hy.ecms_cost(pt, dt, False, s_factor, c, e, h)

@@ -219,6 +219,22 @@ def running_cost_convex(c, e):
     return c.enrichment_slope == 0.0 and e.measured_machine <= 0.0
 
 
+@equation
+def pack_covers_no_drive(interval, battery, e, m, tabs):
+    """Whether the pack's discharge limit covers the accessories and what the machine draws at any torque
+    from its generating limit to zero at this step's speed (its DC power is convex in the torque, so the
+    most is at one end). Where it does not (a pack at its empty end), a generating choice can leave the
+    accessories unserved and its current clamped, and the ECMS's cost is no longer convex: the step takes
+    the exhaustive search."""
+    w, t_min = interval[1], interval[7]
+    u_oc, r_d, r_c, i_lo, i_hi = battery
+    draw = max(
+        el.machine_power(0.0, w, m, e, tabs[4], tabs[5], tabs[6]),
+        el.machine_power(t_min, w, m, e, tabs[4], tabs[5], tabs[6]),
+    )
+    return el.pack_power(i_hi, u_oc, r_d, r_c) > (e.accessory_power + max(draw, 0.0)) * (1.0 + 1e-9) + 1e-6
+
+
 @inline
 def ecms_level_cost(j, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h):
     """(ECMS cost, higher torques dominated, the point) of the running choice at torque level j."""
