@@ -108,3 +108,19 @@ def test_inverse_method_within_3_percent_of_backward(runs, cycle):
         assert inv.electric["fuel_l_per_100km_cs"] == pytest.approx(back, rel=0.03)
         assert abs(inv.energy.relative_residual) < 1e-12
         assert inv.method == "inverse" and inv.summary()["speed_not_followed_s"] <= 2.0
+
+
+@pytest.mark.parametrize("cycle", ["udds", "hwfet", "us06"])
+def test_ecms_walk_finds_the_exhaustive_searchs_choices(cycle):
+    """The ECMS's cost is convex in the engine's torque on this car (hybrid.running_cost_convex), so a walk
+    downhill from the last running level finds the level trying every one finds: the same choices at every
+    step (bit for bit), backward and inverse."""
+    from vpsim.cycles import load_cycle
+    from vpsim.methods import hev
+
+    cyc = load_cycle(cycle)
+    for run in (hev.run, hev.run_inverse):
+        walk, every = run(cyc, HEV, ems="ecms"), run(cyc, HEV, ems="ecms", exhaustive=True)
+        assert walk.fuel_kg == every.fuel_kg
+        for k in ("engine_on", "engine_torque_nm", "machine_torque_nm", "soc"):
+            assert np.array_equal(walk.series[k], every.series[k]), k

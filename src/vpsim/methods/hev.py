@@ -132,14 +132,19 @@ def causal_kernel(
     soc_start,
     rows,
     sums,
+    exhaustive,
 ):
     """Drive the cycle with the management ``ems`` (rule, ecms, or dp with the cost-to-go ``jcost``); fill
-    ``rows`` and the sums. Returns the final state of charge."""
+    ``rows`` and the sums. Returns the final state of charge. ``exhaustive``: the ECMS tries every torque
+    level even where a walk finds the same one (:func:`vpsim.model.hybrid.ecms_cheapest_level`; the
+    reference the walk is tested against)."""
     inv_line = tb.inverse_spacing(line_speed)
     soc = soc_start
     on = 0.0
     on_time = 0.0
     j = 0
+    level = 0
+    walk = hy.running_cost_convex(c, e) and not exhaustive
     for k in range(time_s.size - 1):
         dt = time_s[k + 1] - time_s[k]
         v = 0.5 * (speed[k + 1] + speed[k])
@@ -151,27 +156,33 @@ def causal_kernel(
         # what the interval and the charge fix, once for all the choices
         interval = hy.p2_interval(v, a, ratio, c, e, m, tabs)
         battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
-        choice_on, choice_te = hy.p2_choose(
-            interval,
-            battery,
-            soc,
-            on,
-            on_time,
-            dt,
-            ems,
-            levels,
-            t_low,
-            t_high,
-            c,
-            e,
-            m,
-            tabs,
-            h,
-            soc_grid,
-            jcost,
-            k + 1,
-        )
-        pt = hy.p2_choice(interval, battery, choice_on, choice_te, c, e, m, tabs)
+        if ems == hy.EMS_ECMS and walk and hy.pack_covers_no_drive(interval, battery, e, m, tabs):
+            # the exhaustive search's choice by a walk from the last step's level, where the cost is convex
+            pt, level = hy.p2_ecms_walk(
+                interval, battery, soc, on, dt, levels, t_low, t_high, level, c, e, m, tabs, h
+            )
+        else:
+            choice_on, choice_te = hy.p2_choose(
+                interval,
+                battery,
+                soc,
+                on,
+                on_time,
+                dt,
+                ems,
+                levels,
+                t_low,
+                t_high,
+                c,
+                e,
+                m,
+                tabs,
+                h,
+                soc_grid,
+                jcost,
+                k + 1,
+            )
+            pt = hy.p2_choice(interval, battery, choice_on, choice_te, c, e, m, tabs)
         terms = hy.hybrid_powers(pt, v, a, c, e)
         running, missing = _hybrid.book_step(sums, pt, terms, interval[0], dt, ratio, on, c, h)
         on_time = on_time + dt if running > 0.0 else 0.0
@@ -213,41 +224,50 @@ def store_row(rows, k, t, v, a, g, pt, running, missing, ratio, soc, c):
 def _inputs(cycle, params, schedule=None):
     from ..gears import default_schedule
     from ..model.maps import cached_engine_map
-    from ..model.record import kernel_records
-    from ..model.record import ratios as total_ratios
+    from ..model.record import memo
 
     engine_map = cached_engine_map(params.engine)
     if schedule is None:
         schedule = default_schedule(cycle, params, engine_map)
+    return (engine_map, schedule, *memo(params, "p2_records", _records))
+
+
+def _records(params):
+    """(c, e, m, tables, h, total ratios, DP grid) of a parameter set, built once per set (as the power
+    split's inputs): a run on a prepared schedule then spends no time rebuilding them."""
+    from ..model.record import kernel_records
+    from ..model.record import ratios as total_ratios
+
     e, m, tabs = el.electric_records(params)
     return (
-        engine_map,
-        schedule,
         kernel_records(params)[0],
         e,
         m,
         tabs.astuple(),
         hy.hybrid_record(params),
         np.asarray(total_ratios(params.transmission), float),
+        hy.dp_grid(params),
     )
 
 
-def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", schedule=None):
+def run(
+    cycle, params, *, ems: str | None = None, mode: str = "realistic", schedule=None, exhaustive: bool = False
+):
     """The P2 hybrid of ``params`` on ``cycle`` (backward method) with the management ``ems`` (default
     ``params.hybrid.ems``); a :class:`vpsim.result.Result`. ``schedule``: the gear rule's schedule of this
     cycle and car (:func:`vpsim.gears.default_schedule`) if already at hand (a benchmark's prepared inputs,
-    as the engine car's backward method takes them); derived here otherwise."""
+    as the engine car's backward method takes them); derived here otherwise. ``exhaustive``: the ECMS tries
+    every torque level (the reference its walk is tested against; the same choices)."""
     ems = ems or params.hybrid.ems
     if ems not in hy.EMS_CODES:
         raise VpsimError(f"unknown energy management {ems!r}; expected one of {', '.join(hy.EMS_CODES)}")
-    engine_map, schedule, c, e, m, tabs, h, ratios = _inputs(cycle, params, schedule)
+    engine_map, schedule, c, e, m, tabs, h, ratios, grid = _inputs(cycle, params, schedule)
     t0 = time.process_time()
     ts, vs = np.asarray(cycle.time_s, float), np.asarray(cycle.speed_mps, float)
     n = ts.size - 1
     soc_start = params.battery.soc_initial
     levels = params.hybrid.torque_levels
     lines = (engine_map.max_torque_speed, engine_map.max_torque_values, engine_map.min_torque_values)
-    grid = hy.dp_grid(params)
     if ems == "dp":
         dt = np.diff(ts)
         v = 0.5 * (vs[1:] + vs[:-1])
@@ -280,6 +300,7 @@ def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", sched
         soc_start,
         rows,
         sums,
+        exhaustive,
     )
     cpu = time.process_time() - t0
     return _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu)
@@ -313,7 +334,15 @@ def _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu):
     return _hybrid.result(cycle, params, ems, mode, series, sums, soc_start, soc_end, n, cpu)
 
 
-def run_inverse(cycle, params, *, driver: str = "2", ems: str | None = None, mode: str = "realistic"):
+def run_inverse(
+    cycle,
+    params,
+    *,
+    driver: str = "2",
+    ems: str | None = None,
+    mode: str = "realistic",
+    exhaustive: bool = False,
+):
     """The P2 hybrid on the inverse method: the smoothing driver's trajectory v_d(t) (34)-(35), sampled on
     :func:`vpsim.drivers.smoothing.inverse_grid`, driven by the same management and operating point as the
     backward method (each grid interval at its mean speed and constant acceleration, to second order in the
@@ -333,7 +362,7 @@ def run_inverse(cycle, params, *, driver: str = "2", ems: str | None = None, mod
     ts, vs = np.asarray(cycle.time_s, float), np.asarray(cycle.speed_mps, float)
     grid = inverse_grid(ts, params.simulation.inverse_max_step)
     smooth = np.maximum(SmoothingDriver(ts, vs, a).evaluate(grid)[0], 0.0)
-    engine_map, schedule, c, e, m, tabs, h, ratios = _inputs(cycle, params)
+    engine_map, schedule, c, e, m, tabs, h, ratios, soc_grid = _inputs(cycle, params)
     t0 = time.process_time()
     n = grid.size - 1
     rows = np.empty((N_ROWS, n))
@@ -353,11 +382,12 @@ def run_inverse(cycle, params, *, driver: str = "2", ems: str | None = None, mod
         hy.EMS_CODES[ems],
         params.hybrid.torque_levels,
         *lines,
-        hy.dp_grid(params),
+        soc_grid,
         np.zeros((1, 2, 2)),
         params.battery.soc_initial,
         rows,
         sums,
+        exhaustive,
     )
     cpu = time.process_time() - t0
     starts = np.searchsorted(grid, ts[:-1])  # the grid intervals that start at the cycle's samples

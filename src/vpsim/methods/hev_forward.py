@@ -354,7 +354,7 @@ def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", sched
         )
         result_of = hev_split._result
     else:
-        engine_map, schedule, c, e, m, tabs, h, ratios = hev._inputs(cycle, params, schedule)
+        engine_map, schedule, c, e, m, tabs, h, ratios, soc_grid = hev._inputs(cycle, params, schedule)
         t0 = time.process_time()
         rows = np.empty((hev.N_ROWS, n))
         sums = np.zeros(hev.N_SUMS)
@@ -375,7 +375,7 @@ def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", sched
             engine_map.max_torque_speed,
             engine_map.max_torque_values,
             engine_map.min_torque_values,
-            hy.dp_grid(params),
+            soc_grid,
             no_cost,
             soc_start,
             drv,

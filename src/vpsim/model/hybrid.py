@@ -206,6 +206,82 @@ def ecms_cost(point, dt, start, s_factor, c, e, h):
 
 
 @equation
+def running_cost_convex(c, e):
+    """Whether the ECMS's cost of the running choices is convex in the engine's torque, so that the cheapest
+    of its levels is found by walking downhill (:func:`ecms_cheapest_level`) instead of trying them all.
+
+    It is where the fuel is affine in the torque (the BQM (19): p_i affine in T_cr, the fuel (7) affine in
+    p_i; not with a boosted engine's enrichment, whose cap bends it down) and the machine's DC power convex
+    in its torque (the scalable loss model: k0 + k_sw |tau| + k_cu tau^2 ..., not a measured map's
+    bilinear table): the machine's torque is the demand less the engine's (linear; a braking demand's
+    regenerative share makes it piecewise linear and convex), the pack's current convex and increasing in
+    its power (B2) and the chemical power convex and increasing in the current (B3, charge at eta_c < 1),
+    and where the machine or the pack is at its limit the cost is the fuel plus a constant, or a trace
+    miss's price falling steeper than the fuel rises."""
+    return c.enrichment_slope == 0.0 and e.measured_machine <= 0.0
+
+
+@equation
+def pack_covers_no_drive(interval, battery, e, m, tabs):
+    """Whether the pack's discharge limit covers the accessories and what the machine draws at any torque
+    from its generating limit to zero at this step's speed (its DC power is convex in the torque, so the
+    most is at one end). Where it does not (a pack at its empty end), a generating choice can leave the
+    accessories unserved and its current clamped, and the ECMS's cost is no longer convex: the step takes
+    the exhaustive search."""
+    w, t_min = interval[1], interval[7]
+    u_oc, r_d, r_c, i_lo, i_hi = battery
+    draw = max(
+        el.machine_power(0.0, w, m, e, tabs[4], tabs[5], tabs[6]),
+        el.machine_power(t_min, w, m, e, tabs[4], tabs[5], tabs[6]),
+    )
+    return el.pack_power(i_hi, u_oc, r_d, r_c) > (e.accessory_power + max(draw, 0.0)) * (1.0 + 1e-9) + 1e-6
+
+
+@inline
+def ecms_level_cost(j, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h):
+    """(ECMS cost, higher torques dominated, the point) of the running choice at torque level j."""
+    pt = p2_choice(interval, battery, 1.0, engine_torque_level(j, levels, t_low, t_high), c, e, m, tabs)
+    return ecms_cost(pt, dt, start, s_factor, c, e, h), higher_torques_dominated(pt, battery), pt
+
+
+@equation
+def ecms_cheapest_level(
+    interval, battery, start, s_factor, dt, levels, t_low, t_high, guess, c, e, m, tabs, h
+):
+    """(cost, level, its point) of the cheapest running choice of the ECMS where its cost is convex in the
+    engine's torque (:func:`running_cost_convex`): from the level ``guess``, downhill to the first level
+    whose neighbours cost no less. The level the exhaustive search (every level upward, the first strict
+    minimum, none above a dominated one) finds: ties go to the lower level, and no walk goes above a
+    dominated one."""
+    j = min(max(guess, 0), levels - 1)
+    cj, dom, pj = ecms_level_cost(
+        j, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h
+    )
+    if j + 1 < levels and not dom:
+        cu, du, pu = ecms_level_cost(
+            j + 1, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h
+        )
+        if cu < cj:
+            j, cj, dom, pj = j + 1, cu, du, pu
+            while j + 1 < levels and not dom:
+                cu, du, pu = ecms_level_cost(
+                    j + 1, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h
+                )
+                if not cu < cj:
+                    break
+                j, cj, dom, pj = j + 1, cu, du, pu
+            return cj, j, pj
+    while j > 0:
+        cd, _, pd = ecms_level_cost(
+            j - 1, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h
+        )
+        if cd > cj:
+            break
+        j, cj, pj = j - 1, cd, pd
+    return cj, j, pj
+
+
+@equation
 def rule_engine_torque(t_in, w, soc, t_low, t_high, h):
     """The rule's engine torque: the input demand plus a charging power that grows from 0 at soc_target to
     charge_power at soc_low (a load-point shift), within the engine's lines."""
@@ -442,6 +518,24 @@ def p2_choose(
         if u > 0 and higher_torques_dominated(pt, battery):
             break
     return choice_on, choice_te
+
+
+@equation
+def p2_ecms_walk(interval, battery, soc, on, dt, levels, t_low, t_high, level, c, e, m, tabs, h):
+    """The P2 ECMS's choice as :func:`p2_choose` makes it, found by a walk (:func:`ecms_cheapest_level`) from
+    the last step's torque ``level`` instead of trying every level: for a cost convex in the engine's torque
+    (:func:`running_cost_convex`, a pack not at its empty end: :func:`pack_covers_no_drive`). Returns the
+    chosen point and the level to start the next step's walk from."""
+    s_factor = equivalence_factor(soc, h)
+    pt = p2_choice(interval, battery, 0.0, 0.0, c, e, m, tabs)
+    best = ecms_cost(pt, dt, False, s_factor, c, e, h)
+    if interval[5]:
+        cost, level, p_run = ecms_cheapest_level(
+            interval, battery, on == 0.0, s_factor, dt, levels, t_low, t_high, level, c, e, m, tabs, h
+        )
+        if cost < best:
+            pt = p_run
+    return pt, level
 
 
 @equation
