@@ -96,8 +96,9 @@ def test_the_fleet_fits_the_bev_class_out_of_fold(tmp_path):
 
 def test_the_bev_classes_of_real_records(shared_dir, tmp_path):
     """The class split (vpsim.fleet.ev.ev_class) on named records of the 2022 list: the Audi e-tron S's
-    induction machines, the Taycan's two-speed gearbox, the Model 3 AWD's two axles, the Bolt's one; the
-    Q4 e-tron (a permanent-magnet rear machine) is not an induction car, nor the e-tron GT (two gears)."""
+    induction machines, the Taycan's two-speed gearbox, the Model 3 AWD's two axles, the Bolt's one, the
+    BMW i4's and iX's electrically excited machines; the Q4 e-tron (a permanent-magnet rear machine) is not
+    an induction car, nor the e-tron GT (two gears)."""
     cars = read_test_car_list(_real_list(shared_dir))
     by_model: dict = {}
     for v in cars.ev_vehicles:
@@ -109,6 +110,11 @@ def test_the_bev_classes_of_real_records(shared_dir, tmp_path):
     assert by_model["Taycan Perf Battery"] == {("bev_two_speed", "pm")}  # rear-wheel drive, two gears
     assert by_model["Model 3 Long Range AWD"] == {("bev_awd", "pm")}
     assert by_model["BOLT EUV"] == {("bev", "pm")}
+    # BMW's electrically excited machines (i4 rear- and all-wheel drive, iX), not the MINI's magnet machine
+    assert by_model['i4 eDrive 40 Gran Coupe (18" Wheels)'] == {("bev_eesm", "pm")}
+    assert by_model['i4 M50 Gran Coupe (20" Wheels)'] == {("bev_eesm", "pm")}
+    assert by_model['iX xDrive50 (22" Wheels)'] == {("bev_eesm", "pm")}
+    assert by_model["MINI COOPER SE HARDTOP 2 DOOR"] == {("bev", "pm")}
     # the vehicle file of an induction car says so, and runs
     rec = next(v for v in cars.ev_vehicles if v.model == "e-tron S")
     car = tmp_path / "etron.toml"

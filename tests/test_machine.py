@@ -252,6 +252,26 @@ def test_leave_one_out_figures(shared_dir: Path, benchmark_script) -> None:
             assert getattr(DEFAULT_COEFFICIENTS[kind], key) == pytest.approx(value, rel=1e-5, abs=1e-9), key
 
 
+def test_loss_variants_script_transcribes_the_model(shared_dir: Path, benchmark_script) -> None:
+    """benchmarks/machine_loss_variants.py writes the model's seven terms out again (so its variants can
+    differ from it): its ``base`` columns equal vpsim.model.machine.loss_w's at every map point, so the
+    variants' figures in docs/model.md are measured against the shipped form, not a copy that drifted."""
+    var = benchmark_script("machine_loss_variants")
+    fit = benchmark_script("machine_fit")
+    machines = fit.load_all(shared_dir / "data" / "raw" / "advisor")
+    for name, m in machines.items():
+        x, _, _, t, w, _ = var.design(m, var.BASE)
+        model_basis, _ = fit.design(m)  # the model's loss_w with one coefficient at a time
+        assert x == pytest.approx(model_basis, rel=1e-12, abs=1e-15), name
+    # and a point checked by hand: at the base speed and rated torque every base term is its coefficient
+    # times 1, except the speed terms at nu = w_b / w_max and the field-weakening term (0 at base speed)
+    m = machines["MC_PM49"]
+    c = var.columns(m, np.array([m.rated_power_w / m.base_speed_radps]), np.array([m.base_speed_radps]))
+    nu = m.base_speed_radps / m.max_speed_radps
+    assert c["k_sw"][0] == pytest.approx(1.0) and c["k_fw"][0] == pytest.approx(0.0, abs=1e-15)
+    assert c["k_fe_h"][0] == pytest.approx(nu) and c["k_mech"][0] == pytest.approx(nu**3)
+
+
 # ------------------------------------------------------------------------------------ hostile files
 
 _GOOD = """mc_description='test permanent magnet motor';

@@ -937,7 +937,8 @@ def _powertrain_md(run, s) -> list[str]:
         "",
         "Median / median abs / p90 abs error, out of fold. Conventional cars: mpg on the cycles above; "
         "battery-electric cars (`vpsim.fleet.ev`): unadjusted MPGe of the charge-depleting UDDS and highway "
-        "tests, four classes (`bev`, `bev_awd`, `bev_two_speed`, `bev_induction`: `vpsim.fleet.ev.ev_class`) "
+        "tests, five classes (`bev`, `bev_awd`, `bev_two_speed`, `bev_induction`, `bev_eesm`: "
+        "`vpsim.fleet.ev.ev_class`) "
         "each with its own technology (`machine.loss_scale`, `electric.accessory_power`) fitted on the same "
         "kind of folds (EV families held out together). FASTSim: its BEV (`vpsim.fleet.peer_bev`) on the "
         "same records, calibrated per the same classes.",
