@@ -91,10 +91,11 @@ def dp_kernel(
         for q in range(5):
             packs[i, q] = st[q]
     for k in range(v.size - 1, -1, -1):
-        w = vh.engine_speed(v[k], ratio[k], c)
+        interval = hy.p2_interval(v[k], a[k], ratio[k], c, e, m, tabs, h)
+        w = interval[1]  # the engine's speed were it to run
         t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
-        runs = hy.can_run(w, c)
-        interval = hy.p2_interval(v[k], a[k], ratio[k], c, e, m, tabs)
+        runs = interval[5]
+        t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
         for i in range(n):
             battery = (packs[i, 0], packs[i, 1], packs[i, 2], packs[i, 3], packs[i, 4])
             best0 = math.inf
@@ -103,14 +104,14 @@ def dp_kernel(
                 on = 1.0 if u > 0 else 0.0
                 if u > 0 and not runs:
                     break
-                te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else 0.0
-                pt = hy.p2_choice(interval, battery, on, te, c, e, m, tabs)
+                te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else t_off
+                pt = hy.p2_choice(interval, battery, on, te, c, e, m, tabs, h)
                 nxt = soc_grid[i] + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt[k]
-                s_next = 1 if u > 0 else 0
+                s_next = 1 if pt[16] > 0.0 else 0  # the engine turning after the interval
                 base = hy.ecms_cost(pt, dt[k], False, 0.0, c, e, h) + hy.cost_to_go(
                     jcost[k + 1], s_next, nxt, soc0, dsoc, n
                 )
-                c0 = base + (h.engine_start_fuel if u > 0 else 0.0)  # from off: a start
+                c0 = base + (h.engine_start_fuel if s_next == 1 else 0.0)  # from standing: a start
                 if c0 < best0:
                     best0 = c0
                 if base < best1:
@@ -158,19 +159,25 @@ def causal_kernel(
         a = (speed[k + 1] - speed[k]) / dt
         g, j = gear_index(time_s, k, sched_t, sched_gear, j)
         ratio = ratios[g]
-        w = vh.engine_speed(v, ratio, c)
-        t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
-        runs = hy.can_run(w, c)
         # what the interval and the charge fix, once for all the choices
-        interval = hy.p2_interval(v, a, ratio, c, e, m, tabs)
+        interval = hy.p2_interval(v, a, ratio, c, e, m, tabs, h)
+        w = interval[1]  # the engine's speed were it to run
+        t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
+        runs = interval[5]
+        t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
         battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
         choice_on = 0.0
-        choice_te = 0.0
+        choice_te = t_off
         if ems == hy.EMS_RULE:
-            t_in = el.shaft_torque(vh.wheel_force(v, a, c), ratio, c)
-            if hy.rule_wants_engine(on, on_time, t_in * w, soc, h) and runs:
-                choice_on = 1.0
-                choice_te = hy.rule_engine_torque(t_in, w, soc, t_low, t_high, h)
+            if h.mild > 0.0:
+                choice_on, choice_te = hy.mild_rule(interval, soc, t_low, t_high, h)
+                if choice_on == 0.0:
+                    choice_te = t_off
+            else:
+                t_in = el.shaft_torque(vh.wheel_force(v, a, c), ratio, c)
+                if hy.rule_wants_engine(on, on_time, t_in * w, soc, h) and runs:
+                    choice_on = 1.0
+                    choice_te = hy.rule_engine_torque(t_in, w, soc, t_low, t_high, h)
         else:
             s_factor = hy.equivalence_factor(soc, h)
             best = math.inf
@@ -178,13 +185,18 @@ def causal_kernel(
                 if u > 0 and not runs:
                     break
                 o = 1.0 if u > 0 else 0.0
-                te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else 0.0
-                pt = hy.p2_choice(interval, battery, o, te, c, e, m, tabs)
-                start = u > 0 and on == 0.0
+                te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else t_off
+                pt = hy.p2_choice(interval, battery, o, te, c, e, m, tabs, h)
+                start = pt[16] > 0.0 and on == 0.0
                 if ems == hy.EMS_DP:
                     nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
                     cost = hy.ecms_cost(pt, dt, start, 0.0, c, e, h) + hy.cost_to_go(
-                        jcost[k + 1], 1 if u > 0 else 0, nxt, soc_grid[0], soc_grid[1] - soc_grid[0], n_grid
+                        jcost[k + 1],
+                        1 if pt[16] > 0.0 else 0,
+                        nxt,
+                        soc_grid[0],
+                        soc_grid[1] - soc_grid[0],
+                        n_grid,
                     )
                 else:
                     cost = hy.ecms_cost(pt, dt, start, s_factor, c, e, h)
@@ -194,7 +206,7 @@ def causal_kernel(
                     choice_te = te
                 if u > 0 and hy.higher_torques_dominated(pt, battery):
                     break
-        pt = hy.p2_choice(interval, battery, choice_on, choice_te, c, e, m, tabs)
+        pt = hy.p2_choice(interval, battery, choice_on, choice_te, c, e, m, tabs, h)
         running = pt[16]
         if running > 0.0 and on == 0.0:
             sums[S_STARTS] += 1.0
@@ -251,7 +263,7 @@ def _inputs(cycle, params, schedule=None):
     engine_map = cached_engine_map(params.engine)
     if schedule is None:
         schedule = default_schedule(cycle, params, engine_map)
-    e, m, tabs = el.electric_records(params)
+    e, m, tabs = el.electric_records(_rotor_at_crank(params))
     return (
         engine_map,
         schedule,
@@ -261,6 +273,20 @@ def _inputs(cycle, params, schedule=None):
         tabs.astuple(),
         hy.hybrid_record(params),
         np.asarray(total_ratios(params.transmission), float),
+    )
+
+
+def _rotor_at_crank(params):
+    """The parameters whose machine's rotor inertia is referred to the shaft the kernel turns: a mild
+    hybrid's belt of ratio k makes J_m k^2 at the crank (the P2's and a P1's: J_m)."""
+    if params.powertrain.type != "mhev" or params.mild.belt_ratio == 1.0:
+        return params
+    from ..model.record import memo
+
+    return memo(
+        params,
+        "rotor_at_crank",
+        lambda p: p.with_changes(machine={"inertia": p.machine.inertia * p.mild.belt_ratio**2}),
     )
 
 
@@ -340,8 +366,11 @@ _COLUMNS = {
 
 def _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu):
     series = _hybrid.series(cycle, rows, _COLUMNS, H_SOC, soc_end, n)
-    # the engine turns with the input shaft while it runs, and stands still while its clutch is open
+    # the engine turns with the input shaft while it runs, and stands still while its clutch is open (the
+    # mild hybrid's row is the crank's speed, its machine's the belt's ratio times it)
     series["engine_speed_radps"] = np.where(series["engine_on"], series["machine_speed_radps"], 0.0)
+    if params.powertrain.type == "mhev":
+        series["machine_speed_radps"] = series["machine_speed_radps"] * params.mild.belt_ratio
     return _hybrid.result(cycle, params, ems, mode, series, sums, soc_start, soc_end, n, cpu)
 
 
