@@ -489,8 +489,11 @@ def run(
     t0 = time.process_time()
     gear, rows, acc = passes(cycle.time_s, intervals, keep_series or _rows or stop_start)
     starts = 0
-    if stop_start:
-        starts = _stop_at_rest(cycle, rows, intervals)
+    if stop_start:  # the stopped intervals' rows become the standing engine's (no speed, torque or fuel)
+        stopped, starts = rules.stopped_at_rest(intervals[1], intervals[2])
+        for row in (R_W, R_DW, R_TCR, R_MDOT, R_FIRED, R_P, R_THR, R_SHORT, R_BRAKE):
+            rows[row, stopped] = 0.0
+        rows[R_CLUTCH, stopped] = rules.CLUTCH_OPEN
         account(cycle.time_s, rows, ratios, gear, recs, generated, extended, acc)
         acc[A_FUEL] += starts * params.hybrid.engine_start_fuel
     cpu = time.process_time() - t0
@@ -513,28 +516,6 @@ def run(
     if _rows:
         r.solver.update(rows=rows, gear=gear)
     return r
-
-
-def _stop_at_rest(cycle, rows, intervals) -> int:
-    """Stop-start (``simulation.stop_start``): the engine stops in every interval at rest (speed 0 at both
-    ends) after the car first moved, and restarts when it moves off. The stopped intervals' rows become
-    the standing engine's (no speed, torque or fuel; nothing fired), so :func:`account` books neither
-    idle fuel nor engine terms there. The standstill before the first move keeps idling (the key-on start
-    warms the engine; production systems stop only after the car has moved); a stop at the cycle's end
-    needs no restart. Returns the number of restarts, each costing ``hybrid.engine_start_fuel`` (the start
-    model the hybrids use)."""
-    _, v, a, _ = intervals
-    rest = (v == 0.0) & (a == 0.0)
-    moving = np.flatnonzero(~rest)
-    if moving.size == 0:
-        return 0
-    stopped = rest.copy()
-    stopped[: moving[0]] = False
-    for row in (R_W, R_DW, R_TCR, R_MDOT, R_FIRED, R_P, R_THR, R_SHORT, R_BRAKE):
-        rows[row, stopped] = 0.0
-    rows[R_CLUTCH, stopped] = rules.CLUTCH_OPEN
-    # a restart wherever a stopped interval is followed by a moving one
-    return int(np.count_nonzero(stopped[:-1] & ~stopped[1:]))
 
 
 def intervals(

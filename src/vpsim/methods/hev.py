@@ -263,7 +263,7 @@ def _inputs(cycle, params, schedule=None):
     engine_map = cached_engine_map(params.engine)
     if schedule is None:
         schedule = default_schedule(cycle, params, engine_map)
-    e, m, tabs = el.electric_records(_rotor_at_crank(params))
+    e, m, tabs = el.electric_records(hy.rotor_at_crank(params))
     return (
         engine_map,
         schedule,
@@ -273,20 +273,6 @@ def _inputs(cycle, params, schedule=None):
         tabs.astuple(),
         hy.hybrid_record(params),
         np.asarray(total_ratios(params.transmission), float),
-    )
-
-
-def _rotor_at_crank(params):
-    """The parameters whose machine's rotor inertia is referred to the shaft the kernel turns: a mild
-    hybrid's belt of ratio k makes J_m k^2 at the crank (the P2's and a P1's: J_m)."""
-    if params.powertrain.type != "mhev" or params.mild.belt_ratio == 1.0:
-        return params
-    from ..model.record import memo
-
-    return memo(
-        params,
-        "rotor_at_crank",
-        lambda p: p.with_changes(machine={"inertia": p.machine.inertia * p.mild.belt_ratio**2}),
     )
 
 

@@ -398,6 +398,20 @@ H_FIELDS = (
 H_LAYOUT_FIELDS = ("mild", "belt_ratio", "belt_efficiency")
 
 
+def rotor_at_crank(params):
+    """The parameters whose machine's rotor inertia is referred to the shaft the kernel turns: a mild
+    hybrid's belt of ratio k makes J_m k^2 at the crank (the P2's and a P1's: J_m)."""
+    if params.powertrain.type != "mhev" or params.mild.belt_ratio == 1.0:
+        return params
+    from .record import memo
+
+    return memo(
+        params,
+        "rotor_at_crank",
+        lambda p: p.with_changes(machine={"inertia": p.machine.inertia * p.mild.belt_ratio**2}),
+    )
+
+
 def hybrid_record(params):
     """The record of ``params.hybrid``'s numbers (:data:`H_FIELDS`) and the layout's
     (:data:`H_LAYOUT_FIELDS`)."""
