@@ -182,3 +182,18 @@ def test_stop_start_takes_true_or_false_only(tmp_path):
     path.write_text('base = "hofman2011"\n[simulation]\nstop_start = 1\n')
     with pytest.raises(ParameterError, match="stop_start = 1 is not a true or false"):
         load_parameters(path)
+
+
+def test_cli_reports_the_restarts_and_the_mild_hybrids_figures(tmp_path, capsys):
+    from vpsim.cli.main import main
+
+    path = tmp_path / "car.toml"
+    path.write_text('base = "hofman2011"\n[simulation]\nstop_start = true\n')
+    assert main(["simulate", "--vehicle", str(path), "--cycle", "udds"]) == 0
+    assert "stop-start        14 engine restarts" in capsys.readouterr().out
+    assert main(["simulate", "--vehicle", "mhev", "--cycle", "udds", "--ems", "dp", "--json"]) == 0
+    import json
+
+    s = json.loads(capsys.readouterr().out)
+    assert s["engine_starts"] > 10 and abs(s["energy_relative_residual"]) < 1e-9
+    assert s["fuel_l_per_100km_cs"] < s["fuel_l_per_100km"] * 1.01
