@@ -69,6 +69,8 @@ def test_dynamic_programming_bounds_the_causal_managements(runs):
     for cycle in CYCLES:
         cs = {m: runs[cycle, m].electric["fuel_l_per_100km_cs"] for m in EMS}
         assert cs["dp"] <= min(cs["ecms"], cs["rule"]) * 1.001, (cycle, cs)
+        e = runs[cycle, "dp"].electric
+        assert e["soc_end"] >= e["soc_start"] - 1e-3 and abs(e["net_energy_change_ratio"]) <= 0.01
     for cycle in ("udds", "us06"):
         cs = {m: runs[cycle, m].electric["fuel_l_per_100km_cs"] for m in EMS}
         assert cs["ecms"] <= cs["rule"], (cycle, cs)
