@@ -109,6 +109,10 @@ def run_batch(
         cycle = load_cycle(cycle)
     if not isinstance(params, Parameters):
         params = load_parameters(params)
+    if params.simulation.stop_start:
+        raise VpsimError(
+            "simulation.stop_start is not modelled by the batch runs; run the variants with vpsim.simulate"
+        )
     names, values = normalise_variants(variants, params)
     recs = _validate_variants(params, names, values)
     schedules, schedule_of_variant = _schedules(cycle, params, names, values, gears)

@@ -42,7 +42,7 @@ from .errors import ParameterError
 from .textio import check_path, printable, read_text, toml_error
 from .units import FIELD_DIMENSIONS, to_si
 
-PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l", "bev", "hev_p2", "hev_split")
+PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l", "bev", "hev_p2", "hev_split", "mhev")
 
 
 @dataclass(frozen=True)
@@ -179,6 +179,9 @@ class Simulation:
     ode_relative_tolerance: float
     inverse_max_step: float  # s
     fuel_cutoff_speed: float = 0.0  # rad/s; realistic mode: fuel cut in overrun above this speed (0: never)
+    # an engine car's stop-start: the engine stops at rest and a restart costs hybrid.engine_start_fuel
+    # (backward and inverse methods; off: every figure as before)
+    stop_start: bool = False
 
 
 @dataclass(frozen=True)
@@ -281,6 +284,16 @@ class Split:
 
 
 @dataclass(frozen=True)
+class Mild:
+    """A 48 V mild hybrid's machine on the crank (powertrain type ``mhev``, :mod:`vpsim.model.hybrid`): a P0
+    belt starter-generator (``belt_ratio`` machine to crank speed, ``belt_efficiency`` either way) or, with
+    ratio 1 and efficiency 1, a P1 machine on the crank itself."""
+
+    belt_ratio: float = 2.7
+    belt_efficiency: float = 0.95
+
+
+@dataclass(frozen=True)
 class Parameters:
     """A complete parameter set. ``provenance`` maps ``"section.field"`` to its confidence label/note."""
 
@@ -296,6 +309,7 @@ class Parameters:
     electric: Electric = field(default_factory=Electric)
     hybrid: Hybrid = field(default_factory=Hybrid)
     split: Split = field(default_factory=Split)
+    mild: Mild = field(default_factory=Mild)
     provenance: dict[str, str] = field(default_factory=dict, compare=False, repr=False)
     citation: str = field(default="", compare=False, repr=False)
 
@@ -355,9 +369,10 @@ _SECTIONS = {
     "electric": Electric,
     "hybrid": Hybrid,
     "split": Split,
+    "mild": Mild,
 }
-POWERTRAINS = ("conventional", "bev", "hev_p2", "hev_split")
-HYBRIDS = ("hev_p2", "hev_split")
+POWERTRAINS = ("conventional", "bev", "hev_p2", "hev_split", "mhev")
+HYBRIDS = ("hev_p2", "hev_split", "mhev")
 EMS = ("rule", "ecms", "dp")
 MACHINE_KINDS = ("pm", "induction")
 _ATTR_ALIASES = {"lambda": "lambda_"}  # TOML name -> attribute
@@ -459,6 +474,7 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "split.generator_base_speed": (1.0, 5000.0, True),
     "split.generator_max_speed": (1.0, 5000.0, True),
     "split.generator_inertia": (0.0, 10.0, True),
+    "mild.belt_ratio": (0.2, 10.0, True),  # 1: on the crank; belt starter-generators 2.5-3
 }
 # Whole numbers: (low, high). Production piston engines have 1 to 16 cylinders and are two-stroke (1
 # revolution per cycle) or four-stroke (2); Newton converges in a handful of iterations or not at all.
@@ -481,7 +497,7 @@ DISPLACEMENT_RANGE = (0.04e-3, 16.0e-3)  # m^3: a 40 cc moped engine to a 16 L t
 MAX_FULL_LOAD_BMEP = 40.0e5  # Pa: production SI engines reach about 25-30 bar (turbocharged)
 MIN_MOTORING_BMEP = -60.0e5  # Pa: friction + pumping at the top of the map, real engines -2 to -6 bar
 IDLE_CHECK_SPEED = 80.0  # rad/s: the idle speed of the methods (vpsim.model.record.IDLE_SPEED)
-_EFFICIENCIES = ("transmission.efficiency", "engine.thermal_efficiency")
+_EFFICIENCIES = ("transmission.efficiency", "engine.thermal_efficiency", "mild.belt_efficiency")
 # fields of earlier versions that no longer exist: read and ignored, with the reason
 _RETIRED = {
     "simulation.newton_max_iterations": "the FQM's Newton solve always converges to 1e-12 (at most 30 steps)",
@@ -524,6 +540,8 @@ def _typed(typ: str, value: Any) -> Any:
         return int(f) if f.is_integer() else None
     if typ == "str":
         return value if isinstance(value, str) else None
+    if typ == "bool":
+        return value if isinstance(value, bool) else None
     if typ == "float":
         if not _is_number(value):
             return None
@@ -579,7 +597,8 @@ def _describe(typ: str, key: str = "") -> str:
         return f"list of {n} numbers ([low, high])" if n == 2 else f"list of {n} numbers"
     if typ.startswith("tuple"):
         return f"non-empty list of at most {_MAX_LIST} numbers (true/false and text are not numbers)"
-    return {"int": "whole number", "float": "number", "str": "text"}.get(typ, "number")
+    names = {"int": "whole number", "float": "number", "str": "text", "bool": "true or false"}
+    return names.get(typ, "number")
 
 
 def check_field(key: str, value: Any, where: str) -> float:

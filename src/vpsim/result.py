@@ -519,7 +519,7 @@ class Result:
                     "fuel_l_per_100km_cs", float("nan") if self.electric else self.fuel_l_per_100km
                 )
             ),
-            "engine_starts": self.electric.get("engine_starts"),
+            "engine_starts": self.electric.get("engine_starts", self.solver.get("engine_starts")),
             "ems": self.electric.get("ems"),
             **self.deviations.as_dict(),
         }

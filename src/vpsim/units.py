@@ -218,6 +218,8 @@ FIELD_DIMENSIONS: dict[str, str] = {
     "split.generator_base_speed": "angular_speed",
     "split.generator_max_speed": "angular_speed",
     "split.generator_inertia": "inertia",
+    "mild.belt_ratio": "dimensionless",
+    "mild.belt_efficiency": "fraction",
     "drivers.forward_kp": "gain_p",
     "drivers.forward_ki": "gain_i",
     "drivers.inverse_a": "time",

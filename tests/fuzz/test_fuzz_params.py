@@ -251,8 +251,9 @@ _FIELDS = {
         "thermal_efficiency",
     ],
     "transmission": ["gearbox_ratios", "final_drive", "efficiency"],
-    "simulation": ["fuel_density", "idle_fuel_flow", "inverse_max_step", "fuel_cutoff_speed"],
+    "simulation": ["fuel_density", "idle_fuel_flow", "inverse_max_step", "fuel_cutoff_speed", "stop_start"],
 }
+_SWITCHES = {"simulation.stop_start"}  # the fields that take true or false
 _scalar = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True),
     st.integers(-(10**25), 10**25),
@@ -309,6 +310,9 @@ def test_random_parameter_files_are_valid_or_one_line(tmp_path, entries):
     for key, v in params.flat().items():
         for x in v if isinstance(v, tuple) else (v,):
             if isinstance(x, str):  # a name: powertrain.type, machine.kind, battery.cell, machine.map_file
+                continue
+            if key in _SWITCHES:
+                assert isinstance(x, bool), (key, x)
                 continue
             assert not isinstance(x, bool) and math.isfinite(x), (key, x)
     assert 0.04e-3 <= params.engine.displacement <= 16e-3

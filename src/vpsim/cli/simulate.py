@@ -199,6 +199,8 @@ def simulate(cycle, method, vehicle, driver, mode, gears, speed_unit, as_json, o
         click.echo(f"  fuel consumption  {lp100}{' L/100 km' if _ok(lp100) else ''}")
         mpg = number(summary["fuel_economy_mpg"], "8.2f", "fuel_economy_mpg")
         click.echo(f"  fuel economy      {mpg}{' mpg (US)' if _ok(mpg) else ''}")
+        if summary["engine_starts"] is not None:  # an engine car with stop-start
+            click.echo(f"  stop-start        {summary['engine_starts']} engine restarts")
     if measured is not None and not result.electric:
         err = number(summary["measured_error_pct"], "+.1f", "measured_error_pct")
         click.echo(

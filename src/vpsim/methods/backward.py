@@ -485,8 +485,17 @@ def run(
     intervals = cycle_intervals(cycle)
     if not run_kernel.overloads:  # compile (or load) outside the timing
         passes(cycle.time_s[:2], tuple(x[:1] for x in intervals), keep_series)
+    stop_start = params.simulation.stop_start
     t0 = time.process_time()
-    gear, rows, acc = passes(cycle.time_s, intervals, keep_series or _rows)
+    gear, rows, acc = passes(cycle.time_s, intervals, keep_series or _rows or stop_start)
+    starts = 0
+    if stop_start:  # the stopped intervals' rows become the standing engine's (no speed, torque or fuel)
+        stopped, starts = rules.stopped_at_rest(intervals[1], intervals[2])
+        for row in (R_W, R_DW, R_TCR, R_MDOT, R_FIRED, R_P, R_THR, R_SHORT, R_BRAKE):
+            rows[row, stopped] = 0.0
+        rows[R_CLUTCH, stopped] = rules.CLUTCH_OPEN
+        account(cycle.time_s, rows, ratios, gear, recs, generated, extended, acc)
+        acc[A_FUEL] += starts * params.hybrid.engine_start_fuel
     cpu = time.process_time() - t0
     sums = acc.tolist()
     trace = TraceMiss(
@@ -502,6 +511,8 @@ def run(
     series = _sample_series(cycle, params, rows, gear, generated) if keep_series else {}
     trace.details["torque_beyond_full_load_s"] = trace.seconds
     r = _result(cycle, params, mode, series, sums[A_FUEL], sums[A_DIST], cpu, n, trace, energy)
+    if stop_start:
+        r.solver.update(engine_starts=starts)
     if _rows:
         r.solver.update(rows=rows, gear=gear)
     return r

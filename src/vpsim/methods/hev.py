@@ -29,7 +29,6 @@ from ..model import battery as bt
 from ..model import electric as el
 from ..model import hybrid as hy
 from ..model import tables as tb
-from ..model import vehicle as vh
 from ..model._compile import kernel
 from ..model.engine import equation
 from ..model.tables import gear_index
@@ -80,10 +79,11 @@ def dp_kernel(
         for q in range(5):
             packs[i, q] = st[q]
     for k in range(v.size - 1, -1, -1):
-        w = vh.engine_speed(v[k], ratio[k], c)
+        interval = hy.p2_interval(v[k], a[k], ratio[k], c, e, m, tabs, h)
+        w = interval[1]  # the engine's speed were it to run
         t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
-        runs = hy.can_run(w, c)
-        interval = hy.p2_interval(v[k], a[k], ratio[k], c, e, m, tabs)
+        runs = interval[5]
+        t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
         for i in range(n):
             battery = (packs[i, 0], packs[i, 1], packs[i, 2], packs[i, 3], packs[i, 4])
             best0 = math.inf
@@ -92,14 +92,14 @@ def dp_kernel(
                 on = 1.0 if u > 0 else 0.0
                 if u > 0 and not runs:
                     break
-                te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else 0.0
-                pt = hy.p2_choice(interval, battery, on, te, c, e, m, tabs)
+                te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else t_off
+                pt = hy.p2_choice(interval, battery, on, te, c, e, m, tabs, h)
                 nxt = soc_grid[i] + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt[k]
-                s_next = 1 if u > 0 else 0
+                s_next = 1 if pt[16] > 0.0 else 0  # the engine turning after the interval
                 base = hy.ecms_cost(pt, dt[k], False, 0.0, c, e, h) + hy.cost_to_go(
                     jcost[k + 1], s_next, nxt, soc0, dsoc, n
                 )
-                c0 = base + (h.engine_start_fuel if u > 0 else 0.0)  # from off: a start
+                c0 = base + (h.engine_start_fuel if s_next == 1 else 0.0)  # from standing: a start
                 if c0 < best0:
                     best0 = c0
                 if base < best1:
@@ -144,17 +144,18 @@ def causal_kernel(
     on_time = 0.0
     j = 0
     level = 0
-    walk = hy.running_cost_convex(c, e) and not exhaustive
+    walk = hy.running_cost_convex(c, e) and not exhaustive and h.mild == 0.0  # (mild: convexity not shown)
     for k in range(time_s.size - 1):
         dt = time_s[k + 1] - time_s[k]
         v = 0.5 * (speed[k + 1] + speed[k])
         a = (speed[k + 1] - speed[k]) / dt
         g, j = gear_index(time_s, k, sched_t, sched_gear, j)
         ratio = ratios[g]
-        w = vh.engine_speed(v, ratio, c)
-        t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
         # what the interval and the charge fix, once for all the choices
-        interval = hy.p2_interval(v, a, ratio, c, e, m, tabs)
+        interval = hy.p2_interval(v, a, ratio, c, e, m, tabs, h)
+        w = interval[1]  # the engine's speed were it to run
+        t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
+        t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
         battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
         if ems == hy.EMS_ECMS and walk and hy.pack_covers_no_drive(interval, battery, e, m, tabs):
             # the exhaustive search's choice by a walk from the last step's level, where the cost is convex
@@ -173,6 +174,7 @@ def causal_kernel(
                 levels,
                 t_low,
                 t_high,
+                t_off,
                 c,
                 e,
                 m,
@@ -182,7 +184,7 @@ def causal_kernel(
                 jcost,
                 k + 1,
             )
-            pt = hy.p2_choice(interval, battery, choice_on, choice_te, c, e, m, tabs)
+            pt = hy.p2_choice(interval, battery, choice_on, choice_te, c, e, m, tabs, h)
         terms = hy.hybrid_powers(pt, v, a, c, e)
         running, missing = _hybrid.book_step(sums, pt, terms, interval[0], dt, ratio, on, c, h)
         on_time = on_time + dt if running > 0.0 else 0.0
@@ -238,7 +240,7 @@ def _records(params):
     from ..model.record import kernel_records
     from ..model.record import ratios as total_ratios
 
-    e, m, tabs = el.electric_records(params)
+    e, m, tabs = el.electric_records(hy.rotor_at_crank(params))
     return (
         kernel_records(params)[0],
         e,
@@ -329,8 +331,11 @@ _COLUMNS = {
 
 def _result(cycle, params, ems, mode, rows, sums, soc_start, soc_end, n, cpu):
     series = _hybrid.series(cycle, rows, _COLUMNS, H_SOC, soc_end, n)
-    # the engine turns with the input shaft while it runs, and stands still while its clutch is open
+    # the engine turns with the input shaft while it runs, and stands still while its clutch is open (the
+    # mild hybrid's row is the crank's speed, its machine's the belt's ratio times it)
     series["engine_speed_radps"] = np.where(series["engine_on"], series["machine_speed_radps"], 0.0)
+    if params.powertrain.type == "mhev":
+        series["machine_speed_radps"] = series["machine_speed_radps"] * params.mild.belt_ratio
     return _hybrid.result(cycle, params, ems, mode, series, sums, soc_start, soc_end, n, cpu)
 
 

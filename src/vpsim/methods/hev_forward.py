@@ -41,7 +41,6 @@ from ..model import electric as el
 from ..model import hybrid as hy
 from ..model import split as sp
 from ..model import tables as tb
-from ..model import vehicle as vh
 from ..model._compile import kernel
 from ..model.engine import equation
 from ..model.tables import gear_index
@@ -131,15 +130,15 @@ def p2_kernel(
         ratio = ratios[g]
         battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
         vm = v + 0.5 * a * dt
-        t_low, t_high = hy.engine_lines(
-            vh.engine_speed(vm, ratio, c), line_speed, line_max, line_min, inv_line
-        )
-        interval = hy.p2_interval(vm, a, ratio, c, e, m, tabs)
+        interval = hy.p2_interval(vm, a, ratio, c, e, m, tabs, h)
+        w = interval[1]  # the engine's speed were it to run
+        t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
+        t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
         on_c, te = hy.p2_choose(
-            interval, battery, soc, on, on_time, period[k], ems, levels, t_low, t_high, c, e, m, tabs, h,
-            soc_grid, jcost, 0,
+            interval, battery, soc, on, on_time, period[k], ems, levels, t_low, t_high, t_off, c, e, m, tabs,
+            h, soc_grid, jcost, 0,
         )  # fmt: skip
-        pt = hy.p2_choice(interval, battery, on_c, te, c, e, m, tabs)
+        pt = hy.p2_choice(interval, battery, on_c, te, c, e, m, tabs, h)
         if pt[13] > hy.MISS_TOLERANCE_N:  # the powertrain falls short: the acceleration it delivers
             extra[F_LIMITED_S] += dt
             extra[F_MAX_SHORT] = max(extra[F_MAX_SHORT], el.shaft_torque(pt[13], ratio, c))
@@ -147,8 +146,8 @@ def p2_kernel(
             a = no_rollback(hy.delivered_acceleration(a, pt[13], c), v, dt)
             for _ in range(SECANT_STEPS):
                 vm = v + 0.5 * a * dt
-                interval = hy.p2_interval(vm, a, ratio, c, e, m, tabs)
-                pt = hy.p2_choice(interval, battery, on_c, te, c, e, m, tabs)
+                interval = hy.p2_interval(vm, a, ratio, c, e, m, tabs, h)
+                pt = hy.p2_choice(interval, battery, on_c, te, c, e, m, tabs, h)
                 g1 = pt[13] - pt[12]
                 if abs(g1) <= BALANCE_N:
                     break

@@ -69,7 +69,7 @@ def can_run(w, c):
 
 
 @equation
-def p2_point(v, a, ratio, soc, on, t_e, c, e, m, tabs):
+def p2_point(v, a, ratio, soc, on, t_e, c, e, m, tabs, h):
     """The P2 hybrid's operating point at speed v, acceleration a in the gear of total ratio i, with the
     engine on (``on`` > 0, crank torque from ``t_e``, its torque at the shaft) or off (H1). Returns
     (w, dw, T_in, T_e, T_cr, p_i, mdot_f, T_m, I, U_oc, R, P_machine, brake N, missing N, at the machine's
@@ -80,35 +80,53 @@ def p2_point(v, a, ratio, soc, on, t_e, c, e, m, tabs):
     (:func:`p2_choice`); the management, trying many choices at one interval, evaluates the first once."""
     soc_grid, ocv, r_dis, r_chg = tabs[0], tabs[1], tabs[2], tabs[3]
     battery = el.battery_state(soc, e, soc_grid, ocv, r_dis, r_chg)
-    return p2_choice(p2_interval(v, a, ratio, c, e, m, tabs), battery, on, t_e, c, e, m, tabs)
+    return p2_choice(p2_interval(v, a, ratio, c, e, m, tabs, h), battery, on, t_e, c, e, m, tabs)
 
 
 @equation
-def p2_interval(v, a, ratio, c, e, m, tabs):
+def p2_interval(v, a, ratio, c, e, m, tabs, h):
     """What an interval (speed v, acceleration a, total ratio i) fixes whatever the management chooses:
     (v >= 0, w, dw, wheel force F_w, input-shaft demand T_in (H1), the engine may run, c_m^1.8 at w, the
-    machine's envelope (T_min, T_max) at w, the ratio i)."""
+    machine's envelope (T_min, T_max) at its own speed, the ratio i, the clutch's state).
+
+    The P2 (``h.mild`` 0): w is the gearbox input's speed, the clutch always closed for the machine. The mild
+    hybrid (``h.mild`` 1, :func:`mild_clutch`): w is the crank's speed (the machine turns at
+    ``h.belt_ratio`` w), held at the idle speed while the clutch slips or is open."""
     vv = v if v > 0.0 else 0.0
     w = vh.engine_speed(vv, ratio, c)
     dw = vh.engine_speed(a, ratio, c)
     f = vh.wheel_force(vv, a, c)
-    t_min, t_max = el.envelope(w, m, e, tabs[7], tabs[8], tabs[9])
     t_in = el.shaft_torque(f, ratio, c)
-    return vv, w, dw, f, t_in, can_run(w, c), en.speed_power(w, c), t_min, t_max, ratio
+    runs = can_run(w, c)
+    clutch = CLUTCH_CLOSED
+    if h.mild > 0.0:
+        runs = True  # on the crank, the engine may idle at rest (the clutch open)
+        clutch = mild_clutch(vv, w, t_in, c)
+        if clutch != CLUTCH_CLOSED:
+            w = c.idle_speed
+            dw = 0.0
+    t_min, t_max = el.envelope(h.belt_ratio * w, m, e, tabs[7], tabs[8], tabs[9])
+    return vv, w, dw, f, t_in, runs, en.speed_power(w, c), t_min, t_max, ratio, clutch
 
 
 @inline
-def p2_choice(interval, battery, on, t_e, c, e, m, tabs):
+def p2_choice(interval, battery, on, t_e, c, e, m, tabs, h):
     """The operating point (as :func:`p2_point` returns it) of the choice (engine ``on``, torque ``t_e``) at
     an interval (:func:`p2_interval`) with the pack in state ``battery``
-    (:func:`vpsim.model.electric.battery_state`)."""
-    vv, w, dw, f, t_in, runs, cm18, t_min, t_max, ratio = interval
-    te, t_cr, p, mdot, running = engine_choice(on, runs, t_e, w, dw, cm18, c)
-    t_m, i, u_oc, r, p_m, at_m, at_b = el.machine_and_battery_at(
-        t_in - te + el.rotor_torque(dw, e), t_in < 0.0, vv, w, t_min, t_max, battery, 0.0, e, m, tabs
+    (:func:`vpsim.model.electric.battery_state`). The mild hybrid's engine with ``on`` 0 is dragged with its
+    fuel cut (``t_e`` then its closed-throttle crank torque) while the clutch is closed, else stopped
+    (:func:`mild_engine_choice`); its machine acts on the crank through the belt (:func:`belt_to_crank`)."""
+    vv, w0, dw0, f, t_in, runs, cm18, t_min, t_max, ratio, clutch = interval
+    te, t_cr, p, mdot, running, w, dw = engine_of_choice(on, runs, clutch, t_e, w0, dw0, cm18, c, h)
+    t_pass = clutch_passes(t_in, clutch)  # the demand the clutch passes to the crank's side
+    t_ask = crank_to_belt(t_pass - te + el.rotor_torque(dw, e), h)
+    t_mb, i, u_oc, r, p_m, at_m, at_b = el.machine_and_battery_at(
+        t_ask, t_pass < 0.0, vv, h.belt_ratio * w, t_min, t_max, battery, 0.0, e, m, tabs
     )
+    t_m = belt_to_crank(t_mb, h)
     t_net = te + t_m - el.rotor_torque(dw, e)
-    missing, brake = shortfall_and_brake(f, el.wheel_force_of_shaft(t_net, ratio, c))
+    t_net_passed = clutch_passes(t_net, clutch)
+    missing, brake = shortfall_and_brake(f, el.wheel_force_of_shaft(t_net_passed, ratio, c))
     return (
         w,
         dw,
@@ -129,6 +147,85 @@ def p2_choice(interval, battery, on, t_e, c, e, m, tabs):
         running,
         cm18,
     )
+
+
+@equation
+def engine_of_choice(on, runs, clutch, t_e, w, dw, cm18, c, h):
+    """(T_e, T_cr, p_i, mdot_f, turning, w, dw) of the choice: the P2's engine (:func:`engine_choice`) or
+    the mild hybrid's (:func:`mild_engine_choice`), with the crank's speed and acceleration (0 where the
+    mild hybrid's engine, and the machine on its crank, stand)."""
+    if h.mild > 0.0:
+        te, t_cr, p, mdot, running = mild_engine_choice(on, clutch, t_e, w, dw, cm18, c)
+        if running <= 0.0:
+            return te, t_cr, p, mdot, running, 0.0, 0.0
+        return te, t_cr, p, mdot, running, w, dw
+    te, t_cr, p, mdot, running = engine_choice(on, runs, t_e, w, dw, cm18, c)
+    return te, t_cr, p, mdot, running, w, dw
+
+
+@equation
+def clutch_passes(t_net, clutch):
+    """The torque the clutch passes of ``t_net`` (the net torque on its engine side, or the gearbox's
+    demand): all of it closed, none open, only a driving torque slipping (a slipping clutch passes no
+    braking)."""
+    if clutch == CLUTCH_OPEN:
+        return 0.0
+    if clutch == CLUTCH_SLIPPING:
+        return t_net if t_net > 0.0 else 0.0
+    return t_net
+
+
+# the clutch between the mild hybrid's crank and its gearbox (the P2's machine is always behind it: closed)
+CLUTCH_OPEN, CLUTCH_CLOSED, CLUTCH_SLIPPING = 0, 1, 2
+
+
+@equation
+def mild_clutch(v, w, t_in, c):
+    """The mild hybrid's clutch (as the engine car's, :mod:`vpsim.model.rules`): closed at and above the
+    idle speed while moving; below it slipping with traction demanded (the engine held at idle), open
+    without (and at rest)."""
+    if v > 0.0 and w >= c.idle_speed:
+        return CLUTCH_CLOSED
+    if v > 0.0 and t_in > 0.0:
+        return CLUTCH_SLIPPING
+    return CLUTCH_OPEN
+
+
+@equation
+def mild_engine_choice(on, clutch, t_e, w, dw, cm18, c):
+    """(T_e, T_cr, p_i, mdot_f, turning) of the mild hybrid's engine: fired (``on`` > 0) with torque ``t_e``
+    as :func:`engine_choice`; not fired with the clutch closed, dragged by the wheels with its fuel cut (crank
+    torque the motoring torque (2)-(6) without (4) at the closed-throttle line's pressure, ``t_e`` then that
+    line's crank torque at w, :func:`closed_line`; turning, no fuel); not fired with the clutch open or
+    slipping, stopped."""
+    if on > 0.0:
+        return engine_choice(on, True, t_e, w, dw, cm18, c)
+    if clutch != CLUTCH_CLOSED:
+        return 0.0, 0.0, 0.0, 0.0, 0.0
+    p = en.intake_pressure_for_torque(t_e, w, c, cm18)
+    t_cr = en.motoring_torque(p, w, c, cm18)
+    return t_cr - vh.inertia_torque(dw, c), t_cr, p, 0.0, 1.0
+
+
+@equation
+def closed_line(w, line_speed, line_min, inv_line):
+    """The engine's closed-throttle crank torque at w (the generated map's line)."""
+    return tb.interp_at(w, line_speed, line_min, inv_line)
+
+
+@equation
+def belt_to_crank(t_machine, h):
+    """The machine's torque at the crank through a belt of ratio k and efficiency eta (k = 1, eta = 1: on the
+    crank, or the P2's shaft): k eta T driving, k T / eta generating."""
+    k = h.belt_ratio
+    return t_machine * k * h.belt_efficiency if t_machine > 0.0 else t_machine * k / h.belt_efficiency
+
+
+@equation
+def crank_to_belt(t_crank, h):
+    """The machine torque that gives ``t_crank`` at the crank (:func:`belt_to_crank` inverted)."""
+    k = h.belt_ratio
+    return t_crank / (k * h.belt_efficiency) if t_crank > 0.0 else t_crank * h.belt_efficiency / k
 
 
 @equation
@@ -240,7 +337,7 @@ def pack_covers_no_drive(interval, battery, e, m, tabs):
 @inline
 def ecms_level_cost(j, interval, battery, start, s_factor, dt, levels, t_low, t_high, c, e, m, tabs, h):
     """(ECMS cost, higher torques dominated, the point) of the running choice at torque level j."""
-    pt = p2_choice(interval, battery, 1.0, engine_torque_level(j, levels, t_low, t_high), c, e, m, tabs)
+    pt = p2_choice(interval, battery, 1.0, engine_torque_level(j, levels, t_low, t_high), c, e, m, tabs, h)
     return ecms_cost(pt, dt, start, s_factor, c, e, h), higher_torques_dominated(pt, battery), pt
 
 
@@ -293,6 +390,30 @@ def rule_engine_torque(t_in, w, soc, t_low, t_high, h):
 
 
 @equation
+def mild_rule(interval, soc, t_low, t_high, h):
+    """The mild hybrid's rule: (engine fired, its torque). At rest, or slowing below the idle speed (the
+    clutch open), the engine stops unless the charge is below ``soc_low`` (then it idles and charges at
+    :func:`rule_engine_torque`'s power). With the clutch closed and no traction demanded it is dragged with
+    its fuel cut while the machine recuperates. Otherwise it is fired: the demand plus the charging power of
+    :func:`rule_engine_torque` below ``soc_target``; above it, less the same share of ``charge_power`` (the
+    machine's assist: the charge above the target spent); within its lines (the machine gives the rest)."""
+    w, t_in, clutch = interval[1], interval[4], interval[10]
+    if clutch == CLUTCH_OPEN:
+        if soc < h.soc_low:
+            return 1.0, rule_engine_torque(0.0, w, soc, t_low, t_high, h)
+        return 0.0, 0.0
+    if clutch == CLUTCH_CLOSED and t_in <= 0.0 and soc >= h.soc_low:
+        return 0.0, 0.0
+    if soc <= h.soc_target:
+        return 1.0, rule_engine_torque(t_in, w, soc, t_low, t_high, h)
+    span = h.soc_target - h.soc_low
+    share = (soc - h.soc_target) / span if span > 0.0 else 1.0
+    share = min(share, 1.0)
+    t = t_in - share * h.charge_power / w
+    return 1.0, min(max(t, t_low), t_high)
+
+
+@equation
 def hybrid_powers(point, v, a, c, e):
     """(indicated, friction, pumping, engine kinetic, chemical, battery loss, accessories, machine loss,
     rotor kinetic, driveline loss, vehicle kinetic, aero, rolling, brake, trace miss, unserved) power (W) of
@@ -306,8 +427,8 @@ def hybrid_powers(point, v, a, c, e):
     vv = v if v > 0.0 else 0.0
     indicated, friction, pumping = 0.0, 0.0, 0.0
     engine_kinetic = 0.0
-    if running > 0.0:
-        indicated, friction, pumping = rules.engine_powers(p, w, t_cr, 1.0, c, cm18)
+    if running > 0.0:  # fired, or (a mild hybrid's) dragged with its fuel cut: no fuel, no indicated work
+        indicated, friction, pumping = rules.engine_powers(p, w, t_cr, 1.0 if mdot != 0.0 else 0.0, c, cm18)
         engine_kinetic = vh.inertia_torque(dw, c) * w
     rotor = el.rotor_torque(dw, e) * w
     f_net = vh.wheel_force(vv, a, c) + brake - missing
@@ -350,14 +471,35 @@ H_FIELDS = (
     "ecms_gain",
     "engine_start_fuel",
 )
+# the layout's numbers the same record carries: the mild hybrid's (1) or not (0), the belt between its machine
+# and the crank (params.mild; ratio and efficiency 1 for the P2's machine on the gearbox's shaft)
+H_LAYOUT_FIELDS = ("mild", "belt_ratio", "belt_efficiency")
+
+
+def rotor_at_crank(params):
+    """The parameters whose machine's rotor inertia is referred to the shaft the kernel turns: a mild
+    hybrid's belt of ratio k makes J_m k^2 at the crank (the P2's and a P1's: J_m)."""
+    if params.powertrain.type != "mhev" or params.mild.belt_ratio == 1.0:
+        return params
+    from .record import memo
+
+    return memo(
+        params,
+        "rotor_at_crank",
+        lambda p: p.with_changes(machine={"inertia": p.machine.inertia * p.mild.belt_ratio**2}),
+    )
 
 
 def hybrid_record(params):
-    """The record of ``params.hybrid``'s numbers (:data:`H_FIELDS`)."""
+    """The record of ``params.hybrid``'s numbers (:data:`H_FIELDS`) and the layout's
+    (:data:`H_LAYOUT_FIELDS`)."""
     import numpy as np
 
-    h = np.zeros(1, np.dtype([(n, np.float64) for n in H_FIELDS], align=True)).view(np.recarray)
-    h[0] = tuple(float(getattr(params.hybrid, n)) for n in H_FIELDS)
+    names = H_FIELDS + H_LAYOUT_FIELDS
+    h = np.zeros(1, np.dtype([(n, np.float64) for n in names], align=True)).view(np.recarray)
+    mild = params.powertrain.type == "mhev"
+    layout = (1.0, params.mild.belt_ratio, params.mild.belt_efficiency) if mild else (0.0, 1.0, 1.0)
+    h[0] = tuple(float(getattr(params.hybrid, n)) for n in H_FIELDS) + tuple(float(x) for x in layout)
     h.flags.writeable = False
     return h[0]
 
@@ -481,17 +623,40 @@ def boost_torque(w, soc, e, m, tabs):
 
 @equation
 def p2_choose(
-    interval, battery, soc, on, on_time, dt, ems, levels, t_low, t_high, c, e, m, tabs, h, soc_grid, jcost, k1
+    interval,
+    battery,
+    soc,
+    on,
+    on_time,
+    dt,
+    ems,
+    levels,
+    t_low,
+    t_high,
+    t_off,
+    c,
+    e,
+    m,
+    tabs,
+    h,
+    soc_grid,
+    jcost,
+    k1,
 ):
-    """The management's choice (engine on, its torque) at one step of the P2 (:func:`p2_interval`, the pack
-    in state ``battery``), from what it knows then: the charge, the engine's state and running time, the
-    step dt; the DP's cost-to-go ``jcost[k1]`` on ``soc_grid`` (``ems`` dp only). Every method's P2 calls it
-    per step."""
+    """The management's choice (engine fired, its torque) at one step of the P2 or the mild hybrid
+    (:func:`p2_interval`, the pack in state ``battery``), from what it knows then: the charge, the engine's
+    state and running time, the step dt; the DP's cost-to-go ``jcost[k1]`` on ``soc_grid`` (``ems`` dp
+    only). ``t_off``: the torque of the engine not fired (0; the mild hybrid's engine dragged with its fuel
+    cut: its closed-throttle line, :func:`closed_line`). Every method's P2 calls it per step."""
     w, t_in, runs = interval[1], interval[4], interval[5]
     choice_on = 0.0
-    choice_te = 0.0
+    choice_te = t_off
     if ems == EMS_RULE:
-        if rule_wants_engine(on, on_time, t_in * w, soc, h) and runs:
+        if h.mild > 0.0:
+            choice_on, choice_te = mild_rule(interval, soc, t_low, t_high, h)
+            if choice_on == 0.0:
+                choice_te = t_off
+        elif rule_wants_engine(on, on_time, t_in * w, soc, h) and runs:
             choice_on = 1.0
             choice_te = rule_engine_torque(t_in, w, soc, t_low, t_high, h)
         return choice_on, choice_te
@@ -501,13 +666,18 @@ def p2_choose(
         if u > 0 and not runs:
             break
         o = 1.0 if u > 0 else 0.0
-        te = engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else 0.0
-        pt = p2_choice(interval, battery, o, te, c, e, m, tabs)
-        start = u > 0 and on == 0.0
+        te = engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else t_off
+        pt = p2_choice(interval, battery, o, te, c, e, m, tabs, h)
+        start = pt[16] > 0.0 and on == 0.0
         if ems == EMS_DP:
             nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
             cost = ecms_cost(pt, dt, start, 0.0, c, e, h) + cost_to_go(
-                jcost[k1], 1 if u > 0 else 0, nxt, soc_grid[0], soc_grid[1] - soc_grid[0], soc_grid.size
+                jcost[k1],
+                1 if pt[16] > 0.0 else 0,
+                nxt,
+                soc_grid[0],
+                soc_grid[1] - soc_grid[0],
+                soc_grid.size,
             )
         else:
             cost = ecms_cost(pt, dt, start, s_factor, c, e, h)
@@ -527,7 +697,7 @@ def p2_ecms_walk(interval, battery, soc, on, dt, levels, t_low, t_high, level, c
     (:func:`running_cost_convex`, a pack not at its empty end: :func:`pack_covers_no_drive`). Returns the
     chosen point and the level to start the next step's walk from."""
     s_factor = equivalence_factor(soc, h)
-    pt = p2_choice(interval, battery, 0.0, 0.0, c, e, m, tabs)
+    pt = p2_choice(interval, battery, 0.0, 0.0, c, e, m, tabs, h)
     best = ecms_cost(pt, dt, False, s_factor, c, e, h)
     if interval[5]:
         cost, level, p_run = ecms_cheapest_level(

@@ -491,3 +491,19 @@ def powers_tangent(
         idle,
         d_tacc * w_e + t_acc * d_w,
     )
+
+
+def stopped_at_rest(v, a):
+    """Stop-start (``simulation.stop_start``): (the intervals whose engine stands, the restarts) of a cycle's
+    intervals (mean speed v, acceleration a). The engine stops in every interval at rest (speed 0 at both
+    ends) after the car first moved, and restarts when it moves off; stopped it burns nothing and books no
+    engine term. The standstill before the first move keeps idling (the key-on start warms the engine;
+    production systems stop only after the car has moved); a stop at the cycle's end needs no restart. Each
+    restart costs ``hybrid.engine_start_fuel`` (the start model the hybrids use)."""
+    import numpy as np
+
+    rest = (np.asarray(v) == 0.0) & (np.asarray(a) == 0.0)
+    moving = np.flatnonzero(~rest)
+    stopped = rest.copy()
+    stopped[: moving[0] if moving.size else rest.size] = False
+    return stopped, int(np.count_nonzero(stopped[:-1] & ~stopped[1:]))

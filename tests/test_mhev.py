@@ -1,0 +1,212 @@
+"""The 48 V mild hybrid (the P2's kernel with the machine on the crank) and an engine car's stop-start:
+conservation, the mild hybrid between the engine car and the full hybrid, the managements against each other,
+and stop-start's saving against the hand value idle flow x time at rest - starts x start fuel."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import vpsim
+from vpsim.batch import run_batch
+from vpsim.cycles import load_cycle
+from vpsim.errors import ParameterError, VpsimError
+from vpsim.model import hybrid as hy
+from vpsim.params import load_parameters
+
+MHEV = load_parameters("mhev")
+EMS = ("rule", "ecms", "dp")
+CYCLES = ("udds", "hwfet", "us06")
+# the same car as an engine car: no machine or battery, its 300 W of accessories on the crank through a 12 V
+# alternator (about 0.6 efficient), idling at the flow of the fleet's rule for this engine
+CONVENTIONAL = MHEV.with_changes(
+    powertrain={"type": "conventional"},
+    engine={"accessory_power": 500.0},
+    simulation={"idle_fuel_flow": 1.25e-4},
+)
+# the same car as a full P2 hybrid: a 40 kW machine behind the clutch and a 1.5 kWh, 240 V pack
+FULL = MHEV.with_changes(
+    powertrain={"type": "hev_p2"},
+    machine={"rated_power": 40e3, "base_speed": 200.0, "max_speed": 700.0, "inertia": 0.03},
+    battery={"cells_in_series": 64, "cells_in_parallel": 1, "soc_min": 0.2},
+    hybrid={"soc_low": 0.5, "charge_power": 5e3},
+)
+
+
+@pytest.fixture(scope="module")
+def runs():
+    return {(c, m): vpsim.simulate(c, "backward", MHEV, ems=m) for c in CYCLES for m in EMS}
+
+
+def test_energy_balance_closes_with_the_belt_and_the_dragged_engine(runs):
+    """indicated + chemical = every loss: the belt's loss booked with the machine's, the dragged engine's
+    friction and pumping with no indicated work, the slipping clutch's in the driveline's."""
+    for key, r in runs.items():
+        assert abs(r.energy.relative_residual) < 1e-12, (key, r.energy)
+    inv = vpsim.simulate("udds", "inverse", MHEV, ems="ecms")
+    assert abs(inv.energy.relative_residual) < 1e-12
+
+
+def test_mild_hybrid_between_the_engine_car_and_the_full_hybrid(runs):
+    """Same engine, gearbox and road load: stop, recuperation and a little assist save on every cycle, and a
+    full hybrid (electric driving, a larger machine and pack) saves more."""
+    for cycle in CYCLES:
+        conv = vpsim.simulate(cycle, "backward", CONVENTIONAL).fuel_l_per_100km
+        full = vpsim.simulate(cycle, "backward", FULL, ems="ecms").electric["fuel_l_per_100km_cs"]
+        mild = runs[cycle, "ecms"].electric["fuel_l_per_100km_cs"]
+        assert full < mild < conv, (cycle, full, mild, conv)
+    # the city cycle: a 48 V system saves some 8-15 % against the engine car (its makers' and the
+    # literature's range for belt starter-generators); here 11.7 %
+    conv = vpsim.simulate("udds", "backward", CONVENTIONAL).fuel_l_per_100km
+    assert 0.05 < 1.0 - runs["udds", "ecms"].electric["fuel_l_per_100km_cs"] / conv < 0.2
+
+
+def test_dynamic_programming_bounds_the_causal_managements(runs):
+    """DP (the optimum on its grid) <= ECMS and <= the rule on every cycle; ECMS <= rule on UDDS and US06.
+    On HWFET this ECMS (the P2's equivalence factor, untuned for this car) ends 0.05 above its start charge,
+    within J1711's 1 % that needs no correction, and burns 0.7 % more than the rule: the order does not
+    hold there."""
+    for cycle in CYCLES:
+        cs = {m: runs[cycle, m].electric["fuel_l_per_100km_cs"] for m in EMS}
+        assert cs["dp"] <= min(cs["ecms"], cs["rule"]) * 1.001, (cycle, cs)
+        e = runs[cycle, "dp"].electric
+        assert e["soc_end"] >= e["soc_start"] - 1e-3 and abs(e["net_energy_change_ratio"]) <= 0.01
+    for cycle in ("udds", "us06"):
+        cs = {m: runs[cycle, m].electric["fuel_l_per_100km_cs"] for m in EMS}
+        assert cs["ecms"] <= cs["rule"], (cycle, cs)
+
+
+def test_the_engine_turns_whenever_the_clutch_is_closed_and_stops_at_rest(runs):
+    """No electric driving: wherever the car moves with the engine's speed at or above idle, the engine
+    turns (fired, or dragged with its fuel cut); at rest it stands and burns nothing; it cuts its fuel on
+    some of the deceleration."""
+    for m in EMS:
+        df = runs["udds", m].to_dataframe()
+        # a sample shows the interval that starts at it: at rest where that interval is
+        rest = (df["speed_mps"] == 0.0) & (df["speed_mps"].shift(-1) == 0.0)
+        assert not df.loc[rest, "engine_on"].any(), m
+        assert (df.loc[rest, "fuel_flow_kgps"] == 0.0).all(), m
+        series = runs["udds", m].series
+        ratios = np.asarray(MHEV.transmission.ratios)[series["gear"].astype(int) - 1]
+        w_wheel = ratios * series["speed_mps"] / MHEV.vehicle.wheel_radius
+        # the samples whose two intervals both have the clutch closed (speed and ratio from the samples)
+        closed = (w_wheel >= 80.0 + 5.0) & (np.roll(w_wheel, 1) >= 85.0) & (np.roll(w_wheel, -1) >= 85.0)
+        assert df.loc[closed, "engine_on"].all(), m
+        cut = df["engine_on"] & (df["fuel_flow_kgps"] == 0.0)
+        assert cut.sum() > 30, m
+        assert runs["udds", m].electric["engine_starts"] > 10
+
+
+def test_the_belt_turns_the_machine_faster_and_costs_its_loss():
+    """The machine turns at the belt ratio times the crank (the series); a belt of lower efficiency costs
+    fuel on the optimum (DP), and a P1 (ratio 1, efficiency 1, the machine on the crank) runs and closes."""
+    r = vpsim.simulate("udds", "backward", MHEV, ems="ecms")
+    s = r.series
+    on = s["engine_on"] & (s["engine_speed_radps"] > 0.0)
+    np.testing.assert_allclose(s["machine_speed_radps"][on], 2.7 * s["engine_speed_radps"][on], rtol=1e-12)
+    lossy = MHEV.with_changes(mild={"belt_efficiency": 0.85})
+    dp = vpsim.simulate("udds", "backward", MHEV, ems="dp").electric["fuel_l_per_100km_cs"]
+    dp_lossy = vpsim.simulate("udds", "backward", lossy, ems="dp").electric["fuel_l_per_100km_cs"]
+    assert dp_lossy > dp
+    p1 = MHEV.with_changes(mild={"belt_ratio": 1.0, "belt_efficiency": 1.0}, machine={"base_speed": 90.0})
+    r1 = vpsim.simulate("udds", "backward", p1, ems="ecms")
+    assert abs(r1.energy.relative_residual) < 1e-12
+
+
+def test_belt_conversions_invert_each_other_and_lose_both_ways():
+    h = hy.hybrid_record(MHEV)
+    for t in (-40.0, -1.0, 0.0, 2.0, 50.0):
+        crank = hy.belt_to_crank(t, h)
+        assert hy.crank_to_belt(crank, h) == pytest.approx(t, rel=1e-15, abs=1e-15)
+        # the crank gets k eta T driving; gives k T / eta generating: |crank| vs k |T|
+        assert abs(crank) * (1 if t > 0 else 0.95**2) <= 2.7 * abs(t) + 1e-12
+
+
+def test_inverse_within_3_percent_of_backward(runs):
+    for cycle in CYCLES:
+        inv = vpsim.simulate(cycle, "inverse", MHEV, ems="ecms").electric["fuel_l_per_100km_cs"]
+        bwd = runs[cycle, "ecms"].electric["fuel_l_per_100km_cs"]
+        assert abs(inv / bwd - 1.0) < 0.03, (cycle, inv, bwd)
+
+
+def test_a_mild_field_out_of_range_is_one_line():
+    with pytest.raises(ParameterError, match="mild.belt_efficiency"):
+        MHEV.with_changes(mild={"belt_efficiency": 1.2})
+    with pytest.raises(ParameterError, match="mild.belt_ratio"):
+        MHEV.with_changes(mild={"belt_ratio": 0.0})
+
+
+# --- stop-start for an engine car -------------------------------------------------------------------------
+
+HOFMAN = load_parameters("hofman2011")
+STOP_START = HOFMAN.with_changes(simulation={"stop_start": True})
+
+
+def _rest_after_first_move(cycle):
+    """(seconds at rest after the car first moved, restarts) counted from the cycle's samples alone."""
+    t, v = np.asarray(cycle.time_s), np.asarray(cycle.speed_mps)
+    rest = (v[1:] == 0.0) & (v[:-1] == 0.0)
+    first = np.flatnonzero(~rest)[0]
+    rest[:first] = False
+    seconds = float(np.sum(np.diff(t)[rest]))
+    restarts = int(np.sum(rest[:-1] & ~rest[1:]))
+    return seconds, restarts
+
+
+@pytest.mark.parametrize("name", ["udds", "ftp75", "nedc"])
+def test_stop_start_saves_the_idle_fuel_less_the_restarts(name):
+    """The hand value: idle flow x time at rest (after the first move) - restarts x start fuel."""
+    cycle = load_cycle(name)
+    base = vpsim.simulate(cycle, "backward", HOFMAN)
+    ss = vpsim.simulate(cycle, "backward", STOP_START)
+    seconds, restarts = _rest_after_first_move(cycle)
+    hand = HOFMAN.simulation.idle_fuel_flow * seconds - restarts * HOFMAN.hybrid.engine_start_fuel
+    assert base.fuel_kg - ss.fuel_kg == pytest.approx(hand, rel=1e-9)
+    assert ss.summary()["engine_starts"] == restarts > 5
+    assert base.summary()["engine_starts"] is None
+    assert abs(ss.energy.relative_residual) < 1e-12
+    # a few per cent on the city cycles (the literature reports some 3-8 % on urban cycles; this car's idle
+    # flow is 0.13 g/s, its UDDS 18 % at rest)
+    assert 0.02 < 1.0 - ss.fuel_kg / base.fuel_kg < 0.08
+
+
+def test_stop_start_off_by_default_and_refused_where_not_modelled():
+    assert HOFMAN.simulation.stop_start is False
+    for method in ("forward", "inverse"):
+        with pytest.raises(VpsimError, match="stop_start"):
+            vpsim.simulate("udds", method, STOP_START)
+    with pytest.raises(VpsimError, match="stop_start"):
+        run_batch("udds", None, "backward", STOP_START)
+
+
+def test_stop_start_takes_true_or_false_only(tmp_path):
+    path = tmp_path / "car.toml"
+    path.write_text('base = "hofman2011"\n[simulation]\nstop_start = 1\n')
+    with pytest.raises(ParameterError, match="stop_start = 1 is not a true or false"):
+        load_parameters(path)
+
+
+def test_cli_reports_the_restarts_and_the_mild_hybrids_figures(tmp_path, capsys):
+    from vpsim.cli.main import main
+
+    path = tmp_path / "car.toml"
+    path.write_text('base = "hofman2011"\n[simulation]\nstop_start = true\n')
+    assert main(["simulate", "--vehicle", str(path), "--cycle", "udds"]) == 0
+    assert "stop-start        14 engine restarts" in capsys.readouterr().out
+    assert main(["simulate", "--vehicle", "mhev", "--cycle", "udds", "--ems", "dp", "--json"]) == 0
+    import json
+
+    s = json.loads(capsys.readouterr().out)
+    assert s["engine_starts"] > 10 and abs(s["energy_relative_residual"]) < 1e-9
+    assert s["fuel_l_per_100km_cs"] < s["fuel_l_per_100km"] * 1.01
+
+
+def test_the_forward_method_runs_the_mild_hybrid_within_3_percent_of_the_backward():
+    """The forward kernel is the P2's with the mild hybrid's record (belt, clutch, dragged engine)."""
+    import vpsim
+
+    for cycle in ("udds", "hwfet"):
+        back = vpsim.simulate(cycle, "backward", "mhev", ems="ecms").summary()
+        fwd = vpsim.simulate(cycle, "forward", "mhev", ems="ecms").summary()
+        assert abs(fwd["fuel_l_per_100km_cs"] / back["fuel_l_per_100km_cs"] - 1.0) < 0.03
+        assert abs(fwd["energy_relative_residual"]) < 1e-9
