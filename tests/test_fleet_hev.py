@@ -9,6 +9,7 @@ import pytest
 
 from vpsim.fleet import hev
 from vpsim.fleet.epa import read_test_car_list
+from vpsim.params import load_parameters
 
 
 def _real_list(shared_dir):
@@ -72,6 +73,12 @@ def test_real_hybrids_are_read(shared_dir):
     ioniq = hev.hev_parameters(recs["AE-U0G6GD048F#0"])
     assert ioniq.machine.rated_power == pytest.approx(32e3)  # the preset's test weight: its 32 kW
     assert ioniq.transmission.gearbox_ratios.__len__() == 6
+    # the pack: a split's is the preset's 1.31 kWh whatever its MG2 (a Camry's is 88-97 kW; sized to it the
+    # pack was 6.6 kWh where Toyota's are 1.0-1.6), a P2's has the strings its machine's power needs
+    camry = hev.hev_parameters(recs["18-AV2H#0"])
+    assert camry.machine.rated_power > 85e3 and camry.battery.cells_in_parallel == 1
+    assert ioniq.battery.cells_in_parallel == hev.pack_strings(load_parameters("hev_p2"), 32e3)
+    assert camry.machine.loss_scale == ioniq.machine.loss_scale == hev.MACHINE_LOSS_SCALE
 
 
 def test_from_epa_writes_a_hybrid_that_simulates_against_its_record(shared_dir, tmp_path, capsys):

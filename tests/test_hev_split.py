@@ -86,6 +86,53 @@ def test_best_efficiency_line_burns_least_at_each_power():
         assert float(emap.fuel_flow(p / w_best, w_best)) <= best * (1.0 + 1e-3), p
 
 
+def _net_cost(emap, p, w, w_r, m):
+    """fuel / (p - L_g - L_m2) of the engine at power p and speed w at ring speed w_r, the battery idle,
+    written out here from Willis and the torque balance (P1)-(P3), as (P6) defines it; inf where MG1 is out
+    of its limits or nothing is left."""
+    from vpsim.model import machine as mc
+
+    t_e = p / w
+    w_s = 3.6 * w - 2.6 * w_r
+    t_g = -t_e / 3.6
+    w_m2 = S.mg2_ratio * w_r
+    cap = float(mc.max_torque(w_m2, m))
+    t_m2 = min(max(-t_g * w_s / w_m2, -cap), cap)
+    net = p - float(mc.loss_w(t_g, w_s, G)) - float(mc.loss_w(t_m2, w_m2, m))
+    if t_e > float(emap.max_torque(w)) or abs(w_s) > G.max_speed or abs(t_g) > float(mc.max_torque(w_s, G)):
+        return math.inf
+    return float(emap.fuel_flow(t_e, w)) / net if net > 0.0 else math.inf
+
+
+def test_system_line_wastes_least_at_each_power_and_ring_speed():
+    """(P6): at powers and ring speeds of the table, no engine speed of a finer grid gives less fuel per unit
+    of the net power (the cost written out in the test from (P1)-(P3)), to 1e-3 (the line's grid is 1.5
+    rad/s); at a highway ring speed (ring 300 rad/s: about 95 km/h on the preset) and a road-load power
+    (10 kW) the line keeps MG1 nearer rest than the engine's own best-efficiency line (P5), which turns it
+    backwards, and wastes less."""
+    from vpsim.model import electric as el
+    from vpsim.model.maps import cached_engine_map
+
+    emap = cached_engine_map(SPLIT.engine).with_exact()
+    m = el.electric_records(SPLIT)[1]
+    powers, ring, table = sp.system_line(emap, 80.0, 545.0, m, G, S)
+    w = np.linspace(80.0, 545.0, 3000)
+    checked = 0
+    for i in range(6, powers.size, 9):
+        for j in range(4, ring.size, 6):
+            got = _net_cost(emap, powers[i], table[i, j], ring[j], m)
+            best = min(_net_cost(emap, powers[i], x, ring[j], m) for x in w)
+            if math.isfinite(best):
+                assert got <= best * (1.0 + 1e-3), (powers[i], ring[j])
+                checked += 1
+    assert checked >= 20
+    own = sp.best_efficiency_line(emap, 80.0, 545.0)
+    w_own = float(np.interp(10e3, own[0], own[1]))
+    w_sys = float(sp.tb.bilinear(powers, ring, table, np.array([10e3]), np.array([300.0]))[0])
+    assert abs(sp.sun_speed(w_sys, 300.0, S)) < abs(sp.sun_speed(w_own, 300.0, S))
+    assert _net_cost(emap, 10e3, w_sys, 300.0, m) < _net_cost(emap, 10e3, w_own, 300.0, m)
+
+
 # --- the car on cycles -------------------------------------------------------------------------------------
 
 

@@ -48,9 +48,15 @@ The vehicle (:func:`hev_parameters`), from the layout's preset (``hev_split`` af
   test weight over the preset's, within :data:`P2_MACHINE_SCALE` of it (Ioniq 3,250 lb / 32 kW, Sorento
   4,500 lb / 44 kW, but F-150 6,000 lb / 35 kW, Tundra 6,000 lb / 36 kW: the P2 machines of the list are
   32-47 kW whatever the car);
-* the battery: the preset's pack (hybrid packs are 1.1-1.9 kWh across the range, by the makers'
-  specifications), with as many strings in parallel as the machine's rated power needs at the cell's
-  discharge limit (:func:`pack_strings`);
+* the battery: the preset's pack (hybrid packs are 0.75-1.9 kWh across the range, by the makers'
+  specifications: Prius 0.75 / 1.31, Corolla 1.31, Camry 1.0-1.6, RAV4 1.59, Highlander and Sienna 1.9,
+  Escape and Maverick 1.1, Ioniq 1.56, Sonata 1.76, Tucson 1.49 kWh); a P2's with as many strings in
+  parallel as its machine's rated power needs at the cell's discharge limit (:func:`pack_strings`: the P2's
+  machine draws on the pack alone), a power split's the preset's one string (its MG2 is fed by MG1 as much as
+  by the pack: sized to MG2's rating the Camry's pack was 6.6 kWh; :func:`battery_strings`);
+* the machines' losses: the loss model (:mod:`vpsim.model.machine`, fitted on 1990s maps) times
+  :data:`MACHINE_LOSS_SCALE`, the level the 2022 single-machine permanent-magnet EVs' drive units fit out of
+  fold (``vpsim fleet``, class ``bev``: 0.14-0.15 in every fold); MG1 of a split shares it;
 * transmission: a power split's ring-to-wheel ratio is the record's axle ratio where plausible
   (:data:`SPLIT_AXLE_RANGE`), else the preset's; the wheel radius the fleet's default; a P2's gearbox as a
   conventional car's of the same code and gears (:func:`vpsim.fleet.vehicle.gear_ratios`, from N/V and the
@@ -107,6 +113,9 @@ SPLIT_CODES = ("CVT", "SCV")  # SCV: the selectable CVT (the RAV4 Hybrid's "sequ
 P2_MACHINE_SCALE = (1.0, 1.4)
 MPG_RANGE = (5.0, 150.0)
 CELL_STRING_MARGIN = 1.0  # the pack gives the machine's rated power at the cell's discharge limit
+# the hybrids' machine and inverter losses times this: the 2022 single-machine PM EVs' fitted drive-loss level
+# (vpsim.fleet.ev class bev, 0.14-0.15 in every out-of-fold fit of the 2022 list); fleet/tuned.py declares it
+MACHINE_LOSS_SCALE = 0.15
 
 # --- technology: two parameters, search bounds set before any vpsim hybrid result -----------------------
 TECH_PARAMS = ("engine.thermal_efficiency", "electric.accessory_power")
@@ -325,6 +334,14 @@ def pack_strings(base, machine_power_w: float) -> int:
     return int(max(base.battery.cells_in_parallel, need))
 
 
+def battery_strings(rec: HEVRecord, base, machine_power_w: float) -> int:
+    """The pack's strings in parallel by the module's rule: a power split's the preset's, a P2's
+    :func:`pack_strings` for its machine."""
+    if rec.layout == "hev_split":
+        return int(base.battery.cells_in_parallel)
+    return pack_strings(base, machine_power_w)
+
+
 def machine_sizes(rec: HEVRecord, base) -> dict[str, float]:
     """The machines' rated powers (W) by the module's rule: ``machine`` and, for a power split,
     ``generator``."""
@@ -387,8 +404,8 @@ def hev_parameters(rec: HEVRecord, technology: dict | None = None):
             "fuel_heating_value": FUEL_LHV_J_PER_KG,
             "rated_power": rec.rated_power_kw * 1e3,
         },
-        "machine": scaled_machine(base.machine, sizes["machine"]),
-        "battery": {"cells_in_parallel": pack_strings(base, sizes["machine"])},
+        "machine": {**scaled_machine(base.machine, sizes["machine"]), "loss_scale": MACHINE_LOSS_SCALE},
+        "battery": {"cells_in_parallel": battery_strings(rec, base, sizes["machine"])},
         "electric": {},
         "simulation": {"fuel_density": FUEL_DENSITY_KG_PER_L},
     }
@@ -512,7 +529,12 @@ def hev_vehicle_toml(rec: HEVRecord, params, source: str = "", technology_note: 
         "engine.thermal_efficiency": technology_note or "the preset's",
         "electric.accessory_power": technology_note or "the preset's (W)",
         "machine.rated_power": f"{sizes} (W)",
-        "battery.cells_in_parallel": "the preset's pack, strings for the machine's rated power",
+        "battery.cells_in_parallel": (
+            "the preset's pack"
+            if rec.layout == "hev_split"
+            else "the preset's pack, strings for the machine's rated power"
+        ),
+        "machine.loss_scale": "the 2022 PM EVs' fitted drive-loss level (vpsim.fleet.hev.MACHINE_LOSS_SCALE)",
         "split.generator_rated_power": f"{sizes} (W)",
         "transmission.final_drive": (
             "record: axle ratio" if rec.layout == "hev_split" else "record: N/V and axle ratio"

@@ -73,10 +73,11 @@ def dp_kernel(v, a, dt, ratio, c, e, m, g, s, tabs, h, levels, lines, best, cap,
     """Backward: jcost[k, i, q] the least fuel (kg) from interval k to the end at charge soc_grid[i] with the
     engine in state q (0 off, 1 on) before it. jcost[K] is the terminal cost, filled by the caller; ``packs``
     (grid points x 5) is room for the pack's state at each grid charge. ``lines``: the engine's full-load
-    line (speeds, torques); ``best``: its best-efficiency line (powers, speeds); ``cap``: its full-load
+    line (speeds, torques); ``best``: the system operating line
+    (powers, ring speeds, engine speeds; :func:`vpsim.model.split.system_line`); ``cap``: its full-load
     power's running maximum (speeds, powers)."""
     eng = (lines[0], lines[1], tb.inverse_spacing(lines[0]))
-    opt = (best[0], best[1], tb.inverse_spacing(best[0]))
+    opt = (best[0], best[1], best[2], tb.inverse_spacing(best[0]), tb.inverse_spacing(best[1]))
     inv_cap = tb.inverse_spacing(cap[0])
     n = soc_grid.size
     soc0 = soc_grid[0]
@@ -146,7 +147,7 @@ def causal_kernel(
     """Drive the cycle with the management ``ems`` (rule, ecms, or dp with the cost-to-go ``jcost``); fill
     ``rows`` and the sums. Returns the final state of charge."""
     eng = (lines[0], lines[1], tb.inverse_spacing(lines[0]))
-    opt = (best[0], best[1], tb.inverse_spacing(best[0]))
+    opt = (best[0], best[1], best[2], tb.inverse_spacing(best[0]), tb.inverse_spacing(best[1]))
     inv_cap = tb.inverse_spacing(cap[0])
     soc = soc0
     on = 0.0
@@ -245,21 +246,23 @@ def _build_inputs(params):
     c = kernel_records(params)[0]
     e, m, tabs = el.electric_records(params)
     # the line on the exact BQM fuel flow (19), the one the kernels burn
-    powers, speeds, cap_speed, cap_power = sp.best_efficiency_line(
-        engine_map.with_exact(), float(c.idle_speed), params.split.engine_max_speed
-    )
+    exact = engine_map.with_exact()
+    w_lo, w_hi = float(c.idle_speed), params.split.engine_max_speed
+    _, _, cap_speed, cap_power = sp.best_efficiency_line(exact, w_lo, w_hi)
+    g, s = sp.generator_record(params), sp.split_record(params)
+    powers, ring, speeds = sp.system_line(exact, w_lo, w_hi, m, g, s)
     lines = (engine_map.max_torque_speed, engine_map.max_torque_values)
     return dict(
         c=c,
         e=e,
         m=m,
-        g=sp.generator_record(params),
-        s=sp.split_record(params),
+        g=g,
+        s=s,
         tabs=tabs.astuple(),
         h=hy.hybrid_record(params),
         ratio=float(total_ratios(params.transmission)[0]),
         lines=lines,
-        best=(powers, speeds),
+        best=(powers, ring, speeds),
         cap=(cap_speed, cap_power),
     )
 

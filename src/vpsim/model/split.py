@@ -17,8 +17,18 @@ over sun teeth):
                           w_g,max: w_c in [(k w_r - w_g,max) / (1 + k), (k w_r + w_g,max) / (1 + k)]
 
 The engine's speed is free within (P4): the management chooses whether the engine runs and its power P_e;
-the engine then turns at the speed of least fuel for that power (the best-efficiency line, (P5):
-w*(P) = argmin_w mdot_f(P / w, w) over the engine's map, :func:`best_efficiency_line`), held within (P4)
+the engine then turns at the speed where engine and gear set together waste least (the system operating
+line, (P6), :func:`system_line`): at ring speed w_r, the speed of least fuel per unit of the power that
+reaches the ring net of the two machines' losses,
+
+    (P6) w*(P, w_r) = argmin_w mdot_f(P / w, w) / (P - L_g(T_g, w_s) - L_m2(T_m2, w_m2))
+
+with T_g, w_s from (P1)-(P3) at the engine's speed w and the battery idle (MG2 passes what MG1 makes, within
+its envelope: T_m2 w_m2 = -T_g w_s), L the machines' loss model (:mod:`vpsim.model.machine`). The engine's
+own best-efficiency line ((P5): w(P) = argmin_w mdot_f(P / w, w), :func:`best_efficiency_line`) is the
+lowest speed at every power for a mean-value engine (its friction grows with speed); at highway ring speeds
+that puts MG1 far below zero speed, where it motors and MG2 generates the power it takes: the recirculating
+power of a split, which (P6) weighs and a real management avoids. It is held within (P4)
 and at or above the speed where MG1's rated torque can hold the engine's (P / w <= (1 + k) T_g,rated). Over
 an interval the engine's speed is held (dw_c = 0: its change between intervals, a fraction of a percent of
 the cycle's energy, is not booked), so dw_s = -k dw_r. Both machines draw on one pack: MG1's DC power is
@@ -46,6 +56,9 @@ from .engine import equation, inline
 
 LINE_POINTS = 121  # powers of the best-efficiency line (uniform from 0 to the engine's top power)
 LINE_SPEEDS = 931  # speeds it is searched over (0.5 rad/s apart on the preset)
+SYSTEM_POWERS = 61  # powers of the system operating line (P6), uniform from 0 to the engine's top power
+SYSTEM_RING_SPEEDS = 41  # its ring speeds, uniform from 0 to MG2's top speed over its reduction
+SYSTEM_SPEEDS = 311  # engine speeds it is searched over (1.5 rad/s apart on the preset)
 SPEED_TRIALS = 16  # speeds tried across the gear set's range where MG1 cannot hold the engine on the line
 
 # the point's fields after the P2's (hybrid.p2_point's first 18, which the shared cost functions read)
@@ -82,12 +95,12 @@ def carrier_speed_range(w_r, c, g, s):
 
 @equation
 def engine_speed_for_power(p, w_r, dw_r, w_lo, w_hi, lines, best, g, s):
-    """The engine's speed for power p at ring speed w_r: on the best-efficiency line (P5), at or above the
+    """The engine's speed for power p at ring speed w_r: on the system operating line (P6), at or above the
     speed where MG1's rated torque holds the engine's (p / w <= (1 + k) T_g,rated), within (w_lo, w_hi)
     (P4); where MG1 cannot hold the engine there (above its base speed its torque falls as 1 / w_s), the
     nearest of ``SPEED_TRIALS`` speeds across the range where it can and the engine reaches p. Returns (the
     speed, its torque p / w, feasible)."""
-    w = tb.interp_at(p, best[0], best[1], best[2])
+    w = tb.bilinear_at(best[0], best[1], best[2], p, w_r, best[3], best[4])
     w_min = max(w_lo, p / ((1.0 + s.ring_over_sun) * g.rated_torque))
     if w_min > w_hi:
         return w_hi, p / w_hi, False
@@ -177,8 +190,8 @@ def engine_choice_speed(on, p, w_r, dw_r, w_lo, w_hi, lines, best, g, s):
 def split_choice(interval, battery, on, p_e, c, e, m, g, s, tabs, lines, best):
     """The operating point of the choice (engine ``on``, power ``p_e``) at an interval
     (:func:`split_interval`) with the pack in state ``battery``; ``lines`` the engine's full-load line
-    (speeds, torques, their inverse spacing), ``best`` its best-efficiency line (powers, speeds, inverse
-    spacing; :func:`best_efficiency_line`). Returns the P2 point's 18 fields
+    (speeds, torques, their inverse spacing), ``best`` the system operating line (powers, ring speeds, the
+    engine speeds table, the two inverse spacings; :func:`system_line`). Returns the P2 point's 18 fields
     (:func:`vpsim.model.hybrid.p2_point`; its machine is MG2, its input torque the ring's demand) and then
     (w_c, w_s, T_g, P_g, dw_s, the ring's net torque, feasible)."""
     vv, w_r, dw_r, f, t_ring, w_m2, dw_m2, t_min, t_max, w_lo, w_hi, ratio = interval
@@ -313,14 +326,22 @@ def split_record(params):
 
 
 def generator_record(params):
-    """MG1's machine record: the scalable loss model (:mod:`vpsim.model.machine`) at its rating."""
+    """MG1's machine record: the scalable loss model (:mod:`vpsim.model.machine`) at its rating, its losses
+    times ``machine.loss_scale`` as MG2's (one drive technology: the two machines share the transaxle, the
+    inverter and the pack)."""
     sp = params.split
+    scale = params.machine.loss_scale
+    coefficients = None
+    if scale != 1.0:
+        base = mc.DEFAULT_COEFFICIENTS["pm"].as_dict()
+        coefficients = mc.LossCoefficients(**{k: v * scale for k, v in base.items()})
     return mc.machine_record(
         mc.MachineSpec(
             rated_power_w=sp.generator_rated_power,
             base_speed_radps=sp.generator_base_speed,
             max_speed_radps=sp.generator_max_speed,
             kind="pm",
+            coefficients=coefficients,
             inertia_kgm2=sp.generator_inertia,
         )
     )
@@ -427,3 +448,42 @@ def split_choose(
             if u > 1 and higher_powers_dominated(pt, battery):
                 break
     return choice_on, choice_p, found
+
+
+def system_line(engine_map, w_lo, w_hi, m, g, s):
+    """(P6) The system operating line: (powers, ring speeds, engine speed table[power, ring speed]) with
+    powers uniform from 0 to the engine's top power and ring speeds from 0 to MG2's top speed over its
+    reduction; each the engine speed in [w_lo, w_hi] of least fuel per unit of net power,
+    mdot_f(P / w, w) / (P - L_g - L_m2), among the speeds where the engine reaches P, MG1 turns within its
+    top speed and holds its reaction torque (P2)-(P4). The battery is taken idle (MG2 passes MG1's power,
+    within its envelope; at low ring speed its torque is held at the envelope). Where no speed delivers a
+    positive net power (P near 0), or none is within MG1's limits, the engine's own best-efficiency speed
+    (P5). ``m``, ``g``, ``s``: MG2's and MG1's machine records and the gear set's (:func:`split_record`)."""
+    k = float(s.ring_over_sun)
+    speeds = np.linspace(w_lo, w_hi, SYSTEM_SPEEDS)
+    t_full = np.asarray(engine_map.max_torque(speeds), float)
+    top = float(np.max(np.maximum(t_full * speeds, 0.0)))
+    powers = np.linspace(0.0, top, SYSTEM_POWERS)
+    ring = np.linspace(0.0, float(m.max_speed) / float(s.mg2_ratio), SYSTEM_RING_SPEEDS)
+    p2 = powers[:, None]
+    t_e = p2 / speeds[None, :]
+    reach = t_e <= t_full[None, :] * (1.0 + 1e-12)
+    fuel = np.asarray(engine_map.fuel_flow(np.where(reach, t_e, 0.0), speeds[None, :]), float)
+    fuel = np.where(reach, fuel, np.inf)
+    own = speeds[np.argmin(fuel, axis=1)]  # (P5) on this grid
+    own[0] = w_lo
+    t_g = -t_e / (1.0 + k)  # (P2)-(P3), the engine's speed held
+    table = np.empty((powers.size, ring.size))
+    for j, w_r in enumerate(ring):
+        w_s = sun_speed(speeds[None, :], w_r, s)
+        loss_g = mc.loss_w(t_g, w_s, g)
+        w_m2 = float(s.mg2_ratio) * w_r
+        t_cap = float(mc.max_torque(w_m2, m))
+        p_m2 = -t_g * w_s  # the battery idle: MG2 passes what MG1 makes
+        t_m2 = np.clip(p_m2 / max(w_m2, 1e-9), -t_cap, t_cap)
+        net = p2 - loss_g - mc.loss_w(t_m2, w_m2, m)
+        ok = reach & (np.abs(w_s) <= g.max_speed) & (np.abs(t_g) <= mc.max_torque(w_s, g)) & (net > 0.0)
+        cost = np.where(ok, fuel / np.where(ok, net, 1.0), np.inf)
+        best = np.argmin(cost, axis=1)
+        table[:, j] = np.where(np.isfinite(cost[np.arange(powers.size), best]), speeds[best], own)
+    return powers, ring, table
