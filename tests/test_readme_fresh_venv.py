@@ -114,6 +114,8 @@ def test_command_runs_in_fresh_venv(fresh, tmp_path, args, lang):
     work = make_scratch(tmp_path)
     if "--scheduler" in args:
         pytest.skip("needs a running Dask cluster at the address shown")
+    if "--local-cluster" in args:  # (the README's install has no Dask; tests/test_sweep_*.py run these)
+        pytest.skip("needs Dask, an optional extra: pip install 'vpsim[cluster]'")
     uses_shared = any("../shared" in a for a in args)
     if uses_shared:
         if not (SHARED / "data").is_dir():

@@ -130,3 +130,22 @@ def test_missing_packages_are_refused_before_computing(tmp_path, capsys, monkeyp
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
     assert not out.exists()  # refused before the output folder was made, let alone anything computed
+
+
+def test_without_dask_at_all_local_cluster_is_one_line(tmp_path, capsys, monkeypatch):
+    """Without the dask package (not only dask.distributed), find_spec("dask.distributed") raises instead of
+    returning None: that was an internal error (exit 3) in a fresh install."""
+    import importlib.util
+
+    real = importlib.util.find_spec
+
+    def find_spec(name, *a, **k):
+        if name.split(".")[0] == "dask":
+            raise ModuleNotFoundError("No module named 'dask'", name="dask")
+        return real(name, *a, **k)
+
+    monkeypatch.setattr(importlib.util, "find_spec", find_spec)
+    out = tmp_path / "s"
+    assert main(["sweep", str(EXAMPLE), "--out", str(out), "--local-cluster", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "need Dask: pip install 'vpsim[cluster]'" in err and err.count("\n") == 1

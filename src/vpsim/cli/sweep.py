@@ -67,7 +67,10 @@ def _hms(s: float) -> str:
 def _installed(module: str) -> bool:
     import importlib.util
 
-    return importlib.util.find_spec(module) is not None
+    try:  # (find_spec of "a.b" imports "a": without it, ModuleNotFoundError, not None)
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:
+        return False
 
 
 def _check_requirements(out, fmt, resume: bool, *, cluster: bool):
