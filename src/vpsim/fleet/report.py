@@ -111,18 +111,18 @@ def summary(run) -> dict:
         ("fastsim_by_powertrain", "fastsim"),
         ("fastsim_calibrated_by_powertrain", "fastsim_calibrated"),
     ):
-        # FASTSim's hybrid (vpsim.fleet.peer_hev) with its defaults; a calibrated one is not built: said so
-        if key == "fastsim_by_powertrain" and run.hev.get("peer_run"):
-            both = hv_ok[np.isfinite(hv_ok["fastsim_error_pct"].to_numpy(float))]
+        # FASTSim's hybrid (vpsim.fleet.peer_hev): its defaults, and calibrated as vpsim's hybrids are
+        hv_col = hv_ok[f"{col}_error_pct"].to_numpy(float)
+        if run.hev.get("peer_run") and np.isfinite(hv_col).any():
+            both = hv_ok[np.isfinite(hv_col)]
             out["peer"][key]["hev"] = {
-                c: error_stats(both[both["cycle"] == c]["fastsim_error_pct"]) for c in HEV_CYCLES
+                c: error_stats(both[both["cycle"] == c][f"{col}_error_pct"]) for c in HEV_CYCLES
             }
-        elif key == "fastsim_by_powertrain":
-            why = run.hev.get("status") if run.peer.get("available") else run.peer.get("reason", "not run")
-            out["peer"][key]["hev"] = {"measured": False, "reason": why or "no full hybrid predicted"}
         else:
-            not_built = "a calibrated FASTSim hybrid is not built"
-            out["peer"][key]["hev"] = {"measured": False, "reason": not_built}
+            why = run.hev.get("status") if run.peer.get("available") else run.peer.get("reason", "not run")
+            if run.peer.get("available") and key != "fastsim_by_powertrain":
+                why = run.hev.get("peer_technology_status", why)
+            out["peer"][key]["hev"] = {"measured": False, "reason": why or "no full hybrid predicted"}
         if run.peer.get("available") and len(ev_ok):
             both = ev_ok[np.isfinite(ev_ok[f"{col}_error_pct"].to_numpy(float))]
             out["peer"][key]["bev"] = {
@@ -575,7 +575,8 @@ def _diagonal(ax, lo, hi, title, measured_unit, predicted_unit):
 def figure_predicted_vs_measured(df, cycles, peer: bool, ev=None, hev=None):
     """One panel per conventional cycle (mpg); with battery-electric rows ``ev``, one per EV test (MPGe:
     green diamonds); with full-hybrid rows ``hev``, one per hybrid test (charge-sustaining mpg: purple
-    triangles, trace misses as red crosses; FASTSim's hybrid with its defaults beside them)."""
+    triangles, trace misses as red crosses; FASTSim's hybrid calibrated on the same classes beside them, or
+    its defaults where it was not calibrated)."""
     ev_cycles = [c for c in EV_CYCLES if ev is not None and (ev["cycle"] == c).any()]
     hev_cycles = [c for c in HEV_CYCLES if hev is not None and (hev["cycle"] == c).any()]
     fig, axes = _axes_grid(len(cycles) + len(ev_cycles) + len(hev_cycles))
@@ -584,16 +585,19 @@ def figure_predicted_vs_measured(df, cycles, peer: bool, ev=None, hev=None):
         sub = hev[(hev["cycle"] == c) & np.isfinite(hev["predicted_mpg"].to_numpy(float))]
         vals = np.concatenate([sub["measured_mpg"], sub["predicted_mpg"]])
         lo, hi = (0.9 * vals.min(), 1.05 * vals.max()) if vals.size else (0, 1)
-        if peer and np.isfinite(sub["fastsim_mpg"].to_numpy(float)).any():
-            ax.scatter(
-                sub["measured_mpg"],
-                sub["fastsim_mpg"],
-                s=14,
-                marker="s",
-                c="tab:orange",
-                alpha=0.45,
-                label="FASTSim 3.1 hybrid, defaults",
-            )
+        for col, what in (("fastsim_calibrated_mpg", "calibrated"), ("fastsim_mpg", "defaults")):
+            # the peer calibrated as vpsim's hybrids are (the fair comparison), else its defaults
+            if peer and col in sub and np.isfinite(sub[col].to_numpy(float)).any():
+                ax.scatter(
+                    sub["measured_mpg"],
+                    sub[col],
+                    s=14,
+                    marker="s",
+                    c="tab:orange",
+                    alpha=0.45,
+                    label=f"FASTSim 3.1 hybrid, {what}",
+                )
+                break
         miss = (sub["status"] == "trace_miss").to_numpy()
         ax.scatter(
             sub["measured_mpg"][~miss],
@@ -853,6 +857,7 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
                     "out_of_fold": run.hev.get("technology", {}),
                     "all_vehicles": run.hev.get("technology_all", {}),
                     "search_bounds": {k: list(v) for k, v in _hev().search_bounds().items()},
+                    "peer_fastsim_calibrated_out_of_fold": run.hev.get("peer_technology", {}),
                 },
             },
             indent=2,
@@ -1017,6 +1022,22 @@ def _hev_md(run, s) -> list[str]:
         reasons = {(p, side) for t in run.hev["technology"].values() for p, side in hm.on_bounds(t).items()}
         for p, side in sorted(reasons):
             L.append(f"\n`{p}` on its {side} bound: the bound stays: {hm.BOUND_REASONS.get((p, side), '')}.")
+    if run.hev.get("peer_technology"):
+        from . import peer_hev as ph
+
+        L += [
+            "",
+            "FASTSim's hybrid calibrated the same way (`vpsim.fleet.peer_hev`: the engine's efficiency curve "
+            f"times a scale searched over {ph.CAL_SCALE[0]:g}-{ph.CAL_SCALE[-1]:g}, the accessory power over "
+            f"{ph.CAL_AUX[0]:g}-{ph.CAL_AUX[-1]:g} W), per fold and class:",
+            "",
+            "| fold.class | efficiency scale | accessories, W | training rows |",
+            "|---|---|---|---|",
+        ]
+        for k, t in run.hev["peer_technology"].items():
+            L.append(f"| {k} | {t['efficiency_scale']:.3f} | {t['accessory_power_w']:.0f} | {t['n_train']} |")
+    elif run.hev.get("peer_technology_status"):
+        L += ["", f"FASTSim's hybrid was not calibrated: {run.hev['peer_technology_status']}."]
     return L
 
 

@@ -96,6 +96,9 @@ HEV_COLUMNS = (
     "fastsim_mpg",
     "fastsim_error_pct",
     "fastsim_status",
+    "fastsim_calibrated_mpg",
+    "fastsim_calibrated_error_pct",
+    "fastsim_calibrated_status",
     "detail",
 )
 MODE = "extended"
@@ -781,6 +784,10 @@ def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings) ->
             for r in part:
                 peer_rows[(r["key"], r["cycle"])] = r
         timings["hev_peer_s"] = time.perf_counter() - t0
+        peer_cal_rows = _calibrated_hev_peer(executor, work, class_of, fold_of, k, out, progress)
+        timings["hev_peer_calibrated_s"] = time.perf_counter() - t0 - timings["hev_peer_s"]
+    else:
+        peer_cal_rows = {}
     out["peer_run"] = bool(peer_rows)
     rows = []
     for v, cs in work:
@@ -811,16 +818,21 @@ def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings) ->
                 "fastsim_mpg": math.nan,
                 "fastsim_error_pct": math.nan,
                 "fastsim_status": "not run",
+                "fastsim_calibrated_mpg": math.nan,
+                "fastsim_calibrated_error_pct": math.nan,
+                "fastsim_calibrated_status": "not run",
                 "detail": "",
             }
-            pr = peer_rows.get((v.key, c))
-            if pr is not None:
+            for col, prows in (("fastsim", peer_rows), ("fastsim_calibrated", peer_cal_rows)):
+                pr = prows.get((v.key, c))
+                if pr is None:
+                    continue
                 mpg = pr.get("peer_mpg", math.nan)
                 if math.isfinite(mpg):
-                    row["fastsim_mpg"] = round(mpg, 4)
-                    row["fastsim_error_pct"] = round(100.0 * (mpg / meas_c - 1.0), 4)
+                    row[f"{col}_mpg"] = round(mpg, 4)
+                    row[f"{col}_error_pct"] = round(100.0 * (mpg / meas_c - 1.0), 4)
                 miss = "trace_miss" if pr.get("trace_miss") else "ok"
-                row["fastsim_status"] = pr.get("peer_error") or miss
+                row[f"{col}_status"] = pr.get("peer_error") or miss
             pred = preds.get((v.key, c))
             err = failed.get((v.key, c)) or (pred or {}).get("error") or ("" if pred else "not run")
             if err:
@@ -839,6 +851,59 @@ def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings) ->
             rows.append(row)
     out["rows"] = rows
     return out
+
+
+def _calibrated_hev_peer(executor, work, class_of, fold_of, k, out, progress) -> dict:
+    """FASTSim's hybrid calibrated as vpsim's hybrids are (:mod:`vpsim.fleet.peer_hev`): its grid on every
+    (record, test), its two parameters fitted per fold and vpsim's class out of fold, then every record
+    run at its fold's values. Returns {(key, test): row}; the fits go into ``out["peer_technology"]``
+    ("fold<k>.<class>")."""
+    from . import hev as hm
+    from . import peer_hev as ph
+
+    items = [(v, c) for v, cs in work for c in cs]
+    size = max(1, HEV_CHUNK // 2)
+    t0 = time.perf_counter()
+    grid_rows: list[dict] = []
+    for i, part in enumerate(
+        executor.map(ph.hev_calibration_chunk, [items[j : j + size] for j in range(0, len(items), size)])
+    ):
+        grid_rows += part
+        _progress(
+            "hybrids: FASTSim's calibration grid, tests",
+            min((i + 1) * size, len(items)),
+            len(items),
+            t0,
+            progress,
+        )
+    by_key = {v.key: v for v, _ in work}
+    ok = [r for r in grid_rows if r["log_l100"] is not None]
+    if not ok:
+        out["peer_technology_status"] = "no record ran on FASTSim's calibration grid: " + (
+            grid_rows[0]["peer_error"] if grid_rows else "no test"
+        )
+        return {}
+    ptech = ph.calibrate_hev_peer(
+        np.stack([r["log_l100"] for r in ok]),
+        np.array([_log_l100(by_key[r["key"]].measured_mpg[r["cycle"]]) for r in ok]),
+        np.array([fold_of[r["key"]] for r in ok]),
+        np.array([class_of[r["key"]] for r in ok], dtype=object),
+        k,
+        hm.CLASSES,
+    )
+    out["peer_technology"] = {f"fold{f}.{c}": _rounded(t) for (f, c), t in sorted(ptech.items())}
+    citems = [
+        (v, c, {p: ptech[(fold_of[v.key], class_of[v.key])][p] for p in ph.HEV_PEER_PARAMS})
+        for v, cs in work
+        for c in cs
+    ]
+    rows: dict = {}
+    for part in executor.map(
+        ph.hev_peer_chunk, [citems[j : j + 2 * HEV_CHUNK] for j in range(0, len(citems), 2 * HEV_CHUNK)]
+    ):
+        for r in part:
+            rows[(r["key"], r["cycle"])] = r
+    return rows
 
 
 def _peer_tech(t: dict) -> dict:
