@@ -125,3 +125,18 @@ def test_cli_runs_the_forward_hybrid(capsys):
     assert main([*args, "--json"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["method"] == "forward" and s["ems"] == "rule" and s["engine_starts"] > 0
+
+
+@pytest.mark.parametrize("cycle", ["udds", "us06"])
+def test_forward_ecms_walk_finds_the_exhaustive_searchs_choices(cycle):
+    """The forward P2's ECMS walks from the last step's torque level (as the backward method's) and makes the
+    choices trying every level makes, at every step (bit for bit)."""
+    from vpsim.methods import hev_forward
+
+    cyc = load_cycle(cycle)
+    p = load_parameters("hev_p2")
+    walk = hev_forward.run(cyc, p, ems="ecms")
+    every = hev_forward.run(cyc, p, ems="ecms", exhaustive=True)
+    assert walk.fuel_kg == every.fuel_kg
+    for k in ("engine_on", "engine_torque_nm", "machine_torque_nm", "soc", "speed_mps"):
+        assert np.array_equal(walk.series[k], every.series[k]), k

@@ -23,7 +23,8 @@ def series(cycle, rows, columns: dict[str, int], soc_row: int, soc_end: float, n
     cycle's time and speed, the state of charge at each sample, the flags as booleans."""
     ts = np.asarray(cycle.time_s, float)
     idx = np.minimum(np.arange(ts.size), n - 1)
-    out = {k: rows[j, idx].copy() for k, j in columns.items()}
+    block = np.take(rows, idx, axis=1)  # one gather for every row (each series a row of it, not of rows)
+    out = {k: block[j] for k, j in columns.items()}
     out["time_s"] = ts.copy()
     out["speed_mps"] = np.asarray(cycle.speed_mps, float).copy()
     out["reference_speed_mps"] = out["speed_mps"].copy()

@@ -9,7 +9,9 @@ Time advances on a grid that steps on every cycle sample and at most ``electric.
   time) turns the speed error e = v_cycle(t) - v into an acceleration command u (a wheel force m u + road
   load); it holds the car at rest while the cycle stands, and the car does not roll back;
 * the **energy management** (the backward method's own per-step choice, :func:`vpsim.model.hybrid.p2_choose`
-  or :func:`vpsim.model.split.split_choose`, rule or ECMS) splits that demand between the engine and the
+  or :func:`vpsim.model.split.split_choose`, rule or ECMS; the P2's ECMS found, as on the backward method,
+  by a walk from the last step's torque level, :func:`vpsim.model.hybrid.p2_ecms_walk`, where its cost is
+  convex) splits that demand between the engine and the
   machines, with the engine's state, its running time and the state of charge it has at that moment; the
   ECMS prices a choice over the cycle's sample period, as on the backward method (priced over the 0.25 s
   step, a start's fuel outweighs the running cost fourfold and UDDS came out 5 % higher);
@@ -114,12 +116,16 @@ def p2_kernel(
     speeds,
     sums,
     extra,
+    exhaustive,
 ):
     """The P2 forward: fill ``rows`` (one per step), ``speeds`` (at the grid's points), the sums; returns the
-    final state of charge."""
+    final state of charge. ``exhaustive``: the ECMS tries every torque level even where a walk finds the same
+    one (as the backward method's :func:`vpsim.methods.hev.causal_kernel`)."""
     inv_line = tb.inverse_spacing(line_speed)
     kp, ki, u_lo, u_hi, aw = drv
     v, z, soc, on, on_time, j = v_ref[0], 0.0, soc_start, 0.0, 0.0, 0
+    level = 0
+    walk = hy.running_cost_convex(c, e) and not exhaustive and h.mild == 0.0  # as the backward method's
     speeds[0] = v
     for k in range(grid.size - 1):
         dt = grid[k + 1] - grid[k]
@@ -134,11 +140,19 @@ def p2_kernel(
         w = interval[1]  # the engine's speed were it to run
         t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
         t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
-        on_c, te = hy.p2_choose(
-            interval, battery, soc, on, on_time, period[k], ems, levels, t_low, t_high, t_off, c, e, m, tabs,
-            h, soc_grid, jcost, 0,
-        )  # fmt: skip
-        pt = hy.p2_choice(interval, battery, on_c, te, c, e, m, tabs, h)
+        if ems == hy.EMS_ECMS and walk and hy.pack_covers_no_drive(interval, battery, e, m, tabs):
+            # the exhaustive search's choice by a walk from the last step's level, where the cost is convex
+            # (as the backward method); the choice (engine on, its torque) is the point's
+            pt, level = hy.p2_ecms_walk(
+                interval, battery, soc, on, period[k], levels, t_low, t_high, level, c, e, m, tabs, h
+            )
+            on_c, te = pt[16], pt[3]
+        else:
+            on_c, te = hy.p2_choose(
+                interval, battery, soc, on, on_time, period[k], ems, levels, t_low, t_high, t_off, c, e, m,
+                tabs, h, soc_grid, jcost, 0,
+            )  # fmt: skip
+            pt = hy.p2_choice(interval, battery, on_c, te, c, e, m, tabs, h)
         if pt[13] > hy.MISS_TOLERANCE_N:  # the powertrain falls short: the acceleration it delivers
             extra[F_LIMITED_S] += dt
             extra[F_MAX_SHORT] = max(extra[F_MAX_SHORT], el.shaft_torque(pt[13], ratio, c))
@@ -301,11 +315,14 @@ def _check_ems(ems, params):
     return ems
 
 
-def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", schedule=None):
+def run(
+    cycle, params, *, ems: str | None = None, mode: str = "realistic", schedule=None, exhaustive: bool = False
+):
     """The hybrid of ``params`` (P2 or power split) on ``cycle`` by the forward method with the management
     ``ems`` (rule or ecms; default ``params.hybrid.ems``); a :class:`vpsim.result.Result`. ``schedule``: the
     P2's gear schedule in time (default: the gear rule's on ``cycle``,
-    :func:`vpsim.gears.default_schedule`)."""
+    :func:`vpsim.gears.default_schedule`). ``exhaustive``: the P2's ECMS tries every torque level (the
+    reference its walk is tested against; the same choices)."""
     ems = _check_ems(ems, params)
     ts, vs = np.asarray(cycle.time_s, float), np.asarray(cycle.speed_mps, float)
     grid = step_grid(ts, params.electric.forward_max_step)
@@ -382,6 +399,7 @@ def run(cycle, params, *, ems: str | None = None, mode: str = "realistic", sched
             speeds,
             sums,
             extra,
+            exhaustive,
         )
         result_of = hev._result
     cpu = time.process_time() - t0

@@ -28,6 +28,7 @@ distance / (E_wall / 33.705 kWh) (EPA's gallon equivalent).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,7 +55,8 @@ ELECTRIC_TERMS = (
     "unserved",
 )
 KWH_PER_GALLON_EQUIVALENT = 33.705  # EPA: the energy content of a gallon of gasoline, for MPGe
-BISECTION_STEPS = 48  # halvings of a torque cut to the battery's limit (to 2^-48 of the demand)
+BISECTION_STEPS = 48  # halvings of a torque cut to the battery's limit (to 2^-48 of the demand): the
+# fallback of torque_for_power's closed forms
 
 # the electric record: the battery's scalars, the electric section and the machine's inertia
 E_FIELDS = (
@@ -161,14 +163,20 @@ def envelope(w, m, e, env_speed, env_max, env_min):
     return mc.min_torque(w, m), mc.max_torque(w, m)
 
 
+@equation
+def map_loss_at(t, w, e, map_speed, map_torque, map_loss):
+    """A measured machine's loss at (T, w) as its map interpolates it, held at the map's edges (as
+    MeasuredMachine.loss_w), before the floor at 0 that :func:`machine_power` applies."""
+    ws = min(max(w, map_speed[0]), map_speed[map_speed.size - 1])
+    ts = min(max(t, map_torque[0]), map_torque[map_torque.size - 1])
+    return tb.bilinear_at(map_speed, map_torque, map_loss, ws, ts, e.inv_map_speed, e.inv_map_torque)
+
+
 @inline
 def machine_power(t, w, m, e, map_speed, map_torque, map_loss):
     """The machine's DC power at (T, w) (E3): T w plus its losses (model, or the measured map's)."""
-    if e.measured_machine > 0.0:  # the map's loss, held at its edges (as MeasuredMachine.loss_w)
-        ws = min(max(w, map_speed[0]), map_speed[map_speed.size - 1])
-        ts = min(max(t, map_torque[0]), map_torque[map_torque.size - 1])
-        loss = tb.bilinear_at(map_speed, map_torque, map_loss, ws, ts, e.inv_map_speed, e.inv_map_torque)
-        return t * w + max(loss, 0.0)
+    if e.measured_machine > 0.0:
+        return t * w + max(map_loss_at(t, w, e, map_speed, map_torque, map_loss), 0.0)
     return mc.electric_power(t, w, m)
 
 
@@ -199,8 +207,33 @@ def pack_current(p, u_oc, r_d, r_c):
 
 @equation
 def torque_for_power(p_target, t_from, w, m, e, map_speed, map_torque, map_loss):
-    """The torque between 0 and ``t_from`` whose DC power plus the accessories is ``p_target`` (bisection:
-    the power rises with the torque). ``t_from`` is the torque asked, whose power is beyond the target."""
+    """The torque between 0 and ``t_from`` whose DC power plus the accessories is ``p_target``, where the
+    power rises through it: ``t_from`` is the torque asked, whose power is beyond the target. Where the
+    bracket holds (the power at or below the target at its low end, above it at its high end) the root in
+    closed form: the scalable machine's power is a quadratic in T at fixed w
+    (:func:`vpsim.model.machine.torque_of_power`), the measured map's piecewise linear
+    (:func:`map_torque_of_power`); else, or where rounding puts the root outside the bracket, the bisection
+    (:func:`bisect_torque_for_power`)."""
+    lo, hi = 0.0, t_from
+    if t_from < 0.0:
+        lo, hi = t_from, 0.0
+    p_lo = machine_power(lo, w, m, e, map_speed, map_torque, map_loss) + e.accessory_power
+    p_hi = machine_power(hi, w, m, e, map_speed, map_torque, map_loss) + e.accessory_power
+    if p_lo <= p_target < p_hi:
+        if e.measured_machine > 0.0:
+            t = map_torque_of_power(p_target, lo, hi, p_lo, p_hi, w, m, e, map_speed, map_torque, map_loss)
+        else:
+            t = mc.torque_of_power(p_target - e.accessory_power, w, lo, hi, m)
+        if t == t:  # not NaN
+            return t
+    return bisect_torque_for_power(p_target, t_from, w, m, e, map_speed, map_torque, map_loss)
+
+
+@equation
+def bisect_torque_for_power(p_target, t_from, w, m, e, map_speed, map_torque, map_loss):
+    """:func:`torque_for_power` by bisection (the power rises with the torque): the fallback where no
+    bracket holds (the accessories alone beyond the pack's limit) and the reference its closed forms are
+    tested against. Keeps the side within the limit."""
     lo, hi = 0.0, t_from
     if t_from < 0.0:
         lo, hi = t_from, 0.0
@@ -211,6 +244,47 @@ def torque_for_power(p_target, t_from, w, m, e, map_speed, map_torque, map_loss)
         else:
             lo = mid
     return lo if t_from > 0.0 else hi
+
+
+@equation
+def map_torque_of_power(p_target, lo, hi, p_lo, p_hi, w, m, e, map_speed, map_torque, map_loss):
+    """:func:`torque_for_power` on a measured map, with the bracket [lo, hi] and its powers (p_lo <= p_target
+    < p_hi, the accessories included). At fixed w the map's bilinear loss is linear in T between its torque
+    nodes (and held beyond them), so the power T w + max(loss, 0) is piecewise linear: a bisection over the
+    nodes inside the bracket (keeping the bracket) leaves one cell, where at most the floor at 0 bends it;
+    a linear root there (after the bend's point, where the loss crosses 0) is exact. NaN where the root falls
+    outside the bracket by rounding (the caller bisects)."""
+    acc = e.accessory_power
+    n = map_torque.size
+    i0 = 0  # the first node above lo
+    while i0 < n and map_torque[i0] <= lo:
+        i0 += 1
+    i1 = n - 1  # the last node below hi
+    while i1 >= 0 and map_torque[i1] >= hi:
+        i1 -= 1
+    while i0 <= i1:
+        k = (i0 + i1) // 2
+        tk = map_torque[k]
+        pk = machine_power(tk, w, m, e, map_speed, map_torque, map_loss) + acc
+        if pk > p_target:
+            hi, p_hi, i1 = tk, pk, k - 1
+        else:
+            lo, p_lo, i0 = tk, pk, k + 1
+    # one cell: the raw loss is linear in T here; where it changes sign the floor bends the power once
+    l_lo = map_loss_at(lo, w, e, map_speed, map_torque, map_loss)
+    l_hi = map_loss_at(hi, w, e, map_speed, map_torque, map_loss)
+    if (l_lo < 0.0 < l_hi) or (l_hi < 0.0 < l_lo):
+        tb_ = lo + (hi - lo) * l_lo / (l_lo - l_hi)
+        if lo < tb_ < hi:
+            pb = machine_power(tb_, w, m, e, map_speed, map_torque, map_loss) + acc
+            if pb > p_target:
+                hi, p_hi = tb_, pb
+            else:
+                lo, p_lo = tb_, pb
+    if not p_hi > p_lo:
+        return math.nan
+    r = lo + (hi - lo) * (p_target - p_lo) / (p_hi - p_lo)
+    return min(max(r, lo), hi)
 
 
 @inline

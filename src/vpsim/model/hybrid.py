@@ -252,9 +252,9 @@ def higher_torques_dominated(point, battery):
     :func:`p2_choice` point, the pack in state ``battery``): the machine is held at its charging side's
     limit (its generating envelope, or the torque whose current is the pack's charging limit), so a larger
     engine torque leaves the machine's torque and the battery's current as they are (up to the rounding of
-    the limit's bisection) and only burns more fuel (the fuel rises with the torque), its surplus going to
-    the friction brakes; with no trace miss to close. The ECMS and the DP, trying torques upward, stop
-    there."""
+    the limit's root, :func:`vpsim.model.electric.torque_for_power`) and only burns more fuel (the fuel
+    rises with the torque), its surplus going to the friction brakes; with no trace miss to close. The ECMS
+    and the DP, trying torques upward, stop there."""
     t_m, i, at_m, at_b, missing = point[7], point[8], point[14], point[15], point[13]
     if missing > MISS_TOLERANCE_N or point[16] <= 0.0:
         return False

@@ -64,10 +64,12 @@ __all__ = [
     "efficiency_errors_pts",
     "efficiency_table",
     "electric_power",
+    "loss_polynomial",
     "loss_w",
     "machine_record",
     "max_torque",
     "min_torque",
+    "torque_of_power",
 ]
 
 KINDS = ("pm", "induction")
@@ -269,6 +271,47 @@ def loss_w(t, w, m):
 def electric_power(t, w, m):
     """DC electrical power (W) of machine and inverter: t w + loss_w(t, w, m); negative when generating."""
     return t * w + loss_w(t, w, m)
+
+
+@equation
+def loss_polynomial(w, sign, m):
+    """(a, b, c) with loss_w(T, w, m) = a T^2 + b T + c for the torques T of sign ``sign`` (+1: T >= 0, -1:
+    T <= 0) at speed w: :func:`loss_w`'s terms grouped by powers of T (at fixed w the loss is a quadratic in
+    |T|: copper and field weakening in T^2, switching in |T|, standby, iron and windage constant)."""
+    over = _max2(abs(w) / m.base_speed, 1.0)
+    nu = abs(w) / m.max_speed
+    tr = m.rated_torque
+    a = m.rated_power * m.copper_scale * (m.k_cu + m.k_fw * (over * over - 1.0)) / (tr * tr)
+    b = sign * m.rated_power * m.k_sw / tr
+    c = m.rated_power * (m.k0 + nu * (m.k_fe_h + nu * (m.k_fe_e + nu * m.k_mech)))
+    return a, b, c
+
+
+@equation
+def torque_of_power(p, w, lo, hi, m):
+    """The torque T in [lo, hi] (a bracket on one side of 0) whose :func:`electric_power` at w is ``p``, where
+    the power rises through ``p`` (electric_power(lo) <= p < electric_power(hi), the caller's bracket): the
+    larger root of a T^2 + (w + b) T + (c - p) = 0 (:func:`loss_polynomial`; a >= 0, and with the power
+    below p at lo and above it at hi the larger root is the bracket's one crossing). Closed form, without
+    cancellation; NaN where rounding puts it outside the bracket (the caller then bisects)."""
+    sign = 1.0 if lo + hi > 0.0 else -1.0
+    a, b, c = loss_polynomial(w, sign, m)
+    bb = w + b
+    cc = c - p
+    if a > 0.0:
+        disc = bb * bb - 4.0 * a * cc
+        if disc < 0.0:
+            return math.nan
+        sq = math.sqrt(disc)
+        r = (sq - bb) / (2.0 * a) if bb <= 0.0 else -2.0 * cc / (bb + sq)
+    elif bb > 0.0:
+        r = -cc / bb
+    else:
+        return math.nan
+    slack = 1e-12 * (hi - lo)
+    if r < lo - slack or r > hi + slack:
+        return math.nan
+    return min(max(r, lo), hi)
 
 
 # --- maps --------------------------------------------------------------------------------------------------
