@@ -124,3 +124,30 @@ def test_ecms_walk_finds_the_exhaustive_searchs_choices(cycle):
         assert walk.fuel_kg == every.fuel_kg
         for k in ("engine_on", "engine_torque_nm", "machine_torque_nm", "soc"):
             assert np.array_equal(walk.series[k], every.series[k]), k
+
+
+def test_ecms_walk_keeps_the_minimum_on_time_as_the_exhaustive_search():
+    """With a minimum on time (the engine kept on, a start and a stop while moving priced over it), the walk
+    and the exhaustive search still make the same choices at every step, and every run of the engine lasts at
+    least that long."""
+    from vpsim.cycles import load_cycle
+    from vpsim.methods import hev
+
+    p = HEV.with_changes(hybrid={"ecms_min_on_time": 5.0})
+    cyc = load_cycle("udds")
+    walk, every = hev.run(cyc, p, ems="ecms"), hev.run(cyc, p, ems="ecms", exhaustive=True)
+    assert walk.fuel_kg == every.fuel_kg
+    for k in ("engine_on", "engine_torque_nm", "machine_torque_nm", "soc"):
+        assert np.array_equal(walk.series[k], every.series[k]), k
+    t, on = walk.series["time_s"], walk.series["engine_on"].astype(int)
+    edges = np.diff(np.r_[0, on, 0])
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    inside = stops < t.size
+    assert inside.sum() >= 10
+    # the P2's engine also stops where the car slows below its idle speed (the clutch must open)
+    runs_ok = t[stops[inside]] - t[starts[inside]] >= 5.0 - 1e-9
+    from vpsim.model.record import IDLE_SPEED
+
+    w = walk.series["engine_speed_radps"]
+    forced = w[stops[inside]] < IDLE_SPEED
+    assert (runs_ok | forced).all()

@@ -47,7 +47,8 @@ def test_energy_balance_closes_and_the_kinetic_term_is_the_speed_left_at_the_end
 
 # the forward car's charge-sustaining fuel against the backward method's; the one exception: the power split
 # on US06, where the backward method misses 10-15 s of the trace at full power (120-150 kJ of wheel work it
-# does not deliver) and the forward car, behind the trace there, delivers it catching up (measured +3.5-3.6 %)
+# does not deliver) and the forward car, behind the trace there, delivers it catching up (measured +3.5 %
+# rule, +3.6 % ECMS)
 TOLERANCE = {("hev_split", "us06"): 0.04}
 
 

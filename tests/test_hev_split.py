@@ -143,16 +143,53 @@ def test_energy_balance_closes_with_the_engine_both_machines_and_the_battery(run
 
 def test_dynamic_programming_bounds_ecms_and_the_rules(runs):
     """Charge-sustaining fuel: DP (the optimum on its grid) <= ECMS and DP <= rules on every cycle where the
-    rules follow the trace as well as the DP. ECMS <= rules holds on UDDS (-6.6 %); on HWFET and US06 the ECMS
-    (its equivalence factor the P2's) still pulses the engine and cycles the battery more than the
-    demand-following rules, 2.7 % and 3.4 % above them (the gap is reported, not hidden; docs/model.md)."""
+    rules follow the trace as well as the DP. ECMS <= rules holds on UDDS (-7.0 %); on HWFET and US06 the ECMS
+    (its equivalence factor the P2's, its engine kept on 5 s once started) ends 1.1 % and 2.2 % above the
+    demand-following rules (2.7 % and 3.3 % without the minimum on time; the gap is reported, not hidden:
+    docs/model.md), bounded here at 1.5 % and 2.5 %."""
     for cycle in ("udds", "hwfet", "us06"):
         cs = {m: runs[cycle, m].electric["fuel_l_per_100km_cs"] for m in EMS}
         assert cs["dp"] <= cs["ecms"], (cycle, cs)
         if runs[cycle, "rule"].trace_miss.seconds <= runs[cycle, "dp"].trace_miss.seconds:
             assert cs["dp"] <= cs["rule"], (cycle, cs)
-    udds = {m: runs["udds", m].electric["fuel_l_per_100km_cs"] for m in EMS}
-    assert udds["ecms"] <= udds["rule"], udds
+    bound = {"udds": 1.0, "hwfet": 1.015, "us06": 1.025}
+    for cycle, factor in bound.items():
+        cs = {m: runs[cycle, m].electric["fuel_l_per_100km_cs"] for m in EMS}
+        assert cs["ecms"] <= factor * cs["rule"], (cycle, cs)
+
+
+def test_the_ecms_keeps_a_started_engine_on_for_its_minimum_on_time(runs):
+    """With ``ecms_min_on_time`` (the preset's 5 s) every run of the engine the ECMS starts lasts at least
+    that long (the last may be cut by the cycle's end); without it, on US06 it made 56 starts, 37 of its stops
+    3 s or less."""
+    assert SPLIT.hybrid.ecms_min_on_time == 5.0
+    for cycle in ("udds", "hwfet", "us06"):
+        s = runs[cycle, "ecms"].series
+        t, on = s["time_s"], s["engine_on"].astype(int)
+        edges = np.diff(np.r_[0, on, 0])
+        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        inside = stops < t.size
+        assert inside.sum() >= 10, cycle
+        assert (t[stops[inside]] - t[starts[inside]] >= 5.0 - 1e-9).all(), cycle
+    assert runs["us06", "ecms"].electric["engine_starts"] <= 40
+
+
+def test_the_start_and_the_stop_priced_over_the_minimum_on_time():
+    """The ECMS's start share and stop price by hand: with T = 5 s over a 1 s step, a fifth of the start's
+    0.3 g each (the restart a stop while moving commits to); none at rest or with the engine off; without T,
+    the whole start at the start and nothing at a stop."""
+    from vpsim.model import hybrid as hy
+
+    h = hy.hybrid_record(SPLIT)
+    fuel = SPLIT.hybrid.engine_start_fuel
+    assert hy.start_share(1.0, h) == pytest.approx(0.2)
+    assert hy.start_share(10.0, h) == 1.0
+    assert hy.stop_price(1.0, True, 1.0, h) == pytest.approx(0.2 * fuel)
+    assert hy.stop_price(1.0, False, 1.0, h) == 0.0 and hy.stop_price(0.0, True, 1.0, h) == 0.0
+    assert hy.must_keep_running(1.0, 4.0, h) and not hy.must_keep_running(1.0, 5.0, h)
+    h0 = hy.hybrid_record(SPLIT.with_changes(hybrid={"ecms_min_on_time": 0.0}))
+    assert hy.start_share(1.0, h0) == 1.0 and hy.stop_price(1.0, True, 1.0, h0) == 0.0
+    assert not hy.must_keep_running(1.0, 0.0, h0)
 
 
 def test_ecms_prices_the_charge_the_pack_keeps():
@@ -173,7 +210,7 @@ def test_ecms_prices_the_charge_the_pack_keeps():
     for current, kept in ((-40.0, 0.95), (40.0, 1.0)):
         point = [0.0] * 25
         point[0], point[8], point[9] = 100.0, current, 200.0  # machine speed, battery current, U_oc
-        cost = hy.ecms_cost(tuple(point), 1.0, False, 2.5, c, e, h)
+        cost = hy.ecms_cost(tuple(point), 1.0, 0.0, 2.5, c, e, h)
         assert cost == pytest.approx(2.5 * kept * 200.0 * current / q, rel=1e-12)
         # the same energy as the state of charge's change times the charge it holds at U_oc
         dsoc = bt.soc_rate(current, e.capacity_as, e.coulombic_efficiency) * 1.0
@@ -229,9 +266,9 @@ def test_trace_misses_are_counted(runs):
 @pytest.mark.parametrize("cycle", ["udds", "hwfet", "us06"])
 def test_inverse_method_near_backward(runs, cycle):
     """The smoothing driver's trajectory with the same management and point: the rules within 3 % of the
-    backward method (they achieve 2.1 %), the ECMS within 3.5 % (it achieves 1.9 % UDDS, 0.7 % HWFET, 3.05 %
-    US06: its on/off decisions move with the smoothed trajectory)."""
-    for ems, tol in (("rule", 0.03), ("ecms", 0.035)):
+    backward method (they achieve 2.1 %), the ECMS too (it achieves -1.0 % UDDS, -0.1 % HWFET, -2.7 % US06:
+    its on/off decisions move with the smoothed trajectory)."""
+    for ems, tol in (("rule", 0.03), ("ecms", 0.03)):
         inv = vpsim.simulate(cycle, "inverse", SPLIT, ems=ems)
         back = runs[cycle, ems].electric["fuel_l_per_100km_cs"]
         assert inv.electric["fuel_l_per_100km_cs"] == pytest.approx(back, rel=tol)

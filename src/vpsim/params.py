@@ -261,6 +261,8 @@ class Hybrid:
     # ECMS: equivalence factor s = s0 + ecms_gain (soc_target - soc): fuel + s P_chem / q_hv is minimised
     ecms_factor: float = 2.5
     ecms_gain: float = 20.0
+    # an engine the ECMS starts runs at least this long (s); the start's fuel is spread over it in the choice
+    ecms_min_on_time: float = 0.0
     engine_start_fuel: float = 0.3e-3  # kg of fuel one engine start costs (cranking, enrichment)
     torque_levels: int = 24  # engine torques the ECMS and DP choose from at each step (between its lines)
     dp_soc_points: int = 121  # the DP's state-of-charge grid
@@ -466,6 +468,7 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "hybrid.min_on_time": (0.0, 600.0, True),
     "hybrid.ecms_factor": (0.0, 20.0, True),
     "hybrid.ecms_gain": (0.0, 1000.0, True),
+    "hybrid.ecms_min_on_time": (0.0, 600.0, True),
     "hybrid.engine_start_fuel": (0.0, 0.1, True),
     "hybrid.dp_soc_span": (0.01, 1.0, True),
     "split.mg2_ratio": (0.1, 20.0, True),

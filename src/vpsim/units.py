@@ -207,6 +207,7 @@ FIELD_DIMENSIONS: dict[str, str] = {
     "hybrid.soc_hysteresis": "fraction",
     "hybrid.charge_power": "power",
     "hybrid.min_on_time": "time",
+    "hybrid.ecms_min_on_time": "time",
     "hybrid.dp_soc_span": "fraction",
     "hybrid.dp_soc_points": "count",
     "hybrid.torque_levels": "count",

@@ -500,7 +500,7 @@ TOML_FIELDS = (
     ("battery", ("cell", "cells_in_series", "cells_in_parallel", "soc_initial", "soc_min", "soc_max")),
     ("electric", ("accessory_power",)),
     ("simulation", ("fuel_density",)),
-    ("hybrid", ("ems", "soc_target")),
+    ("hybrid", ("ems", "soc_target", "ecms_min_on_time")),
     (
         "split",
         ("sun_teeth", "ring_teeth", "mg2_ratio", "engine_max_speed", "generator_rated_power")

@@ -160,7 +160,7 @@ def causal_kernel(
         if ems == hy.EMS_ECMS and walk and hy.pack_covers_no_drive(interval, battery, e, m, tabs):
             # the exhaustive search's choice by a walk from the last step's level, where the cost is convex
             pt, level = hy.p2_ecms_walk(
-                interval, battery, soc, on, dt, levels, t_low, t_high, level, c, e, m, tabs, h
+                interval, battery, soc, on, on_time, dt, levels, t_low, t_high, level, c, e, m, tabs, h
             )
         else:
             choice_on, choice_te = hy.p2_choose(

@@ -29,7 +29,8 @@ Energy management (``hybrid.ems``):
 * ``ecms``: at each step the choice (engine off, or one of ``torque_levels`` torques between its lines)
   that minimises mdot_f + s P_chem / q_hv, the battery's chemical power made fuel by the equivalence factor
   s = ``ecms_factor`` + ``ecms_gain`` (soc_target - soc) (causal: what a car's controller can run); a
-  start adds its fuel.
+  start adds its fuel. With ``ecms_min_on_time`` T > 0 an engine it starts stays on for T, the start adds
+  dt / T of its fuel and a stop while moving the same (the restart it commits to).
 * ``dp``: dynamic programming on the backward model over a state-of-charge grid (and the engine's on/off
   state, for the starts' fuel): the least fuel that ends the cycle at or above its starting charge, the lower
   bound the causal controllers are judged against.
@@ -275,6 +276,32 @@ def equivalence_factor(soc, h):
 
 
 @equation
+def start_share(dt, h):
+    """The share of a start's fuel the ECMS charges to the step that starts the engine: all of it, or, with a
+    minimum on time T (the engine kept running for T once started), dt / T of it (the start amortised over
+    the run it commits to)."""
+    if h.ecms_min_on_time > 0.0:
+        return min(dt / h.ecms_min_on_time, 1.0)
+    return 1.0
+
+
+@equation
+def stop_price(on, moving, dt, h):
+    """The ECMS's price of stopping a running engine while the car moves, with a minimum on time T: the
+    restart the stop commits to, its fuel amortised over T as a start's is (:func:`start_share`); 0 without
+    T, at rest, or with the engine already off."""
+    if on > 0.0 and moving and h.ecms_min_on_time > 0.0:
+        return h.engine_start_fuel * min(dt / h.ecms_min_on_time, 1.0)
+    return 0.0
+
+
+@equation
+def must_keep_running(on, on_time, h):
+    """The ECMS keeps an engine it started running until it has run ``ecms_min_on_time``."""
+    return on > 0.0 and on_time < h.ecms_min_on_time
+
+
+@equation
 def fuel_equivalent(energy_j, efficiency, c):
     """The fuel (kg) whose heating value at ``efficiency`` is ``energy_j``."""
     return energy_j / (efficiency * c.fuel_heating_value)
@@ -283,8 +310,8 @@ def fuel_equivalent(energy_j, efficiency, c):
 @equation
 def ecms_cost(point, dt, start, s_factor, c, e, h):
     """The cost of one choice over dt (kg of fuel): its fuel, the battery's chemical energy at the
-    equivalence factor s (0 for the DP, whose cost-to-go prices the charge), a start's fuel, and a trace
-    miss at a prohibitive price.
+    equivalence factor s (0 for the DP, whose cost-to-go prices the charge), ``start`` times a start's fuel
+    (1 or 0 for the DP; the ECMS's share, :func:`start_share`), and a trace miss at a prohibitive price.
 
     The chemical energy is the stored energy's change, charge counted at the pack's coulombic efficiency
     (B3), as the state of charge (and the DP's cost-to-go) counts it: priced at U_oc I instead, a charging
@@ -294,9 +321,7 @@ def ecms_cost(point, dt, start, s_factor, c, e, h):
     mdot = point[6]
     missing = point[13]
     chem = bt.chemical_power(point[9], point[8], e.coulombic_efficiency)
-    cost = mdot * dt + s_factor * fuel_equivalent(chem * dt, 1.0, c)
-    if start:
-        cost += h.engine_start_fuel
+    cost = mdot * dt + s_factor * fuel_equivalent(chem * dt, 1.0, c) + start * h.engine_start_fuel
     if missing > MISS_TOLERANCE_N:  # the machine's speed stands in for the vehicle's (same sign, > 0 moving)
         cost += MISS_PENALTY * fuel_equivalent(missing * (point[0] + 1.0) * dt, 1.0, c)
     return cost
@@ -470,6 +495,7 @@ H_FIELDS = (
     "ecms_factor",
     "ecms_gain",
     "engine_start_fuel",
+    "ecms_min_on_time",
 )
 # the layout's numbers the same record carries: the mild hybrid's (1) or not (0), the belt between its machine
 # and the crank (params.mild; ratio and efficiency 1 for the P2's machine on the gearbox's shaft)
@@ -661,6 +687,8 @@ def p2_choose(
             choice_te = rule_engine_torque(t_in, w, soc, t_low, t_high, h)
         return choice_on, choice_te
     s_factor = equivalence_factor(soc, h)
+    keep = ems == EMS_ECMS and runs and must_keep_running(on, on_time, h)
+    share = start_share(dt, h) if ems == EMS_ECMS else 1.0
     best = math.inf
     for u in range(levels + 1):
         if u > 0 and not runs:
@@ -668,7 +696,10 @@ def p2_choose(
         o = 1.0 if u > 0 else 0.0
         te = engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else t_off
         pt = p2_choice(interval, battery, o, te, c, e, m, tabs, h)
-        start = pt[16] > 0.0 and on == 0.0
+        if keep and pt[16] <= 0.0:
+            continue
+        start = share if (pt[16] > 0.0 and on == 0.0) else 0.0
+        extra = stop_price(on, interval[0] > 0.0, dt, h) if (ems == EMS_ECMS and pt[16] <= 0.0) else 0.0
         if ems == EMS_DP:
             nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
             cost = ecms_cost(pt, dt, start, 0.0, c, e, h) + cost_to_go(
@@ -680,7 +711,7 @@ def p2_choose(
                 soc_grid.size,
             )
         else:
-            cost = ecms_cost(pt, dt, start, s_factor, c, e, h)
+            cost = ecms_cost(pt, dt, start, s_factor, c, e, h) + extra
         if cost < best:
             best = cost
             choice_on = o
@@ -691,17 +722,20 @@ def p2_choose(
 
 
 @equation
-def p2_ecms_walk(interval, battery, soc, on, dt, levels, t_low, t_high, level, c, e, m, tabs, h):
+def p2_ecms_walk(interval, battery, soc, on, on_time, dt, levels, t_low, t_high, level, c, e, m, tabs, h):
     """The P2 ECMS's choice as :func:`p2_choose` makes it, found by a walk (:func:`ecms_cheapest_level`) from
     the last step's torque ``level`` instead of trying every level: for a cost convex in the engine's torque
     (:func:`running_cost_convex`, a pack not at its empty end: :func:`pack_covers_no_drive`). Returns the
     chosen point and the level to start the next step's walk from."""
     s_factor = equivalence_factor(soc, h)
     pt = p2_choice(interval, battery, 0.0, 0.0, c, e, m, tabs, h)
-    best = ecms_cost(pt, dt, False, s_factor, c, e, h)
+    best = ecms_cost(pt, dt, 0.0, s_factor, c, e, h) + stop_price(on, interval[0] > 0.0, dt, h)
     if interval[5]:
+        if must_keep_running(on, on_time, h):
+            best = math.inf
+        start = start_share(dt, h) if on == 0.0 else 0.0
         cost, level, p_run = ecms_cheapest_level(
-            interval, battery, on == 0.0, s_factor, dt, levels, t_low, t_high, level, c, e, m, tabs, h
+            interval, battery, start, s_factor, dt, levels, t_low, t_high, level, c, e, m, tabs, h
         )
         if cost < best:
             pt = p_run

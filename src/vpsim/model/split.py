@@ -421,6 +421,8 @@ def split_choose(
             found = split_choice(interval, battery, 0.0, 0.0, c, e, m, g, s, tabs, eng, opt)[24] > 0.0
     else:
         s_factor = hy.equivalence_factor(soc, h)
+        keep = ems == hy.EMS_ECMS and runs and hy.must_keep_running(on, on_time, h)
+        share = hy.start_share(dt, h) if ems == hy.EMS_ECMS else 1.0
         cheapest = math.inf
         for u in range(levels + 2):
             if u > 0 and not runs:
@@ -432,7 +434,9 @@ def split_choose(
                 if u > 1:  # levels rise: MG1 holds, and the pack takes, no more of a larger power either
                     break
                 continue
-            start = u > 0 and on == 0.0
+            if keep and u == 0:
+                continue
+            start = share if (u > 0 and on == 0.0) else 0.0
             if ems == hy.EMS_DP:
                 nxt = soc + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
                 cost = hy.ecms_cost(pt, dt, start, 0.0, c, e, h) + hy.cost_to_go(
@@ -440,6 +444,8 @@ def split_choose(
                 )
             else:
                 cost = hy.ecms_cost(pt, dt, start, s_factor, c, e, h)
+                if u == 0:
+                    cost += hy.stop_price(on, interval[0] > 0.0, dt, h)
             if cost < cheapest:
                 cheapest = cost
                 choice_on = o
