@@ -34,7 +34,13 @@ BEV_KEYS = (
     "on_search_bound",
     "peer_fastsim_calibrated_out_of_fold",
 )
-HEV_KEYS = ("parameters", "out_of_fold", "all_vehicles", "search_bounds", "peer_fastsim_calibrated_out_of_fold")
+HEV_KEYS = (
+    "parameters",
+    "out_of_fold",
+    "all_vehicles",
+    "search_bounds",
+    "peer_fastsim_calibrated_out_of_fold",
+)
 FIT_INFO = ("train_loss", "n_train", "basis")  # how a class's fit was made: written beside its values
 # a technology.json written before the accessories were fitted has no engine.accessory_power: the default
 OPTIONAL = ("engine.accessory_power",)

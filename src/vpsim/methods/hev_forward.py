@@ -144,7 +144,7 @@ def p2_kernel(
             # the exhaustive search's choice by a walk from the last step's level, where the cost is convex
             # (as the backward method); the choice (engine on, its torque) is the point's
             pt, level = hy.p2_ecms_walk(
-                interval, battery, soc, on, period[k], levels, t_low, t_high, level, c, e, m, tabs, h
+                interval, battery, soc, on, on_time, period[k], levels, t_low, t_high, level, c, e, m, tabs, h
             )
             on_c, te = pt[16], pt[3]
         else:
