@@ -152,7 +152,7 @@ def _check_outputs(out, cycles):
         ("fastsim_calibrated_by_powertrain", "fastsim_calibrated"),
         ("fastsim_by_powertrain", "fastsim"),
     ):
-        assert set(s["peer"][key]) == {"conventional", "bev", "hev"}  # vpsim.fleet.ev, vpsim.fleet.hev
+        assert set(s["peer"][key]) == {"conventional", "bev", "hev", "mhev"}  # fleet.ev, .hev, .mhev
         assert s["peer"][key]["conventional"] == s["peer"][conventional]
     assert s["by_powertrain"]["conventional"]["cycles"] == s["cycles"]
     for peer in (fs, s["peer"]["fastsim_calibrated"]):
@@ -276,6 +276,15 @@ def test_fleet_on_the_real_list(shared_dir, tmp_path, capsys):
     assert hv["n_vehicles"] == 25 and hv["status"] == "ok"  # --limit: the first 25 hybrids
     for c in ("udds_hot", "hwy", "us06"):
         assert tuple(hv["cycles"][c]) == STAT_KEYS and hv["cycles"][c]["n"] > 5
+    # the mild hybrids are read (vpsim.fleet.mhev): only those it cannot model stay out, with their reason
+    assert "mild hybrid" not in s["excluded"] and s["excluded"]["mild hybrid, no known system"] == 2
+    mh = s["by_powertrain"]["mhev"]
+    assert mh["n_vehicles"] == 25 and mh["status"] == "ok"  # --limit: the first 25 mild hybrids
+    for c in ("ftp_bag2", "ftp_bag3", "hwy"):
+        assert tuple(mh["cycles"][c]) == STAT_KEYS and mh["cycles"][c]["n"] > 20
+    peer = s["peer"]["fastsim_by_powertrain"]["mhev"]
+    assert peer.get("measured") is False or peer["hwy"]["n"] > 20
+    assert s["peer"]["fastsim_calibrated_by_powertrain"]["mhev"]["measured"] is False
 
 
 def test_a_manual_gets_the_drivers_shift_point(tmp_path):

@@ -50,6 +50,9 @@ def from_epa(file, vehicle_id, config, out, technology):
     if getattr(rec, "powertrain", "conventional") == "hev":
         _from_epa_hev(rec, file, out, technology)
         return
+    if getattr(rec, "powertrain", "conventional") == "mhev":
+        _from_epa_mhev(rec, file, out, technology)
+        return
     tech, note = None, ""
     if technology:
         tech, note = read_technology(technology, "conventional", vehicle_class(rec))
@@ -123,5 +126,27 @@ def _from_epa_hev(rec, file, out, technology) -> None:
             f"{rec.displacement_l:g} L engine {rec.rated_power_kw:.0f} kW, machine "
             f"{params.machine.rated_power / 1e3:.0f} kW; measured {meas or 'nothing usable'} "
             "(udds: the hot UDDS, FTP bags 3 + 4)"
+        )
+    )
+
+
+def _from_epa_mhev(rec, file, out, technology) -> None:
+    """A mild hybrid's vehicle file (:mod:`vpsim.fleet.mhev`); ``technology``: a fleet run's
+    technology.json, its mild-hybrid fit on all vehicles of the layout's class."""
+    from ..fleet import mhev
+    from ..fleet.technology import read_technology
+    from ..textio import printable
+
+    tech, note = None, ""
+    if technology:
+        tech, note = read_technology(technology, "mhev", mhev.mhev_class(rec))
+    params = mhev.mhev_parameters(rec, technology=tech)
+    Path(out).write_text(mhev.mhev_vehicle_toml(rec, params, source=Path(file).name, technology_note=note))
+    meas = ", ".join(f"{c} {v:.1f} mpg" for c, v in rec.measured_mpg.items())
+    click.echo(
+        printable(
+            f"wrote {out}: {rec.make} {rec.model} ({rec.key}), mild hybrid {rec.layout}, "
+            f"{rec.mass_kg:.0f} kg, {rec.displacement_l:g} L engine {rec.rated_power_kw:.0f} kW, machine "
+            f"{params.machine.rated_power / 1e3:.0f} kW; measured {meas or 'nothing usable'}"
         )
     )

@@ -23,8 +23,10 @@ reason                          rule
 ``fuel cell``                   a test on hydrogen
 ``diesel``                      a test on diesel fuel
 ``flex-fuel (E85 test)``        a test on E85
-``mild hybrid``                 ``MHEV`` in the model name, or an FTP test with a fourth bag (the 4-bag FTP of
-                                electrified vehicles: 48 V start-stop, recuperation and assist)
+``mild hybrid, <why>``          a mild hybrid that :mod:`vpsim.fleet.mhev` cannot read (``mhev_vehicles``):
+                                no known system for its maker, a missing field, no usable test. A mild hybrid:
+                                ``MHEV`` in the model name, or an FTP test with a fourth bag (the 4-bag FTP
+                                of electrified vehicles: 48 V start-stop, recuperation and assist)
 ``plug-in hybrid``              another test vehicle of the same make and model is a plug-in (its
                                 charge-depleting tests are often on another test vehicle than its gasoline
                                 tests)
@@ -171,8 +173,8 @@ TRANSMISSION_KIND = {
 
 # 48 V mild hybrids (engine stop, recuperation, electric assist): named MHEV, or certified with the 4-bag FTP
 # electrified vehicles are tested with (FE Bag 4 recorded). On the 2022 list these are mostly BMW, Audi,
-# Mercedes, Jaguar Land Rover and Ram eTorque models; kept in, they ran 10 % (town) and 7.5 % (highway)
-# short of their measured mpg with today's model.
+# Mercedes, Jaguar Land Rover and Ram eTorque models; run as conventional cars they ran 10 % (town) and
+# 7.5 % (highway) short of their measured mpg: vpsim.fleet.mhev reads them as mild hybrids.
 MILD_HYBRID_NAME = re.compile(r"\bmhev\b|mild hybrid", re.IGNORECASE)
 # hybrids: a model name with the word hybrid, HEV (FHEV, PHEV) or a Lexus-style "300h"
 HYBRID_NAME = re.compile(r"hybrid|\b[fp]?hev\b|\b\d{3}h\b", re.IGNORECASE)
@@ -318,13 +320,14 @@ class TestCarList:
     n_rows: int
     ev_vehicles: list = field(default_factory=list)  # battery-electric records (vpsim.fleet.ev.EVRecord)
     hev_vehicles: list = field(default_factory=list)  # full hybrids (vpsim.fleet.hev.HEVRecord)
+    mhev_vehicles: list = field(default_factory=list)  # mild hybrids (vpsim.fleet.mhev.MHEVRecord)
 
     def find(self, vehicle_id: str, configuration: int | None = None):
         """The conventional record (:class:`VehicleRecord`) or battery-electric one
         (:class:`vpsim.fleet.ev.EVRecord`) of a test vehicle; one-line error if none or several."""
         hits = [
             v
-            for v in [*self.vehicles, *self.ev_vehicles, *self.hev_vehicles]
+            for v in [*self.vehicles, *self.ev_vehicles, *self.hev_vehicles, *self.mhev_vehicles]
             if v.vehicle_id == vehicle_id and (configuration is None or v.configuration == configuration)
         ]
         if len(hits) == 1:
@@ -457,6 +460,7 @@ def read_test_car_list(path: str | Path) -> TestCarList:
     vehicles: list[VehicleRecord] = []
     ev_vehicles: list = []
     hev_vehicles: list = []
+    mhev_vehicles: list = []
     for (vid, cfg), tests in groups.items():
         kind = kinds[(vid, cfg)]
         if (kind is None or kind.startswith("mild hybrid")) and _model_key(tests[0]) in model_kind:
@@ -475,6 +479,15 @@ def read_test_car_list(path: str | Path) -> TestCarList:
                 excluded_rows += test_rows
                 continue
             reason = f"{reason} (screened: {kind})"
+        elif kind is not None and kind.startswith("mild hybrid"):  # a mild hybrid: vpsim.fleet.mhev
+            from .mhev import mhev_vehicle
+
+            rec, reason, test_rows = mhev_vehicle(vid, cfg, tests)
+            if rec is not None:
+                mhev_vehicles.append(rec)
+                excluded_rows += test_rows
+                continue
+            reason = f"{reason}{'' if ':' in reason else ':'} (screened: {kind})"
         elif kind is not None:
             rec, reason, test_rows = None, kind, []
         else:
@@ -487,7 +500,9 @@ def read_test_car_list(path: str | Path) -> TestCarList:
             ev_vehicles.append(rec)
         else:
             vehicles.append(rec)
-    return TestCarList(str(path), vehicles, excluded, excluded_rows, len(rows), ev_vehicles, hev_vehicles)
+    return TestCarList(
+        str(path), vehicles, excluded, excluded_rows, len(rows), ev_vehicles, hev_vehicles, mhev_vehicles
+    )
 
 
 _LINE = "\x00line"  # the line number column of a list read row by row (no header can be named so)

@@ -39,9 +39,12 @@ CSV_COLUMNS = (
 )
 # exactly these; ``n_vehicles`` and ``cycles`` are the conventional fleet's, ``by_powertrain`` has both
 SUMMARY_KEYS = ("n_vehicles", "excluded", "held_out", "cycles", "peer", "validation", "by_powertrain")
-POWERTRAINS = ("conventional", "bev", "hev")
+POWERTRAINS = ("conventional", "bev", "hev", "mhev")
 EV_CYCLES = ("udds", "hwy")
 HEV_CYCLES = ("udds_hot", "hwy", "us06")  # vpsim.fleet.hev.HEV_CYCLES (udds_hot: the 4-bag FTP's bags 3 + 4)
+MHEV_CYCLES = ("ftp_bag2", "ftp_bag3", "hwy", "us06")  # vpsim.fleet.mhev.MHEV_CYCLES
+# the peer of the mild hybrids: FASTSim 3.1 has no mild-hybrid resource; its conventional car of the record
+MHEV_PEER_NOTE = "FASTSim's conventional car of the same record (FASTSim 3.1 has no mild-hybrid resource)"
 STAT_KEYS = ("n", "median_error_pct", "median_abs_error_pct", "p90_abs_error_pct")
 FIGURES = ("predicted_vs_measured.png", "error_histograms.png", "error_by_group.png", "worst_vehicles.png")
 N_WORST = 20
@@ -131,7 +134,39 @@ def summary(run) -> dict:
         else:
             why = run.peer.get("reason", "not run") if not run.peer.get("available") else run.ev.get("status")
             out["peer"][key]["bev"] = {"measured": False, "reason": why or "no electric vehicle predicted"}
+    _powertrain_block(
+        out, run, "mhev", run.mhev_frame(), run.mhev, MHEV_CYCLES, "mild hybrid", MHEV_PEER_NOTE
+    )
     return out
+
+
+def _powertrain_block(out, run, name, frame, state, cycles, what, peer_note) -> None:
+    """``by_powertrain.<name>`` (its records' out-of-fold errors per test and per class) and
+    ``peer.fastsim_by_powertrain.<name>`` (FASTSim with its defaults on the same rows, ``peer_note`` says
+    which FASTSim vehicle); a calibrated FASTSim is not built for it: ``fastsim_calibrated_by_powertrain``
+    says so."""
+    ok = frame[np.isfinite(frame["error_pct"].to_numpy(float))]
+
+    def stats(rows, col="error_pct"):
+        return {c: error_stats(rows[rows["cycle"] == c][col]) for c in cycles}
+
+    out["by_powertrain"][name] = {
+        "n_vehicles": int(ok.drop_duplicates(["vehicle_id", "configuration"]).shape[0]),
+        "status": state.get("status", "not run"),
+        "cycles": stats(ok),
+        "classes": {c: stats(ok[ok["layout"] == c]) for c in sorted(set(ok["layout"]))},
+    }
+    peer = out["peer"]
+    if state.get("peer_run"):
+        both = ok[np.isfinite(ok["fastsim_error_pct"].to_numpy(float))]
+        peer["fastsim_by_powertrain"][name] = {**stats(both, "fastsim_error_pct"), "vehicle": peer_note}
+    else:
+        why = state.get("status") if run.peer.get("available") else run.peer.get("reason", "not run")
+        peer["fastsim_by_powertrain"][name] = {"measured": False, "reason": why or f"no {what} predicted"}
+    peer["fastsim_calibrated_by_powertrain"][name] = {
+        "measured": False,
+        "reason": f"a calibrated FASTSim is not built for the {what}s",
+    }
 
 
 def validation(run) -> dict:
@@ -156,6 +191,12 @@ def _hev():
     from . import hev
 
     return hev
+
+
+def _mhev():
+    from . import mhev
+
+    return mhev
 
 
 def ev_technology_bounds(run) -> dict:
@@ -830,6 +871,7 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
     df[cols].to_csv(out / "vehicles.csv", index=False)
     run.ev_frame().to_csv(out / "vehicles_ev.csv", index=False)
     run.hev_frame().to_csv(out / "vehicles_hev.csv", index=False)
+    run.mhev_frame().to_csv(out / "vehicles_mhev.csv", index=False)
     import pandas as pd
 
     pd.DataFrame(
@@ -858,6 +900,12 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
                     "all_vehicles": run.hev.get("technology_all", {}),
                     "search_bounds": {k: list(v) for k, v in _hev().search_bounds().items()},
                     "peer_fastsim_calibrated_out_of_fold": run.hev.get("peer_technology", {}),
+                },
+                "mhev": {
+                    "parameters": list(_mhev().TECH_PARAMS),
+                    "out_of_fold": run.mhev.get("technology", {}),
+                    "all_vehicles": run.mhev.get("technology_all", {}),
+                    "search_bounds": {k: list(v) for k, v in _mhev().search_bounds().items()},
                 },
             },
             indent=2,
@@ -988,20 +1036,44 @@ def _powertrain_md(run, s) -> list[str]:
 
 
 def _hev_md(run, s) -> list[str]:
-    """The full hybrids' count and technology per fold and class (:mod:`vpsim.fleet.hev`)."""
-    hm = _hev()
-    b = s["by_powertrain"]["hev"]
-    L = [
-        "",
+    """The full and the mild hybrids' counts and technology per fold and class (:mod:`vpsim.fleet.hev`,
+    :mod:`vpsim.fleet.mhev`)."""
+    from . import mhev
+
+    b, m = s["by_powertrain"]["hev"], s["by_powertrain"]["mhev"]
+    full = (
         f"Full hybrids predicted: {b['n_vehicles']} ({b['status']}); backward, ECMS, the charge-sustaining "
         "figure against the unadjusted test. `udds_hot`: the hot-start UDDS of the 4-bag FTP (bags 3 + 4, "
         "or Ford's bag 2), not bags 2 and 3 alone (their charge swing sets their figure; docs/fleet.md). "
-        "Classes `hev_split`, `hev_p2`, `hev_p2_converter` (`vpsim.fleet.hev.hev_class`).",
-    ]
-    if run.hev.get("technology"):
+        "Classes `hev_split`, `hev_p2`, `hev_p2_converter` (`vpsim.fleet.hev.hev_class`)."
+    )
+    mild = (
+        f"Mild hybrids predicted: {m['n_vehicles']} ({m['status']}); backward, ECMS, charge-sustaining; "
+        "the 4-bag FTP's bags 2 and 3 as a conventional car's. Classes `mhev_p0` (belt) and `mhev_p1` "
+        f"(crank) (`vpsim.fleet.mhev`). FASTSim: {MHEV_PEER_NOTE}. Per class (median / median abs / p90 "
+        "abs): "
+        + "; ".join(
+            f"`{c}` "
+            + ", ".join(
+                f"{t} {_fmt(v['median_error_pct'])} / {_fmt(v['median_abs_error_pct'], '.1f')} / "
+                f"{_fmt(v['p90_abs_error_pct'], '.1f')} % (n {v['n']})"
+                for t, v in by.items()
+                if v["n"]
+            )
+            for c, by in m.get("classes", {}).items()
+        )
+        + "."
+    )
+    return _hybrid_md(run.hev, _hev(), full, "Hybrid") + _hybrid_md(run.mhev, mhev, mild, "Mild-hybrid")
+
+
+def _hybrid_md(part: dict, hm, text: str, what: str) -> list[str]:
+    """``text``, then the technology per fold and class of a hybrid fleet ``part`` (module ``hm``)."""
+    L = ["", text]
+    if part.get("technology"):
         L += [
             "",
-            f"Hybrid technology per fold ({run.hev['folds']} folds of {run.hev['groups']} hybrid groups; "
+            f"{what} technology per fold ({part['folds']} folds of {part['groups']} groups; "
             "search bounds: "
             + ", ".join(f"`{k}` {lo:g}-{hi:g}" for k, (lo, hi) in hm.search_bounds().items())
             + "):",
@@ -1010,8 +1082,8 @@ def _hev_md(run, s) -> list[str]:
             "|---|---|---|---|---|",
         ]
         for k, t in {
-            **run.hev["technology"],
-            **{f"all.{c}": t for c, t in run.hev["technology_all"].items()},
+            **part["technology"],
+            **{f"all.{c}": t for c, t in part["technology_all"].items()},
         }.items():
             hits = hm.on_bounds(t)
             L.append(
@@ -1019,10 +1091,10 @@ def _hev_md(run, s) -> list[str]:
                 + (", ".join(f"{p.split('.')[1]} {side}" for p, side in hits.items()) or "–")
                 + " |"
             )
-        reasons = {(p, side) for t in run.hev["technology"].values() for p, side in hm.on_bounds(t).items()}
+        reasons = {(p, side) for t in part["technology"].values() for p, side in hm.on_bounds(t).items()}
         for p, side in sorted(reasons):
             L.append(f"\n`{p}` on its {side} bound: the bound stays: {hm.BOUND_REASONS.get((p, side), '')}.")
-    if run.hev.get("peer_technology"):
+    if part.get("peer_technology"):
         from . import peer_hev as ph
 
         L += [
@@ -1034,10 +1106,10 @@ def _hev_md(run, s) -> list[str]:
             "| fold.class | efficiency scale | accessories, W | training rows |",
             "|---|---|---|---|",
         ]
-        for k, t in run.hev["peer_technology"].items():
+        for k, t in part["peer_technology"].items():
             L.append(f"| {k} | {t['efficiency_scale']:.3f} | {t['accessory_power_w']:.0f} | {t['n_train']} |")
-    elif run.hev.get("peer_technology_status"):
-        L += ["", f"FASTSim's hybrid was not calibrated: {run.hev['peer_technology_status']}."]
+    elif part.get("peer_technology_status"):
+        L += ["", f"FASTSim's hybrid was not calibrated: {part['peer_technology_status']}."]
     return L
 
 

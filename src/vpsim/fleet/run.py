@@ -127,6 +127,8 @@ class FleetRun:
     ev: dict = field(default_factory=dict)
     # the full hybrids (vpsim.fleet.hev): rows, their technology and folds (_run_hevs)
     hev: dict = field(default_factory=dict)
+    # the mild hybrids (vpsim.fleet.mhev): rows, their technology and folds (_run_mhevs)
+    mhev: dict = field(default_factory=dict)
 
     def frame(self):
         import pandas as pd
@@ -145,6 +147,13 @@ class FleetRun:
         import pandas as pd
 
         return pd.DataFrame(self.hev.get("rows", []), columns=HEV_COLUMNS)
+
+    def mhev_frame(self):
+        """One row per mild hybrid x test (``ftp_bag2``, ``ftp_bag3``, ``hwy``, ``us06``): mpg measured and
+        predicted (charge-sustaining, ECMS); ``layout`` is its class (``mhev_p0``, ``mhev_p1``)."""
+        import pandas as pd
+
+        return pd.DataFrame(self.mhev.get("rows", []), columns=HEV_COLUMNS)
 
 
 def _vehicle_class(rec: VehicleRecord) -> str:
@@ -488,6 +497,11 @@ def run_fleet(
         hevs = cars.hev_vehicles if limit is None else cars.hev_vehicles[:limit]
         hev_out = _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings)
         timings["hev_s"] = time.perf_counter() - t0
+        # 8. the mild hybrids: the same procedure with the classes mhev_p0, mhev_p1 (vpsim.fleet.mhev)
+        t0 = time.perf_counter()
+        mhevs = cars.mhev_vehicles if limit is None else cars.mhev_vehicles[:limit]
+        mhev_out = _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings)
+        timings["mhev_s"] = time.perf_counter() - t0
     rows = []
     for v, cs in work:
         for c in cs:
@@ -531,6 +545,7 @@ def run_fleet(
         peer_technology=peer_technology,
         ev=ev_out,
         hev=hev_out,
+        mhev=mhev_out,
     )
 
 
@@ -737,55 +752,115 @@ def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings) ->
     (:mod:`vpsim.fleet.peer_hev`, its defaults) on the same records. Returns ``rows``,
     ``technology`` ("fold<k>.<class>"), ``technology_all``, ``folds``, ``groups`` and ``status``."""
     from . import hev as hm
+    from . import peer_hev as ph
 
+    what = {
+        "name": "full hybrid",
+        "label": "hybrids",
+        "cycles": hm.HEV_CYCLES,
+        "tests": "hot UDDS, HWY or US06",
+    }
+    return _run_hybrids(
+        hevs,
+        hm,
+        hm.hev_class,
+        ph.hev_peer_chunk,
+        what,
+        folds,
+        group_by,
+        executor,
+        peer_state,
+        progress,
+        timings,
+    )
+
+
+def _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings) -> dict:
+    """The mild hybrids (:mod:`vpsim.fleet.mhev`) as the full hybrids (:func:`_run_hevs`), classes
+    :data:`vpsim.fleet.mhev.CLASSES`; the peer is FASTSim's conventional car of the same record
+    (:mod:`vpsim.fleet.peer`, its defaults: FASTSim 3.1 has no mild-hybrid resource), as for the
+    conventional cars."""
+    from . import mhev as mm
+    from . import peer as peer_mod
+
+    what = {
+        "name": "mild hybrid",
+        "label": "mild hybrids",
+        "cycles": mm.MHEV_CYCLES,
+        "tests": "FTP, HWY or US06",
+    }
+    return _run_hybrids(
+        mhevs,
+        mm,
+        mm.mhev_class,
+        peer_mod.peer_chunk,
+        what,
+        folds,
+        group_by,
+        executor,
+        peer_state,
+        progress,
+        timings,
+    )
+
+
+def _run_hybrids(
+    recs, hm, class_fn, peer_chunk, what, folds, group_by, executor, peer_state, progress, timings
+):
+    """The hybrids of module ``hm`` (:mod:`vpsim.fleet.hev` or :mod:`.mhev`: ``fit``, ``CLASSES``,
+    ``TECH_PARAMS``, ``grid_chunk``, ``predict_chunk``, ``family_labels``) on their tests ``what["cycles"]``;
+    ``peer_chunk`` runs FASTSim on (record, test) items."""
+    name = what["name"]
     out = {"rows": [], "technology": {}, "technology_all": {}, "folds": 0, "groups": 0}
-    out.update(status="ok", n_records=len(hevs))
-    hevs = [v for v in hevs if any(c in v.measured_mpg for c in hm.HEV_CYCLES)]
-    if not hevs:
-        out["status"] = "no full hybrid with a hot UDDS, HWY or US06 test"
+    out.update(status="ok", n_records=len(recs))
+    recs = [v for v in recs if any(c in v.measured_mpg for c in what["cycles"])]
+    if not recs:
+        out["status"] = f"no {name} with a {what['tests']} test"
         return out
-    groups = cal.vehicle_groups(hevs, group_by, labels=hm.family_labels)
+    groups = cal.vehicle_groups(recs, group_by, labels=hm.family_labels)
     n_groups = len(set(groups.values()))
     k = n_groups if group_by == "manufacturer" else folds
     if n_groups < max(k, 2):
-        out["status"] = f"{len(hevs)} full hybrid(s) in {n_groups} group(s): too few for {k} folds"
+        out["status"] = f"{len(recs)} {name}(s) in {n_groups} group(s): too few for {k} folds"
         return out
-    fold_of = cal.assign_folds([v.key for v in hevs], k, groups=groups)
+    fold_of = cal.assign_folds([v.key for v in recs], k, groups=groups)
     out.update(folds=k, groups=n_groups, fold_of=fold_of, group_of=groups)
-    work = [(v, tuple(c for c in hm.HEV_CYCLES if c in v.measured_mpg)) for v in hevs]
+    work = [(v, tuple(c for c in what["cycles"] if c in v.measured_mpg)) for v in recs]
     chunks = [work[i : i + HEV_CHUNK] for i in range(0, len(work), HEV_CHUNK)]
     t0 = time.perf_counter()
     grid_rows: list[dict] = []
     for i, part in enumerate(executor.map(hm.grid_chunk, chunks)):
         grid_rows += part
-        _progress(
-            "hybrids: technology grid, vehicles", min((i + 1) * HEV_CHUNK, len(work)), len(work), t0, progress
-        )
-    by_key = {v.key: v for v in hevs}
+        done = min((i + 1) * HEV_CHUNK, len(work))
+        _progress(f"{what['label']}: technology grid, vehicles", done, len(work), t0, progress)
+    by_key = {v.key: v for v in recs}
     ok = [r for r in grid_rows if r["log_fuel"] is not None]
     failed = {(r["key"], r["cycle"]): r["error"] for r in grid_rows if r["log_fuel"] is None}
     if not ok:
-        out["status"] = "no full hybrid could be simulated: " + grid_rows[0]["error"]
+        out["status"] = f"no {name} could be simulated: " + grid_rows[0]["error"]
         return out
     grid = np.stack([r["log_fuel"] for r in ok])
     meas = np.array([_log_l100(by_key[r["key"]].measured_mpg[r["cycle"]]) for r in ok])
-    class_of = {v.key: hm.hev_class(v) for v in hevs}
+    class_of = {v.key: class_fn(v) for v in recs}
     tech = _fit_classes(hm, grid, meas, ok, class_of, fold_of, k, out)
     preds = _predict(executor, hm.predict_chunk, work, failed, tech, fold_of, class_of, 4 * HEV_CHUNK)
-    timings["hev_vpsim_s"] = time.perf_counter() - t0
+    prefix = "hev" if hm.__name__.endswith(".hev") else "mhev"
+    timings[f"{prefix}_vpsim_s"] = time.perf_counter() - t0
     peer_rows: dict = {}
     if peer_state.get("available"):
-        from . import peer_hev as ph
-
         t0 = time.perf_counter()
         pitems = [(v, c) for v, cs in work for c in cs]
         pch = [pitems[i : i + 2 * HEV_CHUNK] for i in range(0, len(pitems), 2 * HEV_CHUNK)]
-        for part in executor.map(ph.hev_peer_chunk, pch):
+        for part in executor.map(peer_chunk, pch):
             for r in part:
                 peer_rows[(r["key"], r["cycle"])] = r
-        timings["hev_peer_s"] = time.perf_counter() - t0
+        timings[f"{prefix}_peer_s"] = time.perf_counter() - t0
+    if peer_state.get("available") and prefix == "hev":
+        # FASTSim's hybrid with its engine's efficiency and accessories fitted (the fair peer); a mild
+        # hybrid's peer is FASTSim's conventional car at its defaults (no calibrated one is built)
+        t0 = time.perf_counter()
         peer_cal_rows = _calibrated_hev_peer(executor, work, class_of, fold_of, k, out, progress)
-        timings["hev_peer_calibrated_s"] = time.perf_counter() - t0 - timings["hev_peer_s"]
+        timings["hev_peer_calibrated_s"] = time.perf_counter() - t0
     else:
         peer_cal_rows = {}
     out["peer_run"] = bool(peer_rows)
@@ -831,8 +906,8 @@ def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings) ->
                 if math.isfinite(mpg):
                     row[f"{col}_mpg"] = round(mpg, 4)
                     row[f"{col}_error_pct"] = round(100.0 * (mpg / meas_c - 1.0), 4)
-                miss = "trace_miss" if pr.get("trace_miss") else "ok"
-                row[f"{col}_status"] = pr.get("peer_error") or miss
+                miss = pr.get("trace_miss") if "trace_miss" in pr else pr.get("peer_trace_met") is False
+                row[f"{col}_status"] = pr.get("peer_error") or ("trace_miss" if miss else "ok")
             pred = preds.get((v.key, c))
             err = failed.get((v.key, c)) or (pred or {}).get("error") or ("" if pred else "not run")
             if err:

@@ -25,6 +25,7 @@ TOP_KEYS = (
     "peer_fastsim_calibrated_out_of_fold",
     "bev",
     "hev",
+    "mhev",
 )
 BEV_KEYS = (
     "parameters",
@@ -61,13 +62,13 @@ def _table(path, data, where: str, allowed) -> dict:
 
 
 def read_technology(path, powertrain: str, cls: str) -> tuple[dict[str, float], str]:
-    """The fit on all vehicles of class ``cls`` (``powertrain`` ``"conventional"``, ``"bev"`` or ``"hev"``)
-    in the technology.json ``path``, and the note a vehicle file gives for it; one-line :class:`VpsimError`
-    if the file is from an unfinished run, not such a file, has keys no fleet run writes, or a value out of
-    range."""
+    """The fit on all vehicles of class ``cls`` (``powertrain`` ``"conventional"``, ``"bev"``, ``"hev"`` or
+    ``"mhev"``) in the technology.json ``path``, and the note a vehicle file gives for it; one-line
+    :class:`VpsimError` if the file is from an unfinished run, not such a file, has keys no fleet run
+    writes, or a value out of range."""
     from ..params import check_field
     from ..textio import check_path, read_json
-    from . import ev, hev
+    from . import ev, hev, mhev
     from .calibrate import CLASSES, TECH_PARAMS
     from .report import check_complete
 
@@ -81,14 +82,16 @@ def read_technology(path, powertrain: str, cls: str) -> tuple[dict[str, float], 
         parts["bev."] = (_table(shown, data["bev"], "bev", BEV_KEYS), ev.CLASSES, ev.TECH_PARAMS)
     if "hev" in data:
         parts["hev."] = (_table(shown, data["hev"], "hev", HEV_KEYS), hev.CLASSES, hev.TECH_PARAMS)
+    if "mhev" in data:
+        parts["mhev."] = (_table(shown, data["mhev"], "mhev", HEV_KEYS), mhev.CLASSES, mhev.TECH_PARAMS)
     for prefix, (part, classes, names) in parts.items():
         if "all_vehicles" in part:
             fits = _table(shown, part["all_vehicles"], f"{prefix}all_vehicles", classes)
             for c, fit in fits.items():
                 _table(shown, fit, f"{prefix}all_vehicles.{c}", (*names, *FIT_INFO))
-    prefix = {"bev": "bev.", "hev": "hev."}.get(powertrain, "")
+    prefix = {"bev": "bev.", "hev": "hev.", "mhev": "mhev."}.get(powertrain, "")
     if prefix not in parts:
-        kind = "a battery-electric" if powertrain == "bev" else "a hybrid"
+        kind = {"bev": "a battery-electric", "mhev": "a mild-hybrid"}.get(powertrain, "a hybrid")
         raise VpsimError(
             f"{shown}: not a technology.json of vpsim fleet with {kind} fit (no {prefix}all_vehicles.{cls})"
         )

@@ -1,0 +1,539 @@
+"""The mild-hybrid records of a test car list: reader, layout, vehicle mapping, their technology.
+
+Which records (:func:`mhev_vehicle`): the vehicles :mod:`vpsim.fleet.epa` flags ``mild hybrid`` (``MHEV`` in
+the model name, or an FTP with a fourth bag, after the full-hybrid screens). Each gets a layout by its maker's
+published system (:func:`layout`, :data:`SYSTEMS`; the record names no machine or battery), the first rule
+that applies:
+
+* Mercedes-Benz: ``mhev_p1``, 16 kW. EQ Boost: an integrated starter-generator between engine and gearbox,
+  16 kW / 250 Nm (the M256 straight six; the S 580's V8 has a 48 V ISG too), a 48 V pack of about 1 kWh;
+* BMW: ``mhev_p0``, 8 kW. A 48 V starter-generator on the belt, "up to 8 kW (11 PS)" (BMW, 2019-2020: the
+  5 Series, then the B58 engines);
+* Audi 2.9-4.0 L, and the A3: ``mhev_p0``, 12 kW. A 48 V belt alternator starter, "recuperation of up to
+  12 kW", a 10 Ah lithium-ion pack (A8, 2017; the A3's: 12 kW recuperation, 9 kW / 50 Nm assist);
+* Audi's other 2.0 L (A4, A5, A6, Q5, allroad): ``mhev_p0`` on 12 V, 3 kW. The 12 V MHEV: a belt
+  starter-generator on a 12 V lithium-ion battery (11 Ah); no power is published, a 12 V machine is held by
+  its current (200-250 A at 14 V: 3-3.5 kW);
+* Volvo (B5, B6): ``mhev_p0``, 10 kW. A 48 V integrated starter-generator module on the belt, 10 kW;
+* RAM, Jeep (eTorque): ``mhev_p0``, 12 kW. A 48 V belt motor-generator in place of the alternator, a 430 Wh
+  lithium-ion pack, 90 lb-ft (V6) / 130 lb-ft (V8) at the crank; no power published: the preset's 12 kW;
+* Jaguar, Land Rover, Range Rover: ``mhev_p0``, 12 kW. A 48 V belt-integrated starter-generator (BiSG): the
+  preset ``mhev`` is their E-PACE P300 (12 kW; the class's machines are 10-15 kW);
+* any other: excluded, ``mild hybrid, no known system`` (on the 2022 list the Dodge Charger 3.6 L: a 4-bag
+  FTP, and no mild-hybrid system sold for it).
+
+The tests: a mild hybrid's FTP is the 4-bag FTP of electrified cars (``FE Bag 1``..``FE Bag 4``: the cold
+505 s, the stabilised 867 s, the hot 505 s, the stabilised 867 s again; :mod:`vpsim.fleet.hev`). The bags
+a conventional car's FTP measures are the same phases: ``ftp_bag2`` is ``FE Bag 2`` (the stabilised 867 s)
+and ``ftp_bag3`` ``FE Bag 3`` (the hot 505 s), read where the four bags give the test's composite
+``RND_ADJ_FE`` within :data:`vpsim.fleet.hev.COMPOSITE_TOLERANCE` (the check that the bags are what they
+are; a 3-bag FTP, as some ``MHEV``-named records have, is read as a conventional car's). Bag 4 repeats bag
+2's phase and is not compared. The pack is small (0.2-1 kWh) and a bag's charge swing a few tens of Wh; the
+model reports the charge-sustaining figure (``fuel_l_per_100km_cs``). ``hwy``, ``us06``: ``RND_ADJ_FE`` of
+the HWFE and US06 tests.
+
+The vehicle (:func:`mhev_parameters`): the preset ``mhev`` with what the record holds put in as for a
+conventional car (:func:`vpsim.fleet.vehicle.record_parameters`: test weight, road load folded over the
+cycle, the engine scaled to displacement and cylinders, rated power and boost, the gearbox from N/V and the
+axle ratio, the fleet's wheel radius, driveline efficiency and measured idle), the machine of its layout
+(:data:`SYSTEMS`): a P0 on the belt at the preset's ratio 2.7 and efficiency 0.95, a P1 on the crank (ratio
+1, no belt); the preset's 48 V pack (13 cells in series; 4 for a 12 V system) with as many strings as the
+machine's power needs at the cell's limit (:func:`vpsim.fleet.hev.pack_strings`). Energy management: ECMS.
+
+Technology per class (``mhev_p0``, ``mhev_p1``: the layouts; :data:`TECH_PARAMS`, fitted out of fold by
+family as the other classes): ``engine.thermal_efficiency`` and ``electric.accessory_power``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .epa import (
+    BOOST_SPECIFIC_POWER_KW_PER_L,
+    CERT_GASOLINE,
+    HP_TO_KW,
+    TRANSMISSION_KIND,
+    CertificationRecord,
+)
+from .techgrid import TechGrid
+
+MHEV_CYCLES = ("ftp_bag2", "ftp_bag3", "hwy", "us06")
+CLASSES = ("mhev_p0", "mhev_p1")
+PRESET = "mhev"
+
+
+@dataclass(frozen=True)
+class System:
+    """A maker's mild-hybrid system: layout, machine power (kW), pack voltage class, the source."""
+
+    layout: str  # mhev_p0 (belt) or mhev_p1 (crank)
+    machine_kw: float
+    cells_in_series: int
+    source: str
+
+
+V48, V12 = 13, 4  # cells in series of the nmc_hev cell: 48 V and 12 V nominal
+SYSTEMS = {
+    "mercedes": System("mhev_p1", 16.0, V48, "Mercedes-Benz EQ Boost ISG (P1), 16 kW / 250 Nm"),
+    "bmw": System("mhev_p0", 8.0, V48, "BMW 48 V starter-generator (P0), 8 kW"),
+    "audi48": System("mhev_p0", 12.0, V48, "Audi 48 V belt alternator starter (P0), 12 kW"),
+    "audi12": System(
+        "mhev_p0", 3.0, V12, "Audi 12 V MHEV belt starter-generator (P0), 3 kW (a 12 V machine)"
+    ),
+    "volvo": System("mhev_p0", 10.0, V48, "Volvo 48 V ISGM on the belt (P0), 10 kW"),
+    "etorque": System("mhev_p0", 12.0, V48, "RAM/Jeep eTorque belt motor-generator (P0), the preset's 12 kW"),
+    "jlr": System("mhev_p0", 12.0, V48, "Jaguar Land Rover 48 V BiSG (P0), the preset's 12 kW"),
+}
+# a P1's machine sits on the crank: its base speed where 250 Nm meet 16 kW, its top speed the engine's
+P1_BASE_SPEED = 64.0  # rad/s (16 kW / 250 Nm)
+P1_MAX_SPEED = 700.0  # rad/s (6,700 rpm)
+P1_INERTIA = 0.04  # kg m^2: a disc rotor of some 0.25 m between engine and gearbox (reconstructed)
+
+# --- technology: two parameters ---------------------------------------------------------------------------
+TECH_PARAMS = ("engine.thermal_efficiency", "electric.accessory_power")
+# the full hybrids' efficiency axis: 0.30-0.50 was set first, and the fit on the first 20 mild hybrids sat
+# on its 0.50 (fleet/tuned.py declares the change). The engine's friction is the preset's (hofman2011, 1.34):
+# a lower friction from the conventional fleet's class fits was tried and not kept (docs/fleet.md)
+EFFICIENCY_AXIS = np.array([0.34, 0.38, 0.42, 0.46, 0.50, 0.54])
+EFFICIENCY_FINE = np.round(np.arange(0.34, 0.54001, 0.0025), 5)
+ACCESSORY_NODES_W = (0.0, 1000.0)
+ACCESSORY_AXIS = np.arange(0.0, 3000.1, 25.0)  # the conventional classes' accessory range (calibrate)
+BOUND_REASONS = {
+    ("engine.thermal_efficiency", "low"): "0.34 indicated efficiency is below any 2022 engine's",
+    ("engine.thermal_efficiency", "high"): "0.54 indicated efficiency is beyond the best production engines",
+    ("electric.accessory_power", "low"): "no accessory load is the physical lower end",
+    ("electric.accessory_power", "high"): "3 kW is the conventional classes' bound (vpsim.fleet.calibrate)",
+}
+
+
+@dataclass(frozen=True)
+class MHEVRecord(CertificationRecord):
+    """What the certification record says about one mild-hybrid test vehicle (record units)."""
+
+    vehicle_id: str
+    configuration: int
+    make: str
+    model: str
+    manufacturer: str
+    displacement_l: float
+    cylinders: int
+    rated_hp: float
+    transmission_code: str
+    transmission_kind: str
+    n_gears: int
+    lockup: bool
+    drive: str
+    etw_lb: float
+    axle_ratio: float
+    nv_ratio: float
+    target_a_lbf: float
+    target_b_lbf_per_mph: float
+    target_c_lbf_per_mph2: float
+    boosted: bool
+    boost_rule: str
+    system: str  # a key of SYSTEMS
+    layout: str  # mhev_p0 or mhev_p1
+    bag_rule: str  # how the FTP's bags were read
+    measured_mpg: dict[str, float] = field(default_factory=dict)
+    n_tests: dict[str, int] = field(default_factory=dict)
+
+    powertrain = "mhev"
+
+    @property
+    def specific_power_kw_per_l(self) -> float:
+        return self.rated_power_kw / self.displacement_l
+
+
+AUDI_12V = re.compile(r"\b(A4|A5|A6|Q5)\b|allroad", re.IGNORECASE)
+
+
+def system_of(make: str, model: str, displacement_l: float) -> tuple[str | None, str]:
+    """(a key of :data:`SYSTEMS` or None, the rule or the exclusion reason) by the module's table."""
+    mk = make.strip().upper()
+    if mk == "MERCEDES-BENZ":
+        return "mercedes", "Mercedes-Benz: EQ Boost"
+    if mk == "BMW":
+        return "bmw", "BMW: 48 V starter-generator"
+    if mk == "AUDI":
+        if math.isfinite(displacement_l) and displacement_l >= 2.5:
+            return "audi48", "Audi 2.9-4.0 L: 48 V MHEV"
+        if re.search(r"\bA3\b", model, re.IGNORECASE):
+            return "audi48", "Audi A3: 48 V MHEV"
+        if AUDI_12V.search(model):
+            return "audi12", "Audi 2.0 L (A4, A6, Q5): 12 V MHEV"
+    if mk == "VOLVO":
+        return "volvo", "Volvo B5/B6: 48 V ISGM"
+    if mk in ("RAM", "JEEP"):
+        return "etorque", "RAM/Jeep: eTorque"
+    if mk in ("JAGUAR", "LAND ROVER", "RANGE ROVER"):
+        return "jlr", "Jaguar Land Rover: 48 V BiSG"
+    from ..textio import printable
+
+    return (
+        None,
+        f"mild hybrid, no known system: {printable(make)} {printable(model)} (none published)",
+    )
+
+
+def _bags(t: dict) -> tuple[dict[str, float], str] | str:
+    """{ftp_bag2, ftp_bag3: mpg} of one FTP test row and how they were read, or why not."""
+    from .epa import _plausible_mpg
+    from .hev import BAG_MILES, COLD_WEIGHT, COMPOSITE_TOLERANCE
+
+    b = [t[f"bag{i}"] for i in (1, 2, 3, 4)]
+    if not (_plausible_mpg(b[1]) and _plausible_mpg(b[2])):
+        return "FE Bag 2 or FE Bag 3 missing or implausible"
+    if not math.isfinite(b[3]):
+        return {"ftp_bag2": b[1], "ftp_bag3": b[2]}, "3-bag FTP: bags 2 and 3"
+    if not (all(_plausible_mpg(x) for x in b) and _plausible_mpg(t["fe"])):
+        return "4-bag FTP with a bag or RND_ADJ_FE missing or implausible"
+    m1, m2 = BAG_MILES
+    cold = (m1 + m2) / (m1 / b[0] + m2 / b[1])
+    hot = (m1 + m2) / (m1 / b[2] + m2 / b[3])
+    comp = 1.0 / (COLD_WEIGHT / cold + (1.0 - COLD_WEIGHT) / hot)
+    if abs(comp / t["fe"] - 1.0) > COMPOSITE_TOLERANCE:
+        return (
+            f"FTP bags give a composite {comp:.4g} mpg, RND_ADJ_FE {t['fe']:g}: not within "
+            f"{100 * COMPOSITE_TOLERANCE:g} %"
+        )
+    return {"ftp_bag2": b[1], "ftp_bag3": b[2]}, "4-bag FTP: bags 2 and 3 (composite checked)"
+
+
+def mhev_vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[MHEVRecord | None, str, list[dict]]:
+    """(record or None, exclusion reason, excluded test rows) of one mild hybrid's parsed test rows."""
+    from .epa import (
+        _excl,
+        _field_problem,
+        _harmonic,
+        _plausible_mpg,
+        power_to_mass_problem,
+        road_load_problem,
+    )
+
+    first = tests[0]
+    key, rule = system_of(first["make"], first["model"], first["displacement_l"])
+    if key is None:
+        return None, rule, []
+    test_rows: list[dict] = []
+    values: dict[str, list[float]] = {c: [] for c in MHEV_CYCLES}
+    hows: set[str] = set()
+    used: list[dict] = []
+    for t in tests:
+        cat = t["category"].upper()
+        if t["fuel"] != CERT_GASOLINE or "cold co" in t["procedure"].lower():
+            continue
+        if cat == "FTP":
+            got = _bags(t)
+            if isinstance(got, str):
+                test_rows.append(_excl(t, f"mild hybrid FTP test: {got}", test=True))
+                continue
+            for c, x in got[0].items():
+                values[c].append(x)
+            hows.add(got[1])
+        elif cat in ("HWY", "US06"):
+            if not _plausible_mpg(t["fe"]):
+                test_rows.append(_excl(t, f"{cat} test: RND_ADJ_FE missing or implausible", test=True))
+                continue
+            values["hwy" if cat == "HWY" else "us06"].append(t["fe"])
+        else:
+            continue
+        used.append(t)
+    if not used:
+        return None, "mild hybrid, no usable test: no FTP bag, HWY or US06 figure", test_rows
+    first = used[0]
+    for name in (
+        "etw_lb",
+        "target_a_lbf",
+        "target_b_lbf_per_mph",
+        "target_c_lbf_per_mph2",
+        "displacement_l",
+        "cylinders",
+        "rated_hp",
+        "nv_ratio",
+    ):
+        problem = _field_problem(name, first[name], first["not_a_number"])
+        if problem:
+            return None, f"mild hybrid, {problem}", test_rows
+    problem = road_load_problem(
+        first["target_a_lbf"], first["target_b_lbf_per_mph"], first["target_c_lbf_per_mph2"]
+    ) or power_to_mass_problem(first["rated_hp"], first["etw_lb"])
+    if problem:
+        return None, f"mild hybrid, {problem}", test_rows
+    code = first["transmission_code"].upper()
+    kind = TRANSMISSION_KIND.get(code, "other")
+    n_gears = first["n_gears"]
+    if kind in ("cvt", "other") or not (
+        math.isfinite(n_gears) and n_gears == int(n_gears) and 4 <= n_gears <= 12
+    ):
+        return None, f"mild hybrid, no stepped gearbox: code {code or 'empty'}, {n_gears:g} gears", test_rows
+    axle = first["axle_ratio"]
+    if not (math.isfinite(axle) and 1.5 <= axle <= 8.0):
+        axle = math.nan
+    spec = first["rated_hp"] * HP_TO_KW / first["displacement_l"]
+    boosted = spec > BOOST_SPECIFIC_POWER_KW_PER_L
+    sys_ = SYSTEMS[key]
+    rec = MHEVRecord(
+        vehicle_id=vid,
+        configuration=cfg,
+        make=first["make"],
+        model=first["model"],
+        manufacturer=first["manufacturer"],
+        displacement_l=first["displacement_l"],
+        cylinders=int(round(first["cylinders"])),
+        rated_hp=first["rated_hp"],
+        transmission_code=code,
+        transmission_kind=kind,
+        n_gears=int(n_gears),
+        lockup=first["lockup"].upper() == "Y",
+        drive=first["drive"],
+        etw_lb=first["etw_lb"],
+        axle_ratio=axle,
+        nv_ratio=first["nv_ratio"],
+        target_a_lbf=first["target_a_lbf"],
+        target_b_lbf_per_mph=first["target_b_lbf_per_mph"],
+        target_c_lbf_per_mph2=first["target_c_lbf_per_mph2"],
+        boosted=boosted,
+        boost_rule=f"specific power {spec:.1f} kW/L, {BOOST_SPECIFIC_POWER_KW_PER_L:g} the threshold",
+        system=key,
+        layout=sys_.layout,
+        bag_rule="; ".join(sorted(hows)) + f"; {rule}",
+        measured_mpg={c: _harmonic(v) for c, v in values.items() if v},
+        n_tests={c: len(v) for c, v in values.items() if v},
+    )
+    return rec, "", test_rows
+
+
+# --- the vehicle ------------------------------------------------------------------------------------------
+
+
+def mhev_parameters(rec: MHEVRecord, cycle_name: str | None = None, technology: dict | None = None):
+    """The mild hybrid's :class:`~vpsim.params.Parameters` of a record (road load folded over the cycle
+    ``cycle_name``, default all four); ``technology`` overrides (:data:`TECH_PARAMS`)."""
+    from dataclasses import replace
+
+    from ..errors import VpsimError
+    from ..params import load_parameters
+    from ..scaling import scaled_machine
+    from .cycles import FLEET_CYCLES, fleet_cycle
+    from .hev import pack_strings
+    from .vehicle import record_parameters
+
+    names = MHEV_CYCLES if cycle_name is None else (cycle_name,)
+    cycles = [fleet_cycle(c) for c in names if c in FLEET_CYCLES]
+    # the conventional car of the record (engine, boost, gearbox, road load, idle), without its converter
+    # (the kernel slips its clutch below idle speed) and with the accessories on the electric network
+    conv = record_parameters(rec, cycles, {"engine.accessory_power": 0.0}, converter=False)
+    base = load_parameters(PRESET)
+    sys_ = SYSTEMS[rec.system]
+    machine_w = sys_.machine_kw * 1e3
+    machine = scaled_machine(base.machine, machine_w)
+    mild = {}
+    if sys_.layout == "mhev_p1":
+        machine.update(base_speed=P1_BASE_SPEED, max_speed=P1_MAX_SPEED, inertia=P1_INERTIA)
+        mild = {"belt_ratio": 1.0, "belt_efficiency": 1.0}
+    battery_base = base.with_changes(battery={"cells_in_series": sys_.cells_in_series})
+    strings = pack_strings(battery_base, machine_w)
+    flat = conv.flat()
+    sections: dict[str, dict] = {
+        "vehicle": {k: flat[f"vehicle.{k}"] for k in _VEHICLE},
+        "transmission": {k: _plain(flat[f"transmission.{k}"]) for k in _TRANSMISSION},
+        "engine": {k: _plain(flat[f"engine.{k}"]) for k in _ENGINE},
+        "simulation": {k: flat[f"simulation.{k}"] for k in _SIMULATION},
+        "machine": machine,
+        "battery": {"cells_in_series": sys_.cells_in_series, "cells_in_parallel": strings},
+        "electric": {},
+    }
+    if mild:
+        sections["mild"] = mild
+    for key, value in (technology or {}).items():
+        sec, _, fld = key.partition(".")
+        if sec not in sections:
+            raise VpsimError(f"technology parameter {key!r} is not section.field")
+        sections[sec][fld] = value
+    p = base.with_changes(**sections)
+    return replace(p, name=f"{rec.make} {rec.model} ({rec.key})")
+
+
+_VEHICLE = ("mass", "frontal_area", "drag_coefficient", "rolling_resistance", "air_density", "wheel_radius")
+_VEHICLE += ("road_load_a", "road_load_b", "road_load_c")
+_TRANSMISSION = ("efficiency", "gearbox_ratios", "final_drive", "shift_engine_speed")
+_ENGINE = ("bore", "stroke", "cylinders", "inertia", "intake_manifold_volume", "max_throttle_area")
+_ENGINE += ("min_throttle_area", "map_speed_range", "fuel_heating_value", "rated_power", "boost_pressure")
+_ENGINE += ("boost_enrichment",)
+_SIMULATION = ("fuel_density", "idle_fuel_flow", "fuel_cutoff_speed")
+
+
+def _plain(v):
+    return list(v) if isinstance(v, tuple) else v
+
+
+def mhev_class(rec: MHEVRecord) -> str:
+    """The technology class: the layout (``mhev_p0`` on the belt, ``mhev_p1`` on the crank)."""
+    return rec.layout
+
+
+def family_labels(rec: MHEVRecord):
+    """The labels that join mild-hybrid records into one family (:func:`vpsim.fleet.hev.family_labels`)."""
+    from .hev import family_labels as labels
+
+    return labels(rec)
+
+
+# --- technology fit ----------------------------------------------------------------------------------------
+
+
+def _sim(name: str, params):
+    """One backward ECMS run on the fleet cycle ``name``: (charge-sustaining L/100 km, trace miss s)."""
+    from ..simulation import simulate
+    from .cycles import fleet_cycle
+
+    r = simulate(fleet_cycle(name), "backward", params, ems="ecms")
+    s = r.summary()
+    return float(s["fuel_l_per_100km_cs"]), float(r.deviations.demand_not_deliverable_s or 0.0)
+
+
+def grid_chunk(items: list[tuple[MHEVRecord, tuple[str, ...]]]) -> list[dict]:
+    """Backward ECMS runs of each (record, tests) at every efficiency node and both accessory nodes:
+    ``log_fuel`` (len(EFFICIENCY_AXIS), 2) of ln charge-sustaining L/100 km, or ``error``."""
+    from .run import _kernels_on_one_thread, _one_line
+
+    out = []
+    with _kernels_on_one_thread():
+        for rec, cycles in items:
+            for name in cycles:
+                row = {"key": rec.key, "cycle": name, "log_fuel": None, "error": ""}
+                try:
+                    base = mhev_parameters(rec, name)
+                    g = np.empty((EFFICIENCY_AXIS.size, len(ACCESSORY_NODES_W)))
+                    for i, eta in enumerate(EFFICIENCY_AXIS):
+                        for j, acc in enumerate(ACCESSORY_NODES_W):
+                            p = base.with_changes(
+                                engine={"thermal_efficiency": float(eta)}, electric={"accessory_power": acc}
+                            )
+                            g[i, j] = math.log(_sim(name, p)[0])
+                    if not np.all(np.isfinite(g)):
+                        raise ValueError("non-finite fuel on the technology grid")
+                    row["log_fuel"] = g
+                except Exception as exc:
+                    row["error"] = _one_line(exc)
+                out.append(row)
+    return out
+
+
+GRID = TechGrid(
+    TECH_PARAMS, EFFICIENCY_AXIS, EFFICIENCY_FINE, ACCESSORY_NODES_W, ACCESSORY_AXIS, "mild hybrid"
+)
+surrogate, fit, search_bounds, on_bounds = GRID.surrogate, GRID.fit, GRID.search_bounds, GRID.on_bounds
+
+
+def predict_chunk(items: list[tuple[MHEVRecord, str, dict]]) -> list[dict]:
+    """One backward ECMS run per (record, test, technology): ``l_per_100km_cs``, ``trace_miss_s``, or
+    ``error``."""
+    from .run import _kernels_on_one_thread, _one_line
+
+    out = []
+    with _kernels_on_one_thread():
+        for rec, name, tech in items:
+            row = {"key": rec.key, "cycle": name, "error": ""}
+            try:
+                p = mhev_parameters(rec, name, {k: tech[k] for k in TECH_PARAMS})
+                row["l_per_100km_cs"], row["trace_miss_s"] = _sim(name, p)
+                row["machine_kw"] = p.machine.rated_power / 1e3
+            except Exception as exc:
+                row["error"] = _one_line(exc)
+            out.append(row)
+    return out
+
+
+__all__ = [
+    "CLASSES",
+    "MHEVRecord",
+    "MHEV_CYCLES",
+    "SYSTEMS",
+    "TECH_PARAMS",
+    "family_labels",
+    "mhev_class",
+    "mhev_parameters",
+    "mhev_vehicle",
+    "system_of",
+]
+
+
+# --- the vehicle file ---------------------------------------------------------------------------------------
+
+TOML_FIELDS = (
+    ("vehicle", _VEHICLE),
+    ("transmission", _TRANSMISSION),
+    ("engine", (*_ENGINE, "thermal_efficiency", "accessory_power")),
+    ("machine", ("rated_power", "base_speed", "max_speed", "kind", "inertia")),
+    ("battery", ("cell", "cells_in_series", "cells_in_parallel", "soc_initial", "soc_min", "soc_max")),
+    ("electric", ("accessory_power",)),
+    ("simulation", _SIMULATION),
+    ("hybrid", ("ems", "soc_target")),
+    ("mild", ("belt_ratio", "belt_efficiency")),
+)
+
+
+def mhev_vehicle_toml(rec: MHEVRecord, params, source: str = "", technology_note: str = "") -> str:
+    """An editable mild-hybrid TOML (``vpsim simulate --vehicle``, type ``mhev``) with the record block;
+    ``[record.measured_mpg]`` holds the fleet's tests (``ftp_bag2``, ``ftp_bag3``, ``hwy``, ``us06``), which
+    ``vpsim simulate`` compares with the charge-sustaining figure."""
+    from ..textio import printable
+    from .vehicle import RECORD_BEGIN, RECORD_END, _toml_value, record_block
+
+    sys_ = SYSTEMS[rec.system]
+    notes = {
+        "vehicle.mass": "record: equivalent test weight",
+        "vehicle.road_load_a": "record: target coast-down A (N)",
+        "vehicle.road_load_b": "record: target coast-down B (N per m/s)",
+        "vehicle.road_load_c": "record: target coast-down C (N per (m/s)^2)",
+        "engine.bore": "record: displacement and cylinders",
+        "engine.rated_power": "record: rated power (W)",
+        "engine.thermal_efficiency": technology_note or "the preset's",
+        "electric.accessory_power": technology_note or "the preset's (W)",
+        "machine.rated_power": f"{sys_.source} (vpsim.fleet.mhev.SYSTEMS; W)",
+        "battery.cells_in_parallel": "the preset's cell, strings for the machine's rated power",
+        "transmission.final_drive": "record: N/V and axle ratio",
+    }
+    lines = [
+        printable(
+            f"# {rec.make} {rec.model}: test vehicle {rec.vehicle_id}, configuration {rec.configuration}"
+        ),
+        printable(f"# built by vpsim vehicle from-epa from {source or 'an EPA test car list'}"),
+        printable(f"# mild hybrid {rec.layout}: {sys_.source}"),
+        "# (the module vpsim.fleet.mhev documents the mapping and its defaults)",
+        "# SI units. Edit freely; run with: vpsim simulate --vehicle THIS_FILE",
+        f'base = "{PRESET}"',
+        f"name = {_toml_value(params.name)}",
+        "",
+        "[powertrain]",
+        'type = "mhev"',
+        "",
+    ]
+    flat = params.flat()
+    for sec, fields_ in TOML_FIELDS:
+        lines.append(f"[{sec}]")
+        for f in fields_:
+            v = flat.get(f"{sec}.{f}")
+            if v is None:
+                continue
+            note = notes.get(f"{sec}.{f}")
+            val = _toml_value(list(v) if isinstance(v, tuple) else v)
+            lines.append(f"{f} = {val}" + (f"  # {note}" if note else ""))
+        lines.append("")
+    block = record_block(
+        rec,
+        rec.road_load_si,
+        "measured_mpg",
+        dict(rec.measured_mpg),
+        "unadjusted; ftp_bag2 / ftp_bag3 = FE Bag 2 / 3 of the 4-bag FTP, compared charge-sustaining",
+        {"powertrain": "mhev", "layout": rec.layout},
+    )
+    lines.append(RECORD_BEGIN)
+    lines += [("# " + x) if x else "#" for x in block]
+    lines.append(RECORD_END)
+    return "\n".join(lines) + "\n"
