@@ -143,8 +143,8 @@ def summary(run) -> dict:
 def _powertrain_block(out, run, name, frame, state, cycles, what, peer_note) -> None:
     """``by_powertrain.<name>`` (its records' out-of-fold errors per test and per class) and
     ``peer.fastsim_by_powertrain.<name>`` (FASTSim with its defaults on the same rows, ``peer_note`` says
-    which FASTSim vehicle); a calibrated FASTSim is not built for it: ``fastsim_calibrated_by_powertrain``
-    says so."""
+    which FASTSim vehicle) and ``peer.fastsim_calibrated_by_powertrain.<name>`` (FASTSim calibrated on the
+    same folds and classes, or why not)."""
     ok = frame[np.isfinite(frame["error_pct"].to_numpy(float))]
 
     def stats(rows, col="error_pct"):
@@ -163,10 +163,15 @@ def _powertrain_block(out, run, name, frame, state, cycles, what, peer_note) -> 
     else:
         why = state.get("status") if run.peer.get("available") else run.peer.get("reason", "not run")
         peer["fastsim_by_powertrain"][name] = {"measured": False, "reason": why or f"no {what} predicted"}
-    peer["fastsim_calibrated_by_powertrain"][name] = {
-        "measured": False,
-        "reason": f"a calibrated FASTSim is not built for the {what}s",
-    }
+    cal = ok[np.isfinite(ok["fastsim_calibrated_error_pct"].to_numpy(float))] if len(ok) else ok
+    if state.get("peer_run") and len(cal):
+        peer["fastsim_calibrated_by_powertrain"][name] = {
+            **stats(cal, "fastsim_calibrated_error_pct"),
+            "vehicle": peer_note,
+        }
+    else:
+        why = state.get("peer_technology_status") or peer["fastsim_by_powertrain"][name].get("reason")
+        peer["fastsim_calibrated_by_powertrain"][name] = {"measured": False, "reason": why or "not run"}
 
 
 def validation(run) -> dict:
@@ -906,6 +911,7 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
                     "out_of_fold": run.mhev.get("technology", {}),
                     "all_vehicles": run.mhev.get("technology_all", {}),
                     "search_bounds": {k: list(v) for k, v in _mhev().search_bounds().items()},
+                    "peer_fastsim_calibrated_out_of_fold": run.mhev.get("peer_technology", {}),
                 },
             },
             indent=2,
@@ -1095,21 +1101,32 @@ def _hybrid_md(part: dict, hm, text: str, what: str) -> list[str]:
         for p, side in sorted(reasons):
             L.append(f"\n`{p}` on its {side} bound: the bound stays: {hm.BOUND_REASONS.get((p, side), '')}.")
     if part.get("peer_technology"):
+        from . import peer as pc
         from . import peer_hev as ph
 
+        how = (
+            "`vpsim.fleet.peer_hev`: its hybrid, the engine's efficiency curve times a scale searched over "
+            f"{ph.CAL_SCALE[0]:g}-{ph.CAL_SCALE[-1]:g}, the accessory power over "
+            f"{ph.CAL_AUX[0]:g}-{ph.CAL_AUX[-1]:g} W"
+            if hm.__name__.endswith(".hev")
+            else "`vpsim.fleet.peer`: its conventional car, the efficiency level, the accessory power over "
+            f"{pc.CAL_AUX[0]:g}-{pc.CAL_AUX[-1]:g} W and the part-load exponent, as for the conventional cars"
+        )
         L += [
             "",
-            "FASTSim's hybrid calibrated the same way (`vpsim.fleet.peer_hev`: the engine's efficiency curve "
-            f"times a scale searched over {ph.CAL_SCALE[0]:g}-{ph.CAL_SCALE[-1]:g}, the accessory power over "
-            f"{ph.CAL_AUX[0]:g}-{ph.CAL_AUX[-1]:g} W), per fold and class:",
+            f"FASTSim calibrated the same way ({how}), per fold and class:",
             "",
-            "| fold.class | efficiency scale | accessories, W | training rows |",
-            "|---|---|---|---|",
+            "| fold.class | efficiency scale | accessories, W | part-load exponent | training rows |",
+            "|---|---|---|---|---|",
         ]
         for k, t in part["peer_technology"].items():
-            L.append(f"| {k} | {t['efficiency_scale']:.3f} | {t['accessory_power_w']:.0f} | {t['n_train']} |")
+            q = t.get("part_load_exponent")
+            L.append(
+                f"| {k} | {t['efficiency_scale']:.3f} | {t['accessory_power_w']:.0f} | "
+                f"{'–' if q is None else format(q, '.2f')} | {t['n_train']} |"
+            )
     elif part.get("peer_technology_status"):
-        L += ["", f"FASTSim's hybrid was not calibrated: {part['peer_technology_status']}."]
+        L += ["", f"FASTSim was not calibrated on the {what.lower()}s: {part['peer_technology_status']}."]
     return L
 
 

@@ -30,7 +30,9 @@ import contextlib
 import math
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -760,11 +762,15 @@ def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings) ->
         "cycles": hm.HEV_CYCLES,
         "tests": "hot UDDS, HWY or US06",
     }
+    calibrated = PeerCalibration(
+        ph.hev_calibration_chunk, ph.calibrate_hev_peer, ph.hev_peer_chunk, ph.HEV_PEER_PARAMS, "hybrid"
+    )
     return _run_hybrids(
         hevs,
         hm,
         hm.hev_class,
         ph.hev_peer_chunk,
+        calibrated,
         what,
         folds,
         group_by,
@@ -778,8 +784,8 @@ def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings) ->
 def _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings) -> dict:
     """The mild hybrids (:mod:`vpsim.fleet.mhev`) as the full hybrids (:func:`_run_hevs`), classes
     :data:`vpsim.fleet.mhev.CLASSES`; the peer is FASTSim's conventional car of the same record
-    (:mod:`vpsim.fleet.peer`, its defaults: FASTSim 3.1 has no mild-hybrid resource), as for the
-    conventional cars."""
+    (:mod:`vpsim.fleet.peer`: FASTSim 3.1 has no mild-hybrid resource), with its defaults and calibrated
+    on the mild hybrids' own folds and classes as the conventional cars' peer is on theirs."""
     from . import mhev as mm
     from . import peer as peer_mod
 
@@ -789,11 +795,19 @@ def _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings) 
         "cycles": mm.MHEV_CYCLES,
         "tests": "FTP, HWY or US06",
     }
+    calibrated = PeerCalibration(
+        peer_mod.calibration_chunk,
+        peer_mod.calibrate_peer,
+        peer_mod.peer_chunk,
+        peer_mod.PEER_PARAMS,
+        "conventional car",
+    )
     return _run_hybrids(
         mhevs,
         mm,
         mm.mhev_class,
         peer_mod.peer_chunk,
+        calibrated,
         what,
         folds,
         group_by,
@@ -805,11 +819,12 @@ def _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings) 
 
 
 def _run_hybrids(
-    recs, hm, class_fn, peer_chunk, what, folds, group_by, executor, peer_state, progress, timings
+    recs, hm, class_fn, peer_chunk, calibrated, what, folds, group_by, executor, peer_state, progress, timings
 ):
     """The hybrids of module ``hm`` (:mod:`vpsim.fleet.hev` or :mod:`.mhev`: ``fit``, ``CLASSES``,
     ``TECH_PARAMS``, ``grid_chunk``, ``predict_chunk``, ``family_labels``) on their tests ``what["cycles"]``;
-    ``peer_chunk`` runs FASTSim on (record, test) items."""
+    ``peer_chunk`` runs FASTSim on (record, test) items, ``calibrated`` (:class:`PeerCalibration`) fits
+    and runs it calibrated."""
     name = what["name"]
     out = {"rows": [], "technology": {}, "technology_all": {}, "folds": 0, "groups": 0}
     out.update(status="ok", n_records=len(recs))
@@ -855,12 +870,13 @@ def _run_hybrids(
             for r in part:
                 peer_rows[(r["key"], r["cycle"])] = r
         timings[f"{prefix}_peer_s"] = time.perf_counter() - t0
-    if peer_state.get("available") and prefix == "hev":
-        # FASTSim's hybrid with its engine's efficiency and accessories fitted (the fair peer); a mild
-        # hybrid's peer is FASTSim's conventional car at its defaults (no calibrated one is built)
+    if peer_state.get("available"):
+        # FASTSim with its technology fitted on the same folds and classes (the fair peer)
         t0 = time.perf_counter()
-        peer_cal_rows = _calibrated_hev_peer(executor, work, class_of, fold_of, k, out, progress)
-        timings["hev_peer_calibrated_s"] = time.perf_counter() - t0
+        peer_cal_rows = _calibrated_peer(
+            calibrated, executor, work, class_of, fold_of, k, hm.CLASSES, what["label"], out, progress
+        )
+        timings[f"{prefix}_peer_calibrated_s"] = time.perf_counter() - t0
     else:
         peer_cal_rows = {}
     out["peer_run"] = bool(peer_rows)
@@ -928,24 +944,33 @@ def _run_hybrids(
     return out
 
 
-def _calibrated_hev_peer(executor, work, class_of, fold_of, k, out, progress) -> dict:
-    """FASTSim's hybrid calibrated as vpsim's hybrids are (:mod:`vpsim.fleet.peer_hev`): its grid on every
-    (record, test), its two parameters fitted per fold and vpsim's class out of fold, then every record
-    run at its fold's values. Returns {(key, test): row}; the fits go into ``out["peer_technology"]``
-    ("fold<k>.<class>")."""
-    from . import hev as hm
-    from . import peer_hev as ph
+class PeerCalibration(NamedTuple):
+    """How a fleet part's FASTSim peer is calibrated: ``grid_chunk`` runs (record, test) items on its
+    technology grid (rows with ``log_l100``), ``calibrate`` fits its ``params`` per (fold, class) from them,
+    ``run_chunk`` runs (record, test, technology) items; ``vehicle`` names FASTSim's vehicle."""
 
+    grid_chunk: Callable
+    calibrate: Callable
+    run_chunk: Callable
+    params: tuple
+    vehicle: str
+
+
+def _calibrated_peer(spec, executor, work, class_of, fold_of, k, classes, label, out, progress) -> dict:
+    """FASTSim calibrated as vpsim is on these records (``spec``: :class:`PeerCalibration`): its grid on
+    every (record, test), its parameters fitted per fold and vpsim's class out of fold, then every record
+    run at its fold's values. Returns {(key, test): row}; the fits go into ``out["peer_technology"]``
+    ("fold<k>.<class>"), or why not into ``out["peer_technology_status"]``."""
     items = [(v, c) for v, cs in work for c in cs]
     size = max(1, HEV_CHUNK // 2)
     t0 = time.perf_counter()
     grid_rows: list[dict] = []
     for i, part in enumerate(
-        executor.map(ph.hev_calibration_chunk, [items[j : j + size] for j in range(0, len(items), size)])
+        executor.map(spec.grid_chunk, [items[j : j + size] for j in range(0, len(items), size)])
     ):
         grid_rows += part
         _progress(
-            "hybrids: FASTSim's calibration grid, tests",
+            f"{label}: FASTSim's calibration grid, tests",
             min((i + 1) * size, len(items)),
             len(items),
             t0,
@@ -958,23 +983,24 @@ def _calibrated_hev_peer(executor, work, class_of, fold_of, k, out, progress) ->
             grid_rows[0]["peer_error"] if grid_rows else "no test"
         )
         return {}
-    ptech = ph.calibrate_hev_peer(
+    ptech = spec.calibrate(
         np.stack([r["log_l100"] for r in ok]),
         np.array([_log_l100(by_key[r["key"]].measured_mpg[r["cycle"]]) for r in ok]),
         np.array([fold_of[r["key"]] for r in ok]),
         np.array([class_of[r["key"]] for r in ok], dtype=object),
         k,
-        hm.CLASSES,
+        classes,
     )
     out["peer_technology"] = {f"fold{f}.{c}": _rounded(t) for (f, c), t in sorted(ptech.items())}
+    out["peer_vehicle"] = spec.vehicle
     citems = [
-        (v, c, {p: ptech[(fold_of[v.key], class_of[v.key])][p] for p in ph.HEV_PEER_PARAMS})
+        (v, c, {p: ptech[(fold_of[v.key], class_of[v.key])][p] for p in spec.params})
         for v, cs in work
         for c in cs
     ]
     rows: dict = {}
     for part in executor.map(
-        ph.hev_peer_chunk, [citems[j : j + 2 * HEV_CHUNK] for j in range(0, len(citems), 2 * HEV_CHUNK)]
+        spec.run_chunk, [citems[j : j + 2 * HEV_CHUNK] for j in range(0, len(citems), 2 * HEV_CHUNK)]
     ):
         for r in part:
             rows[(r["key"], r["cycle"])] = r
