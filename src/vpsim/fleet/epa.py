@@ -718,22 +718,7 @@ def _vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[VehicleRecord | Non
     if not used:
         return None, "no usable test", test_rows
     first = used[0]
-    for name in (
-        "etw_lb",
-        "target_a_lbf",
-        "target_b_lbf_per_mph",
-        "target_c_lbf_per_mph2",
-        "displacement_l",
-        "cylinders",
-        "rated_hp",
-        "nv_ratio",
-    ):
-        problem = _field_problem(name, first[name], first["not_a_number"])
-        if problem:
-            return None, problem, test_rows
-    problem = road_load_problem(
-        first["target_a_lbf"], first["target_b_lbf_per_mph"], first["target_c_lbf_per_mph2"]
-    ) or power_to_mass_problem(first["rated_hp"], first["etw_lb"])
+    problem = record_problem(first, (*RECORD_FIELDS, "nv_ratio"))
     if problem:
         return None, problem, test_rows
     code = first["transmission_code"].upper()
@@ -757,33 +742,65 @@ def _vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[VehicleRecord | Non
     spec = first["rated_hp"] * HP_TO_KW / first["displacement_l"]
     boosted = spec > BOOST_SPECIFIC_POWER_KW_PER_L
     rule = f"specific power {spec:.1f} kW/L {'>' if boosted else '<='} {BOOST_SPECIFIC_POWER_KW_PER_L:g} kW/L"
-    measured = {c: _harmonic(v) for c, v in values.items() if v}
     rec = VehicleRecord(
-        vehicle_id=vid,
-        configuration=cfg,
-        make=first["make"],
-        model=first["model"],
-        manufacturer=first["manufacturer"],
-        displacement_l=first["displacement_l"],
-        cylinders=int(round(first["cylinders"])),
-        rated_hp=first["rated_hp"],
-        transmission_code=code,
+        **record_fields(vid, cfg, first, values),
         transmission_kind=kind,
         n_gears=int(n_gears),
         lockup=first["lockup"].upper() == "Y",
-        drive=first["drive"],
-        etw_lb=first["etw_lb"],
         axle_ratio=axle,
-        nv_ratio=first["nv_ratio"],
-        target_a_lbf=first["target_a_lbf"],
-        target_b_lbf_per_mph=first["target_b_lbf_per_mph"],
-        target_c_lbf_per_mph2=first["target_c_lbf_per_mph2"],
         boosted=boosted,
         boost_rule=rule,
-        measured_mpg=measured,
-        n_tests={c: len(v) for c, v in values.items() if v},
     )
     return rec, "", test_rows
+
+
+# the fields every engine's record must hold plausibly (a conventional car and a mild hybrid add nv_ratio)
+RECORD_FIELDS = (
+    "etw_lb",
+    "target_a_lbf",
+    "target_b_lbf_per_mph",
+    "target_c_lbf_per_mph2",
+    "displacement_l",
+    "cylinders",
+    "rated_hp",
+)
+
+
+def record_problem(first: dict, names: tuple[str, ...]) -> str | None:
+    """Why a vehicle whose first usable test row is ``first`` cannot be read, or None: a field of ``names``
+    missing, not a number or implausible (:func:`_field_problem`), then its road load or power to mass."""
+    for name in names:
+        problem = _field_problem(name, first[name], first["not_a_number"])
+        if problem:
+            return problem
+    return road_load_problem(
+        first["target_a_lbf"], first["target_b_lbf_per_mph"], first["target_c_lbf_per_mph2"]
+    ) or power_to_mass_problem(first["rated_hp"], first["etw_lb"])
+
+
+def record_fields(vid: str, cfg: int, first: dict, values: dict[str, list[float]]) -> dict:
+    """The fields a conventional, full-hybrid and mild-hybrid record all take alike from the first usable
+    test row ``first`` and the tests' figures ``values`` (test -> mpg of each test, averaged in fuel per
+    distance)."""
+    return {
+        "vehicle_id": vid,
+        "configuration": cfg,
+        "make": first["make"],
+        "model": first["model"],
+        "manufacturer": first["manufacturer"],
+        "displacement_l": first["displacement_l"],
+        "cylinders": int(round(first["cylinders"])),
+        "rated_hp": first["rated_hp"],
+        "transmission_code": first["transmission_code"].upper(),
+        "drive": first["drive"],
+        "etw_lb": first["etw_lb"],
+        "nv_ratio": first["nv_ratio"],
+        "target_a_lbf": first["target_a_lbf"],
+        "target_b_lbf_per_mph": first["target_b_lbf_per_mph"],
+        "target_c_lbf_per_mph2": first["target_c_lbf_per_mph2"],
+        "measured_mpg": {c: _harmonic(v) for c, v in values.items() if v},
+        "n_tests": {c: len(v) for c, v in values.items() if v},
+    }
 
 
 __all__ = [

@@ -503,40 +503,18 @@ def _cycle(name: str):
     return load_cycle(name)
 
 
+def _wall_of(rec: EVRecord, name: str):
+    """The wall Wh/km of a params' backward run on the cycle ``name``."""
+    from ..simulation import simulate
+
+    cyc = _cycle(name)
+    return lambda p: simulate(cyc, "backward", p).electric["wall_wh_per_km"]
+
+
 def grid_chunk(items: list[tuple[EVRecord, tuple[str, ...]]]) -> list[dict]:
     """Backward runs of each (record, cycles) at every loss-scale node and both accessory nodes:
     ``log_wall`` (len(LOSS_SCALE_AXIS), 2) of ln wall Wh/km, or ``error``."""
-    from ..simulation import simulate
-    from .run import _kernels_on_one_thread, _one_line
-
-    out = []
-    with _kernels_on_one_thread():
-        for rec, cycles in items:
-            try:
-                base = ev_parameters(rec)
-            except Exception as exc:
-                base, why = None, _one_line(exc)
-            for name in cycles:
-                row = {"key": rec.key, "cycle": name, "log_wall": None, "error": ""}
-                try:
-                    if base is None:
-                        raise ValueError(why)
-                    cyc = _cycle(name)
-                    g = np.empty((LOSS_SCALE_AXIS.size, len(ACCESSORY_NODES_W)))
-                    for i, s in enumerate(LOSS_SCALE_AXIS):
-                        for j, acc in enumerate(ACCESSORY_NODES_W):
-                            p = base.with_changes(
-                                machine={"loss_scale": float(s)}, electric={"accessory_power": acc}
-                            )
-                            r = simulate(cyc, "backward", p)
-                            g[i, j] = math.log(r.electric["wall_wh_per_km"])
-                    if not np.all(np.isfinite(g)):
-                        raise ValueError("non-finite energy on the technology grid")
-                    row["log_wall"] = g
-                except Exception as exc:
-                    row["error"] = _one_line(exc)
-                out.append(row)
-    return out
+    return GRID.grid_chunk(items, lambda rec, _: ev_parameters(rec), _wall_of, "log_wall", "energy")
 
 
 GRID = TechGrid(

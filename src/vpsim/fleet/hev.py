@@ -78,7 +78,6 @@ import numpy as np
 
 from .epa import (
     BOOST_SPECIFIC_POWER_KW_PER_L,
-    CERT_GASOLINE,
     HP_TO_KW,
     TRANSMISSION_KIND,
     CertificationRecord,
@@ -194,10 +193,6 @@ def printable_name(make: str, model: str) -> str:
     return printable(f"{make} {model}".strip())[:60]
 
 
-def _harmonic(xs):
-    return len(xs) / sum(1.0 / x for x in xs)
-
-
 def _plausible(x: float) -> bool:
     return math.isfinite(x) and MPG_RANGE[0] <= x <= MPG_RANGE[1]
 
@@ -229,55 +224,26 @@ def hot_udds(t: dict) -> tuple[float, str] | str:
     return hot, how
 
 
+def _ftp(t: dict) -> tuple[dict[str, float], str] | str:
+    """{udds_hot: mpg} of one FTP row and how it was read (:func:`hot_udds`), or why not."""
+    got = hot_udds(t)
+    return got if isinstance(got, str) else ({"udds_hot": got[0]}, got[1])
+
+
 def hev_vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[HEVRecord | None, str, list[dict]]:
     """(record or None, exclusion reason, excluded test rows) of one hybrid's parsed test rows."""
-    from .epa import _excl, _field_problem, power_to_mass_problem, road_load_problem
+    from .epa import RECORD_FIELDS, _field_problem, record_fields, record_problem
+    from .hybrids import read_tests
 
     first = tests[0]
     lay, rule = layout(first["make"], first["model"], first["transmission_code"])
     if lay is None:
         return None, rule, []
-    test_rows: list[dict] = []
-    values: dict[str, list[float]] = {c: [] for c in HEV_CYCLES}
-    hows: set[str] = set()
-    used: list[dict] = []
-    for t in tests:
-        cat = t["category"].upper()
-        if t["fuel"] != CERT_GASOLINE or "cold co" in t["procedure"].lower():
-            continue
-        if cat == "FTP":
-            got = hot_udds(t)
-            if isinstance(got, str):
-                test_rows.append(_excl(t, f"hybrid FTP test: {got}", test=True))
-                continue
-            values["udds_hot"].append(got[0])
-            hows.add(got[1])
-        elif cat in ("HWY", "US06"):
-            if not _plausible(t["fe"]):
-                test_rows.append(_excl(t, f"{cat} test: RND_ADJ_FE missing or implausible", test=True))
-                continue
-            values["hwy" if cat == "HWY" else "us06"].append(t["fe"])
-        else:
-            continue
-        used.append(t)
+    values, hows, used, test_rows = read_tests(tests, HEV_CYCLES, _ftp, "hybrid")
     if not used:
         return None, "hybrid, no usable test: no hot UDDS, HWY or US06 figure", test_rows
     first = used[0]
-    for name in (
-        "etw_lb",
-        "target_a_lbf",
-        "target_b_lbf_per_mph",
-        "target_c_lbf_per_mph2",
-        "displacement_l",
-        "cylinders",
-        "rated_hp",
-    ):
-        problem = _field_problem(name, first[name], first["not_a_number"])
-        if problem:
-            return None, f"hybrid, {problem}", test_rows
-    problem = road_load_problem(
-        first["target_a_lbf"], first["target_b_lbf_per_mph"], first["target_c_lbf_per_mph2"]
-    ) or power_to_mass_problem(first["rated_hp"], first["etw_lb"])
+    problem = record_problem(first, RECORD_FIELDS)
     if problem:
         return None, f"hybrid, {problem}", test_rows
     code = first["transmission_code"].upper()
@@ -291,30 +257,14 @@ def hev_vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[HEVRecord | None
     axle = first["axle_ratio"]
     spec = first["rated_hp"] * HP_TO_KW / first["displacement_l"]
     rec = HEVRecord(
-        vehicle_id=vid,
-        configuration=cfg,
-        make=first["make"],
-        model=first["model"],
-        manufacturer=first["manufacturer"],
-        displacement_l=first["displacement_l"],
-        cylinders=int(round(first["cylinders"])),
-        rated_hp=first["rated_hp"],
-        transmission_code=code,
+        **record_fields(vid, cfg, first, values),
         transmission_kind=TRANSMISSION_KIND.get(code, "other"),
         n_gears=int(n_gears) if lay == "hev_p2" else 1,
-        drive=first["drive"],
-        etw_lb=first["etw_lb"],
         axle_ratio=axle if math.isfinite(axle) else math.nan,
-        nv_ratio=first["nv_ratio"],
-        target_a_lbf=first["target_a_lbf"],
-        target_b_lbf_per_mph=first["target_b_lbf_per_mph"],
-        target_c_lbf_per_mph2=first["target_c_lbf_per_mph2"],
         boosted=spec > BOOST_SPECIFIC_POWER_KW_PER_L,
         layout=lay,
         layout_rule=rule,
         udds_rule="; ".join(sorted(hows)),
-        measured_mpg={c: _harmonic(v) for c, v in values.items() if v},
-        n_tests={c: len(v) for c, v in values.items() if v},
     )
     return rec, "", test_rows
 
@@ -586,49 +536,19 @@ def hev_vehicle_toml(rec: HEVRecord, params, source: str = "", technology_note: 
 # --- technology fit ----------------------------------------------------------------------------------------
 
 
-def _sim(rec: HEVRecord, name: str, params):
-    """One backward ECMS run of ``params`` on the cycle test ``name`` measures: (charge-sustaining L/100 km,
-    how long the trace's power was not deliverable)."""
+def _cycle(name: str):
+    """The cycle the model runs for the test ``name`` (:data:`SIM_CYCLE`)."""
     from ..cycles import load_cycle
-    from ..simulation import simulate
 
-    r = simulate(load_cycle(SIM_CYCLE[name]), "backward", params, ems="ecms")
-    s = r.summary()
-    return float(s["fuel_l_per_100km_cs"]), float(r.deviations.demand_not_deliverable_s or 0.0)
+    return load_cycle(SIM_CYCLE[name])
 
 
 def grid_chunk(items: list[tuple[HEVRecord, tuple[str, ...]]]) -> list[dict]:
     """Backward ECMS runs of each (record, tests) at every efficiency node and both accessory nodes:
     ``log_fuel`` (len(EFFICIENCY_AXIS), 2) of ln charge-sustaining L/100 km, or ``error``."""
-    from .run import _kernels_on_one_thread, _one_line
+    from .hybrids import cs_fuel_of
 
-    out = []
-    with _kernels_on_one_thread():
-        for rec, cycles in items:
-            try:
-                base = hev_parameters(rec)
-                why = ""
-            except Exception as exc:
-                base, why = None, _one_line(exc)
-            for name in cycles:
-                row = {"key": rec.key, "cycle": name, "log_fuel": None, "error": ""}
-                try:
-                    if base is None:
-                        raise ValueError(why)
-                    g = np.empty((EFFICIENCY_AXIS.size, len(ACCESSORY_NODES_W)))
-                    for i, eta in enumerate(EFFICIENCY_AXIS):
-                        for j, acc in enumerate(ACCESSORY_NODES_W):
-                            p = base.with_changes(
-                                engine={"thermal_efficiency": float(eta)}, electric={"accessory_power": acc}
-                            )
-                            g[i, j] = math.log(_sim(rec, name, p)[0])
-                    if not np.all(np.isfinite(g)):
-                        raise ValueError("non-finite fuel on the technology grid")
-                    row["log_fuel"] = g
-                except Exception as exc:
-                    row["error"] = _one_line(exc)
-                out.append(row)
-    return out
+    return GRID.grid_chunk(items, lambda rec, _: hev_parameters(rec), cs_fuel_of(_cycle), "log_fuel", "fuel")
 
 
 GRID = TechGrid(TECH_PARAMS, EFFICIENCY_AXIS, EFFICIENCY_FINE, ACCESSORY_NODES_W, ACCESSORY_AXIS, "hybrid")
@@ -638,17 +558,6 @@ surrogate, fit, search_bounds, on_bounds = GRID.surrogate, GRID.fit, GRID.search
 def predict_chunk(items: list[tuple[HEVRecord, str, dict]]) -> list[dict]:
     """One backward ECMS run per (record, test, technology): ``l_per_100km_cs``, ``trace_miss_s``, or
     ``error``."""
-    from .run import _kernels_on_one_thread, _one_line
+    from . import hybrids
 
-    out = []
-    with _kernels_on_one_thread():
-        for rec, name, tech in items:
-            row = {"key": rec.key, "cycle": name, "error": ""}
-            try:
-                p = hev_parameters(rec, {k: tech[k] for k in TECH_PARAMS})
-                row["l_per_100km_cs"], row["trace_miss_s"] = _sim(rec, name, p)
-                row["machine_kw"] = p.machine.rated_power / 1e3
-            except Exception as exc:
-                row["error"] = _one_line(exc)
-            out.append(row)
-    return out
+    return hybrids.predict_chunk(items, TECH_PARAMS, lambda rec, _, tech: hev_parameters(rec, tech), _cycle)

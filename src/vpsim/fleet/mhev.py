@@ -54,7 +54,6 @@ import numpy as np
 
 from .epa import (
     BOOST_SPECIFIC_POWER_KW_PER_L,
-    CERT_GASOLINE,
     HP_TO_KW,
     TRANSMISSION_KIND,
     CertificationRecord,
@@ -205,62 +204,18 @@ def _bags(t: dict) -> tuple[dict[str, float], str] | str:
 
 def mhev_vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[MHEVRecord | None, str, list[dict]]:
     """(record or None, exclusion reason, excluded test rows) of one mild hybrid's parsed test rows."""
-    from .epa import (
-        _excl,
-        _field_problem,
-        _harmonic,
-        _plausible_mpg,
-        power_to_mass_problem,
-        road_load_problem,
-    )
+    from .epa import RECORD_FIELDS, record_fields, record_problem
+    from .hybrids import read_tests
 
     first = tests[0]
     key, rule = system_of(first["make"], first["model"], first["displacement_l"])
     if key is None:
         return None, rule, []
-    test_rows: list[dict] = []
-    values: dict[str, list[float]] = {c: [] for c in MHEV_CYCLES}
-    hows: set[str] = set()
-    used: list[dict] = []
-    for t in tests:
-        cat = t["category"].upper()
-        if t["fuel"] != CERT_GASOLINE or "cold co" in t["procedure"].lower():
-            continue
-        if cat == "FTP":
-            got = _bags(t)
-            if isinstance(got, str):
-                test_rows.append(_excl(t, f"mild hybrid FTP test: {got}", test=True))
-                continue
-            for c, x in got[0].items():
-                values[c].append(x)
-            hows.add(got[1])
-        elif cat in ("HWY", "US06"):
-            if not _plausible_mpg(t["fe"]):
-                test_rows.append(_excl(t, f"{cat} test: RND_ADJ_FE missing or implausible", test=True))
-                continue
-            values["hwy" if cat == "HWY" else "us06"].append(t["fe"])
-        else:
-            continue
-        used.append(t)
+    values, hows, used, test_rows = read_tests(tests, MHEV_CYCLES, _bags, "mild hybrid")
     if not used:
         return None, "mild hybrid, no usable test: no FTP bag, HWY or US06 figure", test_rows
     first = used[0]
-    for name in (
-        "etw_lb",
-        "target_a_lbf",
-        "target_b_lbf_per_mph",
-        "target_c_lbf_per_mph2",
-        "displacement_l",
-        "cylinders",
-        "rated_hp",
-        "nv_ratio",
-    ):
-        problem = _field_problem(name, first[name], first["not_a_number"])
-        if problem:
-            return None, f"mild hybrid, {problem}", test_rows
-    problem = road_load_problem(
-        first["target_a_lbf"], first["target_b_lbf_per_mph"], first["target_c_lbf_per_mph2"]
-    ) or power_to_mass_problem(first["rated_hp"], first["etw_lb"])
+    problem = record_problem(first, (*RECORD_FIELDS, "nv_ratio"))
     if problem:
         return None, f"mild hybrid, {problem}", test_rows
     code = first["transmission_code"].upper()
@@ -277,32 +232,16 @@ def mhev_vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[MHEVRecord | No
     boosted = spec > BOOST_SPECIFIC_POWER_KW_PER_L
     sys_ = SYSTEMS[key]
     rec = MHEVRecord(
-        vehicle_id=vid,
-        configuration=cfg,
-        make=first["make"],
-        model=first["model"],
-        manufacturer=first["manufacturer"],
-        displacement_l=first["displacement_l"],
-        cylinders=int(round(first["cylinders"])),
-        rated_hp=first["rated_hp"],
-        transmission_code=code,
+        **record_fields(vid, cfg, first, values),
         transmission_kind=kind,
         n_gears=int(n_gears),
         lockup=first["lockup"].upper() == "Y",
-        drive=first["drive"],
-        etw_lb=first["etw_lb"],
         axle_ratio=axle,
-        nv_ratio=first["nv_ratio"],
-        target_a_lbf=first["target_a_lbf"],
-        target_b_lbf_per_mph=first["target_b_lbf_per_mph"],
-        target_c_lbf_per_mph2=first["target_c_lbf_per_mph2"],
         boosted=boosted,
         boost_rule=f"specific power {spec:.1f} kW/L, {BOOST_SPECIFIC_POWER_KW_PER_L:g} the threshold",
         system=key,
         layout=sys_.layout,
         bag_rule="; ".join(sorted(hows)) + f"; {rule}",
-        measured_mpg={c: _harmonic(v) for c, v in values.items() if v},
-        n_tests={c: len(v) for c, v in values.items() if v},
     )
     return rec, "", test_rows
 
@@ -386,42 +325,20 @@ def family_labels(rec: MHEVRecord):
 # --- technology fit ----------------------------------------------------------------------------------------
 
 
-def _sim(name: str, params):
-    """One backward ECMS run on the fleet cycle ``name``: (charge-sustaining L/100 km, trace miss s)."""
-    from ..simulation import simulate
+def _cycle(name: str):
+    """The fleet cycle of the test ``name``."""
     from .cycles import fleet_cycle
 
-    r = simulate(fleet_cycle(name), "backward", params, ems="ecms")
-    s = r.summary()
-    return float(s["fuel_l_per_100km_cs"]), float(r.deviations.demand_not_deliverable_s or 0.0)
+    return fleet_cycle(name)
 
 
 def grid_chunk(items: list[tuple[MHEVRecord, tuple[str, ...]]]) -> list[dict]:
     """Backward ECMS runs of each (record, tests) at every efficiency node and both accessory nodes:
-    ``log_fuel`` (len(EFFICIENCY_AXIS), 2) of ln charge-sustaining L/100 km, or ``error``."""
-    from .run import _kernels_on_one_thread, _one_line
+    ``log_fuel`` (len(EFFICIENCY_AXIS), 2) of ln charge-sustaining L/100 km, or ``error``; the vehicle is
+    built per test (its road load folded over that cycle)."""
+    from .hybrids import cs_fuel_of
 
-    out = []
-    with _kernels_on_one_thread():
-        for rec, cycles in items:
-            for name in cycles:
-                row = {"key": rec.key, "cycle": name, "log_fuel": None, "error": ""}
-                try:
-                    base = mhev_parameters(rec, name)
-                    g = np.empty((EFFICIENCY_AXIS.size, len(ACCESSORY_NODES_W)))
-                    for i, eta in enumerate(EFFICIENCY_AXIS):
-                        for j, acc in enumerate(ACCESSORY_NODES_W):
-                            p = base.with_changes(
-                                engine={"thermal_efficiency": float(eta)}, electric={"accessory_power": acc}
-                            )
-                            g[i, j] = math.log(_sim(name, p)[0])
-                    if not np.all(np.isfinite(g)):
-                        raise ValueError("non-finite fuel on the technology grid")
-                    row["log_fuel"] = g
-                except Exception as exc:
-                    row["error"] = _one_line(exc)
-                out.append(row)
-    return out
+    return GRID.grid_chunk(items, mhev_parameters, cs_fuel_of(_cycle), "log_fuel", "fuel", per_test=True)
 
 
 GRID = TechGrid(
@@ -433,20 +350,9 @@ surrogate, fit, search_bounds, on_bounds = GRID.surrogate, GRID.fit, GRID.search
 def predict_chunk(items: list[tuple[MHEVRecord, str, dict]]) -> list[dict]:
     """One backward ECMS run per (record, test, technology): ``l_per_100km_cs``, ``trace_miss_s``, or
     ``error``."""
-    from .run import _kernels_on_one_thread, _one_line
+    from . import hybrids
 
-    out = []
-    with _kernels_on_one_thread():
-        for rec, name, tech in items:
-            row = {"key": rec.key, "cycle": name, "error": ""}
-            try:
-                p = mhev_parameters(rec, name, {k: tech[k] for k in TECH_PARAMS})
-                row["l_per_100km_cs"], row["trace_miss_s"] = _sim(name, p)
-                row["machine_kw"] = p.machine.rated_power / 1e3
-            except Exception as exc:
-                row["error"] = _one_line(exc)
-            out.append(row)
-    return out
+    return hybrids.predict_chunk(items, TECH_PARAMS, mhev_parameters, _cycle)
 
 
 __all__ = [

@@ -9,6 +9,7 @@ rows; every reported figure then comes from one real run at the fitted values, n
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -71,3 +72,44 @@ class TechGrid:
     def on_bounds(self, params: dict) -> dict[str, str]:
         """{parameter: "low" | "high"} for each fitted value that sits on its search bound."""
         return bounds_hit(self.search_bounds(), params)
+
+    def log_grid(self, base, figure_of, what: str) -> np.ndarray:
+        """ln ``figure_of(params)`` of ``base`` (:class:`~vpsim.params.Parameters`) at every node of the first
+        parameter and both accessory nodes: (len(axis), 2); a non-finite figure (``what``) an error."""
+        (sec0, fld0), (sec1, fld1) = (name.split(".") for name in self.names)
+        g = np.empty((self.axis.size, len(self.accessory_nodes_w)))
+        for i, x in enumerate(self.axis):
+            for j, acc in enumerate(self.accessory_nodes_w):
+                changes: dict[str, dict] = {sec0: {fld0: float(x)}}
+                changes.setdefault(sec1, {})[fld1] = acc
+                g[i, j] = math.log(figure_of(base.with_changes(**changes)))
+        if not np.all(np.isfinite(g)):
+            raise ValueError(f"non-finite {what} on the technology grid")
+        return g
+
+    def grid_chunk(self, items, base_of, runner_of, column: str, what: str, *, per_test: bool = False):
+        """The grid (:meth:`log_grid`) of each (record, tests) of ``items``, a row per test with ``column``
+        (or None and ``error``). ``base_of(rec, test)`` builds the vehicle, once per record (``test`` None)
+        unless ``per_test``; ``runner_of(rec, test)`` gives the figure of a params' run on the test."""
+        from .run import _kernels_on_one_thread, _one_line
+
+        out = []
+        with _kernels_on_one_thread():
+            for rec, cycles in items:
+                if not per_test:
+                    try:
+                        base, why = base_of(rec, None), ""
+                    except Exception as exc:
+                        base, why = None, _one_line(exc)
+                for name in cycles:
+                    row = {"key": rec.key, "cycle": name, column: None, "error": ""}
+                    try:
+                        if per_test:
+                            base = base_of(rec, name)
+                        elif base is None:
+                            raise ValueError(why)
+                        row[column] = self.log_grid(base, runner_of(rec, name), what)
+                    except Exception as exc:
+                        row["error"] = _one_line(exc)
+                    out.append(row)
+        return out
