@@ -765,20 +765,8 @@ def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings) ->
     calibrated = PeerCalibration(
         ph.hev_calibration_chunk, ph.calibrate_hev_peer, ph.hev_peer_chunk, ph.HEV_PEER_PARAMS, "hybrid"
     )
-    return _run_hybrids(
-        hevs,
-        hm,
-        hm.hev_class,
-        ph.hev_peer_chunk,
-        calibrated,
-        what,
-        folds,
-        group_by,
-        executor,
-        peer_state,
-        progress,
-        timings,
-    )
+    part = HybridFleet(hm, hm.hev_class, ph.hev_peer_chunk, calibrated, what)
+    return _run_hybrids(hevs, part, folds, group_by, executor, peer_state, progress, timings)
 
 
 def _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings) -> dict:
@@ -802,29 +790,28 @@ def _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings) 
         peer_mod.PEER_PARAMS,
         "conventional car",
     )
-    return _run_hybrids(
-        mhevs,
-        mm,
-        mm.mhev_class,
-        peer_mod.peer_chunk,
-        calibrated,
-        what,
-        folds,
-        group_by,
-        executor,
-        peer_state,
-        progress,
-        timings,
-    )
+    part = HybridFleet(mm, mm.mhev_class, peer_mod.peer_chunk, calibrated, what)
+    return _run_hybrids(mhevs, part, folds, group_by, executor, peer_state, progress, timings)
 
 
-def _run_hybrids(
-    recs, hm, class_fn, peer_chunk, calibrated, what, folds, group_by, executor, peer_state, progress, timings
-):
-    """The hybrids of module ``hm`` (:mod:`vpsim.fleet.hev` or :mod:`.mhev`: ``fit``, ``CLASSES``,
-    ``TECH_PARAMS``, ``grid_chunk``, ``predict_chunk``, ``family_labels``) on their tests ``what["cycles"]``;
-    ``peer_chunk`` runs FASTSim on (record, test) items, ``calibrated`` (:class:`PeerCalibration`) fits
-    and runs it calibrated."""
+class HybridFleet(NamedTuple):
+    """A hybrid part of the fleet for :func:`_run_hybrids`: its module ``hm`` (:mod:`vpsim.fleet.hev` or
+    :mod:`.mhev`: ``fit``, ``CLASSES``, ``TECH_PARAMS``, ``grid_chunk``, ``predict_chunk``,
+    ``family_labels``), ``class_fn`` its technology class of a record, ``peer_chunk`` runs FASTSim on
+    (record, test) items, ``calibrated`` (:class:`PeerCalibration`) fits and runs it calibrated, ``what``
+    names the vehicles and their tests (``name``, ``label``, ``cycles``, ``tests``)."""
+
+    hm: object
+    class_fn: Callable
+    peer_chunk: Callable
+    calibrated: PeerCalibration
+    what: dict
+
+
+def _run_hybrids(recs, part: HybridFleet, folds, group_by, executor, peer_state, progress, timings):
+    """The hybrids ``recs`` of the fleet part ``part`` (:class:`HybridFleet`) on their tests
+    ``part.what["cycles"]``."""
+    hm, class_fn, peer_chunk, calibrated, what = part
     name = what["name"]
     out = {"rows": [], "technology": {}, "technology_all": {}, "folds": 0, "groups": 0}
     out.update(status="ok", n_records=len(recs))
