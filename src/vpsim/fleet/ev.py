@@ -386,31 +386,15 @@ def ev_parameters(rec: EVRecord, technology: dict | None = None):
 def ev_vehicle_toml(rec: EVRecord, params, source: str = "", technology_note: str = "") -> str:
     """An editable BEV TOML (``vpsim simulate --vehicle``) with the record block
     (:func:`vpsim.fleet.vehicle.read_record_block` reads it; ``[record.measured_mpge]``: udds, hwy)."""
-    from .vehicle import RECORD_BEGIN, RECORD_END, _toml_value
+    from .vehicle import RECORD_NOTES, record_block, toml_head, toml_section, with_record_block
 
     a, b, c = rec.road_load_si
-    lines = [
-        printable(
-            f"# {rec.make} {rec.model}: test vehicle {rec.vehicle_id}, configuration {rec.configuration}"
-        ),
-        printable(f"# built by vpsim vehicle from-epa from {source or 'an EPA test car list'}"),
-        "# (the module vpsim.fleet.ev documents the mapping and its defaults)",
-        "# SI units. Edit freely; run with: vpsim simulate --vehicle THIS_FILE",
-        f'base = "{BASE_PRESET}"',
-        f"name = {_toml_value(params.name)}",
-        "",
-        "[powertrain]",
-        'type = "bev"',
-        "",
-    ]
+    lines = toml_head(rec, source, "ev", BASE_PRESET, params.name, powertrain="bev")
     w_b, w_max = params.machine.base_speed, params.machine.max_speed
     notes = {
-        "vehicle.mass": "record: equivalent test weight",
+        **RECORD_NOTES,
         "vehicle.rolling_resistance": "unused while road_load_* are set (the A/B/C folded, for the peer)",
         "vehicle.drag_coefficient": "unused while road_load_* are set (the A/B/C folded, for the peer)",
-        "vehicle.road_load_a": "record: target coast-down A (N)",
-        "vehicle.road_load_b": "record: target coast-down B (N per m/s)",
-        "vehicle.road_load_c": "record: target coast-down C (N per (m/s)^2)",
         "vehicle.wheel_radius": rec.ratio_rule,
         "transmission.final_drive": rec.ratio_rule,
         "transmission.gearbox_ratios": "single reduction",
@@ -440,20 +424,13 @@ def ev_vehicle_toml(rec: EVRecord, params, source: str = "", technology_note: st
         ("transmission", ("efficiency", "gearbox_ratios", "final_drive")),
         ("machine", ("rated_power", "base_speed", "max_speed", "kind", "inertia", "loss_scale")),
         ("battery", ("cell", "cells_in_series", "cells_in_parallel", "soc_initial", "soc_min", "soc_max")),
-        ("electric", ("accessory_power", "charger_efficiency", "regen_share", "regen_speed_low")),
+        (
+            "electric",
+            ("accessory_power", "charger_efficiency", "regen_share", "regen_speed_low", "regen_speed_high"),
+        ),
     ):
-        lines.append(f"[{sec}]")
-        for f in fields_:
-            v = flat[f"{sec}.{f}"]
-            note = notes.get(f"{sec}.{f}")
-            val = _toml_value(list(v) if isinstance(v, tuple) else v)
-            lines.append(f"{f} = {val}" + (f"  # {note}" if note else ""))
-        if sec == "electric":
-            lines.append(f"regen_speed_high = {_toml_value(flat['electric.regen_speed_high'])}")
-        lines.append("")
+        lines += toml_section(sec, fields_, flat, notes)
     del w_b, w_max
-    from .vehicle import record_block
-
     block = record_block(
         rec,
         (a, b, c),
@@ -462,10 +439,7 @@ def ev_vehicle_toml(rec: EVRecord, params, source: str = "", technology_note: st
         "unadjusted, charge-depleting UDDS and highway tests",
         {"powertrain": "bev"},
     )
-    lines.append(RECORD_BEGIN)
-    lines += [("# " + x) if x else "#" for x in block]
-    lines.append(RECORD_END)
-    return "\n".join(lines) + "\n"
+    return with_record_block(lines, block)
 
 
 # --- grouping for cross-validation ------------------------------------------------------------------------

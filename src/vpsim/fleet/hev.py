@@ -466,14 +466,11 @@ def hev_vehicle_toml(rec: HEVRecord, params, source: str = "", technology_note: 
     record block; ``[record.measured_mpg]`` holds ``udds`` (the hot UDDS, FTP bags 3 + 4), ``hwy``, ``us06``:
     ``vpsim simulate`` compares them with the charge-sustaining figure."""
     from ..textio import printable
-    from .vehicle import RECORD_BEGIN, RECORD_END, _toml_value, record_block
+    from .vehicle import RECORD_NOTES, record_block, toml_head, toml_section, with_record_block
 
     sizes = "the layout's rule (vpsim.fleet.hev): the preset's, scaled"
     notes = {
-        "vehicle.mass": "record: equivalent test weight",
-        "vehicle.road_load_a": "record: target coast-down A (N)",
-        "vehicle.road_load_b": "record: target coast-down B (N per m/s)",
-        "vehicle.road_load_c": "record: target coast-down C (N per (m/s)^2)",
+        **RECORD_NOTES,
         "engine.bore": "record: displacement and cylinders",
         "engine.rated_power": "record: rated power (the engine's, W)",
         "engine.thermal_efficiency": technology_note or "the preset's",
@@ -490,34 +487,13 @@ def hev_vehicle_toml(rec: HEVRecord, params, source: str = "", technology_note: 
             "record: axle ratio" if rec.layout == "hev_split" else "record: N/V and axle ratio"
         ),
     }
-    lines = [
-        printable(
-            f"# {rec.make} {rec.model}: test vehicle {rec.vehicle_id}, configuration {rec.configuration}"
-        ),
-        printable(f"# built by vpsim vehicle from-epa from {source or 'an EPA test car list'}"),
-        printable(f"# layout {rec.layout}: {rec.layout_rule}"),
-        "# (the module vpsim.fleet.hev documents the mapping and its defaults)",
-        "# SI units. Edit freely; run with: vpsim simulate --vehicle THIS_FILE",
-        f'base = "{PRESET[rec.layout]}"',
-        f"name = {_toml_value(params.name)}",
-        "",
-        "[powertrain]",
-        f'type = "{rec.layout}"',
-        "",
-    ]
+    about = [printable(f"# layout {rec.layout}: {rec.layout_rule}")]
+    lines = toml_head(rec, source, "hev", PRESET[rec.layout], params.name, about, rec.layout)
     flat = params.flat()
     for sec, fields_ in TOML_FIELDS:
         if sec == "split" and rec.layout != "hev_split":
             continue
-        lines.append(f"[{sec}]")
-        for f in fields_:
-            v = flat.get(f"{sec}.{f}")
-            if v is None:
-                continue
-            note = notes.get(f"{sec}.{f}")
-            val = _toml_value(list(v) if isinstance(v, tuple) else v)
-            lines.append(f"{f} = {val}" + (f"  # {note}" if note else ""))
-        lines.append("")
+        lines += toml_section(sec, fields_, flat, notes, present_only=True)
     measured = {TOML_TEST_NAME[c]: v for c, v in rec.measured_mpg.items()}
     block = record_block(
         rec,
@@ -527,10 +503,7 @@ def hev_vehicle_toml(rec: HEVRecord, params, source: str = "", technology_note: 
         "unadjusted; udds = the hot UDDS of the 4-bag FTP (bags 3 + 4), compared charge-sustaining",
         {"powertrain": rec.layout},
     )
-    lines.append(RECORD_BEGIN)
-    lines += [("# " + x) if x else "#" for x in block]
-    lines.append(RECORD_END)
-    return "\n".join(lines) + "\n"
+    return with_record_block(lines, block)
 
 
 # --- technology fit ----------------------------------------------------------------------------------------

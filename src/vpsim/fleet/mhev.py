@@ -389,14 +389,11 @@ def mhev_vehicle_toml(rec: MHEVRecord, params, source: str = "", technology_note
     ``[record.measured_mpg]`` holds the fleet's tests (``ftp_bag2``, ``ftp_bag3``, ``hwy``, ``us06``), which
     ``vpsim simulate`` compares with the charge-sustaining figure."""
     from ..textio import printable
-    from .vehicle import RECORD_BEGIN, RECORD_END, _toml_value, record_block
+    from .vehicle import RECORD_NOTES, record_block, toml_head, toml_section, with_record_block
 
     sys_ = SYSTEMS[rec.system]
     notes = {
-        "vehicle.mass": "record: equivalent test weight",
-        "vehicle.road_load_a": "record: target coast-down A (N)",
-        "vehicle.road_load_b": "record: target coast-down B (N per m/s)",
-        "vehicle.road_load_c": "record: target coast-down C (N per (m/s)^2)",
+        **RECORD_NOTES,
         "engine.bore": "record: displacement and cylinders",
         "engine.rated_power": "record: rated power (W)",
         "engine.thermal_efficiency": technology_note or "the preset's",
@@ -405,32 +402,11 @@ def mhev_vehicle_toml(rec: MHEVRecord, params, source: str = "", technology_note
         "battery.cells_in_parallel": "the preset's cell, strings for the machine's rated power",
         "transmission.final_drive": "record: N/V and axle ratio",
     }
-    lines = [
-        printable(
-            f"# {rec.make} {rec.model}: test vehicle {rec.vehicle_id}, configuration {rec.configuration}"
-        ),
-        printable(f"# built by vpsim vehicle from-epa from {source or 'an EPA test car list'}"),
-        printable(f"# mild hybrid {rec.layout}: {sys_.source}"),
-        "# (the module vpsim.fleet.mhev documents the mapping and its defaults)",
-        "# SI units. Edit freely; run with: vpsim simulate --vehicle THIS_FILE",
-        f'base = "{PRESET}"',
-        f"name = {_toml_value(params.name)}",
-        "",
-        "[powertrain]",
-        'type = "mhev"',
-        "",
-    ]
+    about = [printable(f"# mild hybrid {rec.layout}: {sys_.source}")]
+    lines = toml_head(rec, source, "mhev", PRESET, params.name, about, "mhev")
     flat = params.flat()
     for sec, fields_ in TOML_FIELDS:
-        lines.append(f"[{sec}]")
-        for f in fields_:
-            v = flat.get(f"{sec}.{f}")
-            if v is None:
-                continue
-            note = notes.get(f"{sec}.{f}")
-            val = _toml_value(list(v) if isinstance(v, tuple) else v)
-            lines.append(f"{f} = {val}" + (f"  # {note}" if note else ""))
-        lines.append("")
+        lines += toml_section(sec, fields_, flat, notes, present_only=True)
     block = record_block(
         rec,
         rec.road_load_si,
@@ -439,7 +415,4 @@ def mhev_vehicle_toml(rec: MHEVRecord, params, source: str = "", technology_note
         "unadjusted; ftp_bag2 / ftp_bag3 = FE Bag 2 / 3 of the 4-bag FTP, compared charge-sustaining",
         {"powertrain": "mhev", "layout": rec.layout},
     )
-    lines.append(RECORD_BEGIN)
-    lines += [("# " + x) if x else "#" for x in block]
-    lines.append(RECORD_END)
-    return "\n".join(lines) + "\n"
+    return with_record_block(lines, block)

@@ -404,6 +404,58 @@ def _toml_string(text: str) -> str:
     return '"' + "".join(out) + '"'
 
 
+# the notes of the record's own fields, which every vehicle file takes alike
+RECORD_NOTES = {
+    "vehicle.mass": "record: equivalent test weight",
+    "vehicle.road_load_a": "record: target coast-down A (N)",
+    "vehicle.road_load_b": "record: target coast-down B (N per m/s)",
+    "vehicle.road_load_c": "record: target coast-down C (N per (m/s)^2)",
+}
+
+
+def toml_head(rec, source: str, module: str, base: str, name, about=(), powertrain: str = "") -> list[str]:
+    """The first lines of a vehicle file: what it is and where from (``about``: lines of the module's own),
+    the module ``vpsim.fleet.<module>`` that documents the mapping, the preset ``base``, the name and, for
+    ``powertrain``, its ``[powertrain]`` section."""
+    lines = [
+        printable(
+            f"# {rec.make} {rec.model}: test vehicle {rec.vehicle_id}, configuration {rec.configuration}"
+        ),
+        printable(f"# built by vpsim vehicle from-epa from {source or 'an EPA test car list'}"),
+        *about,
+        f"# (the module vpsim.fleet.{module} documents the mapping and its defaults)",
+        "# SI units. Edit freely; run with: vpsim simulate --vehicle THIS_FILE",
+        f'base = "{base}"',
+        f"name = {_toml_value(name)}",
+        "",
+    ]
+    if powertrain:
+        lines += ["[powertrain]", f'type = "{powertrain}"', ""]
+    return lines
+
+
+def toml_section(sec: str, fields_, flat: dict, notes: dict, *, present_only: bool = False) -> list[str]:
+    """The lines of the section ``sec`` of a vehicle file: ``field = value  # note`` for each of ``fields_``
+    (``flat``: :meth:`~vpsim.params.Parameters.flat`; ``present_only``: the fields it holds, not None), then
+    a blank line."""
+    lines = [f"[{sec}]"]
+    for f in fields_:
+        v = flat.get(f"{sec}.{f}") if present_only else flat[f"{sec}.{f}"]
+        if present_only and v is None:
+            continue
+        note = notes.get(f"{sec}.{f}")
+        val = _toml_value(list(v) if isinstance(v, tuple) else v)
+        lines.append(f"{f} = {val}" + (f"  # {note}" if note else ""))
+    lines.append("")
+    return lines
+
+
+def with_record_block(lines: list[str], block: list[str]) -> str:
+    """The vehicle file's text: ``lines``, then the record block (:func:`record_block`) commented out between
+    :data:`RECORD_BEGIN` and :data:`RECORD_END`."""
+    return "\n".join([*lines, RECORD_BEGIN, *(("# " + x) if x else "#" for x in block), RECORD_END]) + "\n"
+
+
 def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", technology_note: str = "") -> str:
     """An editable TOML that :func:`vpsim.params.load_parameters` reads (``vpsim simulate --vehicle``).
 
@@ -412,24 +464,11 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
     uncommented, the block is valid TOML (``[road_load]``, ``[record]``).
     """
     a, b, c = rec.road_load_si
-    lines = [
-        printable(
-            f"# {rec.make} {rec.model}: test vehicle {rec.vehicle_id}, configuration {rec.configuration}"
-        ),
-        printable(f"# built by vpsim vehicle from-epa from {source or 'an EPA test car list'}"),
-        "# (the module vpsim.fleet.vehicle documents the mapping and its defaults)",
-        "# SI units. Edit freely; run with: vpsim simulate --vehicle THIS_FILE",
-        f'base = "{BASE_PRESET}"',
-        f"name = {_toml_value(params.name)}",
-        "",
-    ]
+    lines = toml_head(rec, source, "vehicle", BASE_PRESET, params.name)
     notes = {
-        "vehicle.mass": "record: equivalent test weight",
+        **RECORD_NOTES,
         "vehicle.rolling_resistance": "unused while road_load_* are set (the A/B/C folded, for the peer)",
         "vehicle.drag_coefficient": "unused while road_load_* are set (the A/B/C folded, for the peer)",
-        "vehicle.road_load_a": "record: target coast-down A (N)",
-        "vehicle.road_load_b": "record: target coast-down B (N per m/s)",
-        "vehicle.road_load_c": "record: target coast-down C (N per (m/s)^2)",
         "engine.boost_pressure": "boosted: the boost of the rated power at 5500 rpm (Pa); 0: aspirated",
         "engine.rated_power": "record: rated power (W), caps the full-load line",
         "engine.boost_enrichment": "boosted: extra fuel at full boost (lambda 0.87); 0: aspirated",
@@ -514,13 +553,7 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         ),
         ("simulation", ("idle_fuel_flow", "fuel_density", "fuel_cutoff_speed")),
     ):
-        lines.append(f"[{sec}]")
-        for f in fields_:
-            v = flat[f"{sec}.{f}"]
-            note = notes.get(f"{sec}.{f}")
-            val = _toml_value(list(v) if isinstance(v, tuple) else v)
-            lines.append(f"{f} = {val}" + (f"  # {note}" if note else ""))
-        lines.append("")
+        lines += toml_section(sec, fields_, flat, notes)
     block = record_block(rec, (a, b, c), "measured_mpg", rec.measured_mpg, "", {})
     for key, d in params.drivers.items():
         lines.append(
@@ -530,10 +563,7 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         lines.append(f"forward_ki = {_toml_value(d.forward_ki)}")
         lines.append(f"inverse_a = {_toml_value(d.inverse_a)}")
         lines.append("")
-    lines.append(RECORD_BEGIN)
-    lines += [("# " + x) if x else "#" for x in block]
-    lines.append(RECORD_END)
-    return "\n".join(lines) + "\n"
+    return with_record_block(lines, block)
 
 
 def record_block(rec, road_load_si, measured_key: str, measured: dict, measured_note: str, extra: dict):
