@@ -4,6 +4,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..model import electric as el
@@ -100,3 +102,22 @@ def book_step(sums, pt, terms, vv, dt, ratio, on, c, h):
     if pt[11] < 0.0:
         sums[S_REGEN] += -pt[11] * dt
     return running, missing
+
+
+@equation
+def store_point(rows, k, at, pt, running, missing, ratio, soc, c):
+    """Column k of the series rows ``at`` to ``at + 10``, which every layout's series holds in this order: the
+    point ``pt``'s intake pressure (NaN with the engine off), fuel flow, battery current, open-circuit and
+    terminal voltage, the charge at the step's start, the brakes, the torque short (at the shaft), the engine
+    running, the machine and the battery at their limits."""
+    rows[at, k] = pt[5] if running > 0.0 else math.nan
+    rows[at + 1, k] = pt[6]
+    rows[at + 2, k] = pt[8]
+    rows[at + 3, k] = pt[9]
+    rows[at + 4, k] = pt[9] - pt[10] * pt[8]
+    rows[at + 5, k] = soc
+    rows[at + 6, k] = pt[12]
+    rows[at + 7, k] = el.shaft_torque(missing, ratio, c)
+    rows[at + 8, k] = running
+    rows[at + 9, k] = pt[14]
+    rows[at + 10, k] = pt[15]

@@ -58,6 +58,7 @@ from ._hybrid import N_COMMON_SUMS
     H_TCR,
 ) = range(19)
 N_ROWS = 19
+assert H_LIM_B - H_P == 10  # H_P .. H_LIM_B: the rows methods._hybrid.store_point writes
 N_SUMS = N_COMMON_SUMS  # the running sums: the energy terms, then those of methods._hybrid
 MISS_TOLERANCE_N = 1e-9
 
@@ -206,17 +207,7 @@ def store_row(rows, k, t, v, a, g, pt, running, missing, ratio, soc, c):
     rows[H_W, k] = pt[0]
     rows[H_TE, k] = pt[3]
     rows[H_TM, k] = pt[7]
-    rows[H_P, k] = pt[5] if running > 0.0 else math.nan
-    rows[H_MDOT, k] = pt[6]
-    rows[H_I, k] = pt[8]
-    rows[H_UOC, k] = pt[9]
-    rows[H_U, k] = pt[9] - pt[10] * pt[8]
-    rows[H_SOC, k] = soc
-    rows[H_BRAKE, k] = pt[12]
-    rows[H_MISS, k] = el.shaft_torque(missing, ratio, c)
-    rows[H_ON, k] = running
-    rows[H_LIM_M, k] = pt[14]
-    rows[H_LIM_B, k] = pt[15]
+    _hybrid.store_point(rows, k, H_P, pt, running, missing, ratio, soc, c)
     rows[H_TCR, k] = pt[4]
 
 

@@ -207,9 +207,7 @@ def split_kernel(
     extra,
 ):
     """The power-split forward: as :func:`p2_kernel`, on the power split's choice and point."""
-    eng = (lines[0], lines[1], tb.inverse_spacing(lines[0]))
-    opt = (best[0], best[1], best[2], tb.inverse_spacing(best[0]), tb.inverse_spacing(best[1]))
-    inv_cap = tb.inverse_spacing(cap[0])
+    eng, opt, inv_cap = sp.line_tables(lines, best, cap)
     kp, ki, u_lo, u_hi, aw = drv
     v, z, soc, on, on_time = v_ref[0], 0.0, soc_start, 0.0, 0.0
     speeds[0] = v

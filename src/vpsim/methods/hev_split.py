@@ -31,7 +31,6 @@ from ..model import battery as bt
 from ..model import electric as el
 from ..model import hybrid as hy
 from ..model import split as sp
-from ..model import tables as tb
 from ..model._compile import kernel
 from ..model.engine import equation
 from . import _hybrid
@@ -63,6 +62,7 @@ from ._hybrid import N_COMMON_SUMS
     R_PM,
 ) = range(22)
 N_ROWS = 22
+assert R_LIM_B - R_P == 10  # R_P .. R_LIM_B: the rows methods._hybrid.store_point writes
 # the running sums: the energy terms, those of methods._hybrid, then this layout's own
 S_NONE_S = N_COMMON_SUMS  # seconds with no engine choice the gear set can take
 N_SUMS = N_COMMON_SUMS + 1
@@ -76,9 +76,7 @@ def dp_kernel(v, a, dt, ratio, c, e, m, g, s, tabs, h, levels, lines, best, cap,
     line (speeds, torques); ``best``: the system operating line
     (powers, ring speeds, engine speeds; :func:`vpsim.model.split.system_line`); ``cap``: its full-load
     power's running maximum (speeds, powers)."""
-    eng = (lines[0], lines[1], tb.inverse_spacing(lines[0]))
-    opt = (best[0], best[1], best[2], tb.inverse_spacing(best[0]), tb.inverse_spacing(best[1]))
-    inv_cap = tb.inverse_spacing(cap[0])
+    eng, opt, inv_cap = sp.line_tables(lines, best, cap)
     n = soc_grid.size
     soc0 = soc_grid[0]
     dsoc = soc_grid[1] - soc_grid[0]
@@ -146,9 +144,7 @@ def causal_kernel(
 ):
     """Drive the cycle with the management ``ems`` (rule, ecms, or dp with the cost-to-go ``jcost``); fill
     ``rows`` and the sums. Returns the final state of charge."""
-    eng = (lines[0], lines[1], tb.inverse_spacing(lines[0]))
-    opt = (best[0], best[1], best[2], tb.inverse_spacing(best[0]), tb.inverse_spacing(best[1]))
-    inv_cap = tb.inverse_spacing(cap[0])
+    eng, opt, inv_cap = sp.line_tables(lines, best, cap)
     soc = soc0
     on = 0.0
     on_time = 0.0
@@ -212,17 +208,7 @@ def store_row(rows, k, t, v, a, pt, running, missing, ratio, soc, c):
     rows[R_TE, k] = pt[3]
     rows[R_TG, k] = pt[sp.P_TG]
     rows[R_TM, k] = pt[7]
-    rows[R_P, k] = pt[5] if running > 0.0 else math.nan
-    rows[R_MDOT, k] = pt[6]
-    rows[R_I, k] = pt[8]
-    rows[R_UOC, k] = pt[9]
-    rows[R_U, k] = pt[9] - pt[10] * pt[8]
-    rows[R_SOC, k] = soc
-    rows[R_BRAKE, k] = pt[12]
-    rows[R_MISS, k] = el.shaft_torque(missing, ratio, c)
-    rows[R_ON, k] = running
-    rows[R_LIM_M, k] = pt[14]
-    rows[R_LIM_B, k] = pt[15]
+    _hybrid.store_point(rows, k, R_P, pt, running, missing, ratio, soc, c)
     rows[R_PG, k] = pt[sp.P_PG]
     rows[R_PM, k] = pt[11]
 

@@ -150,6 +150,17 @@ def engine_power_limit(w_hi, cap_speed, cap_power, inv_cap):
 
 
 @equation
+def line_tables(lines, best, cap):
+    """(eng, opt, inv_cap) of a kernel's line arrays, as :func:`split_choice` and :func:`engine_power_limit`
+    read them: ``eng`` the full-load line (speeds, torques, inverse spacing of the speeds), ``opt`` the system
+    operating line (powers, ring speeds, engine speeds, inverse spacings of powers and ring speeds),
+    ``inv_cap`` the inverse spacing of the full-load power's running maximum's speeds."""
+    eng = (lines[0], lines[1], tb.inverse_spacing(lines[0]))
+    opt = (best[0], best[1], best[2], tb.inverse_spacing(best[0]), tb.inverse_spacing(best[1]))
+    return eng, opt, tb.inverse_spacing(cap[0])
+
+
+@equation
 def split_interval(v, a, ratio, c, e, m, g, s, tabs):
     """What an interval (speed v, acceleration a, ring-to-wheel ratio i_r) fixes whatever the management
     chooses: (v >= 0, w_r, dw_r, wheel force F_w, ring demand T_ring (E1), w_m2, dw_m2, MG2's envelope
