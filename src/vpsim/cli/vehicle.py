@@ -37,7 +37,6 @@ def from_epa(file, vehicle_id, config, out, technology):
     """Write the parameters of test vehicle --id of the EPA test car list FILE as an editable TOML."""
     from ..fleet.calibrate import vehicle_class
     from ..fleet.epa import read_test_car_list
-    from ..fleet.technology import read_technology
     from ..fleet.vehicle import record_parameters, vehicle_toml
     from ..textio import printable
 
@@ -53,9 +52,7 @@ def from_epa(file, vehicle_id, config, out, technology):
     if getattr(rec, "powertrain", "conventional") == "mhev":
         _from_epa_mhev(rec, file, out, technology)
         return
-    tech, note = None, ""
-    if technology:
-        tech, note = read_technology(technology, "conventional", vehicle_class(rec))
+    tech, note = _fit(technology, "conventional", vehicle_class(rec))
     params = record_parameters(rec, technology=tech)
     text = vehicle_toml(rec, params, source=Path(file).name, technology_note=note)
     Path(out).write_text(text)
@@ -76,6 +73,14 @@ def from_epa(file, vehicle_id, config, out, technology):
     )
 
 
+def _fit(technology, powertrain: str, cls: str) -> tuple[dict | None, str]:
+    """(the fit, its note) for class ``cls`` of ``powertrain`` in a fleet run's technology.json
+    ``technology`` (:func:`vpsim.fleet.technology.read_technology`), or (None, "") without one."""
+    from ..fleet.technology import read_technology
+
+    return read_technology(technology, powertrain, cls) if technology else (None, "")
+
+
 def _not_an_input(out, *inputs) -> None:
     """--out may not name an input: writing it would replace what is being read."""
     target = Path(out).resolve()
@@ -88,12 +93,9 @@ def _from_epa_bev(rec, file, out, technology) -> None:
     """A battery-electric record's vehicle file (:mod:`vpsim.fleet.ev`); ``technology``: a fleet run's
     technology.json, its battery-electric fit on all vehicles."""
     from ..fleet import ev
-    from ..fleet.technology import read_technology
     from ..textio import printable
 
-    tech, note = None, ""
-    if technology:
-        tech, note = read_technology(technology, "bev", ev.ev_class(rec))
+    tech, note = _fit(technology, "bev", ev.ev_class(rec))
     params = ev.ev_parameters(rec, technology=tech)
     Path(out).write_text(ev.ev_vehicle_toml(rec, params, source=Path(file).name, technology_note=note))
     meas = ", ".join(f"{c} {v:.1f} MPGe" for c, v in rec.measured_mpge.items())
@@ -111,12 +113,9 @@ def _from_epa_hev(rec, file, out, technology) -> None:
     """A full hybrid's vehicle file (:mod:`vpsim.fleet.hev`); ``technology``: a fleet run's
     technology.json, its hybrid fit on all vehicles of the layout's class."""
     from ..fleet import hev
-    from ..fleet.technology import read_technology
     from ..textio import printable
 
-    tech, note = None, ""
-    if technology:
-        tech, note = read_technology(technology, "hev", hev.hev_class(rec))
+    tech, note = _fit(technology, "hev", hev.hev_class(rec))
     params = hev.hev_parameters(rec, technology=tech)
     Path(out).write_text(hev.hev_vehicle_toml(rec, params, source=Path(file).name, technology_note=note))
     meas = ", ".join(f"{hev.TOML_TEST_NAME[c]} {v:.1f} mpg" for c, v in rec.measured_mpg.items())
@@ -134,12 +133,9 @@ def _from_epa_mhev(rec, file, out, technology) -> None:
     """A mild hybrid's vehicle file (:mod:`vpsim.fleet.mhev`); ``technology``: a fleet run's
     technology.json, its mild-hybrid fit on all vehicles of the layout's class."""
     from ..fleet import mhev
-    from ..fleet.technology import read_technology
     from ..textio import printable
 
-    tech, note = None, ""
-    if technology:
-        tech, note = read_technology(technology, "mhev", mhev.mhev_class(rec))
+    tech, note = _fit(technology, "mhev", mhev.mhev_class(rec))
     params = mhev.mhev_parameters(rec, technology=tech)
     Path(out).write_text(mhev.mhev_vehicle_toml(rec, params, source=Path(file).name, technology_note=note))
     meas = ", ".join(f"{c} {v:.1f} mpg" for c, v in rec.measured_mpg.items())
