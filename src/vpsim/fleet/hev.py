@@ -232,20 +232,19 @@ def _ftp(t: dict) -> tuple[dict[str, float], str] | str:
 
 def hev_vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[HEVRecord | None, str, list[dict]]:
     """(record or None, exclusion reason, excluded test rows) of one hybrid's parsed test rows."""
-    from .epa import RECORD_FIELDS, _field_problem, record_fields, record_problem
+    from .epa import RECORD_FIELDS, _field_problem, record_fields
     from .hybrids import read_tests
 
     first = tests[0]
     lay, rule = layout(first["make"], first["model"], first["transmission_code"])
     if lay is None:
         return None, rule, []
-    values, hows, used, test_rows = read_tests(tests, HEV_CYCLES, _ftp, "hybrid")
-    if not used:
-        return None, "hybrid, no usable test: no hot UDDS, HWY or US06 figure", test_rows
-    first = used[0]
-    problem = record_problem(first, RECORD_FIELDS)
-    if problem:
-        return None, f"hybrid, {problem}", test_rows
+    figures = "no hot UDDS, HWY or US06 figure"
+    values, hows, first, test_rows, why = read_tests(
+        tests, HEV_CYCLES, _ftp, "hybrid", RECORD_FIELDS, figures
+    )
+    if why:
+        return None, why, test_rows
     code = first["transmission_code"].upper()
     n_gears = first["n_gears"]
     if lay == "hev_p2":

@@ -9,14 +9,19 @@ from __future__ import annotations
 from .epa import CERT_GASOLINE
 
 
-def read_tests(tests: list[dict], cycles: tuple[str, ...], ftp, what: str):
-    """(values, hows, used, test_rows) of one hybrid's parsed test rows: ``values`` {test: [mpg, ...]} over
-    ``cycles``, ``hows`` how the FTPs were read, ``used`` the test rows read, ``test_rows`` the excluded ones.
+def read_tests(
+    tests: list[dict], cycles: tuple[str, ...], ftp, what: str, fields: tuple[str, ...], figures: str
+):
+    """(values, hows, first, test_rows, why) of one hybrid's parsed test rows: ``values`` {test: [mpg, ...]}
+    over ``cycles``, ``hows`` how the FTPs were read, ``first`` the first test row read, ``test_rows`` the
+    excluded ones; ``why`` the vehicle's exclusion reason, or "".
 
     Certification gasoline only, no cold-CO test; an FTP by ``ftp(row)``: ({test: mpg}, how) or why not; a HWY
-    or US06 test its ``RND_ADJ_FE`` as ``hwy`` or ``us06``; any other test is passed over. ``what`` names the
-    vehicles in an FTP's exclusion (``hybrid``, ``mild hybrid``)."""
-    from .epa import _excl, _plausible_mpg
+    or US06 test its ``RND_ADJ_FE`` as ``hwy`` or ``us06``; any other test is passed over. Excluded: no test
+    read (``figures`` names those looked for), or the first one's ``fields``, road load or power to mass
+    (:func:`vpsim.fleet.epa.record_problem`). ``what`` names the vehicles in a reason (``hybrid``, ``mild
+    hybrid``)."""
+    from .epa import _excl, _plausible_mpg, record_problem
 
     test_rows: list[dict] = []
     values: dict[str, list[float]] = {c: [] for c in cycles}
@@ -42,7 +47,10 @@ def read_tests(tests: list[dict], cycles: tuple[str, ...], ftp, what: str):
         else:
             continue
         used.append(t)
-    return values, hows, used, test_rows
+    if not used:
+        return values, hows, None, test_rows, f"{what}, no usable test: {figures}"
+    problem = record_problem(used[0], fields)
+    return values, hows, used[0], test_rows, f"{what}, {problem}" if problem else ""
 
 
 # --- technology fit ----------------------------------------------------------------------------------------

@@ -204,20 +204,19 @@ def _bags(t: dict) -> tuple[dict[str, float], str] | str:
 
 def mhev_vehicle(vid: str, cfg: int, tests: list[dict]) -> tuple[MHEVRecord | None, str, list[dict]]:
     """(record or None, exclusion reason, excluded test rows) of one mild hybrid's parsed test rows."""
-    from .epa import RECORD_FIELDS, record_fields, record_problem
+    from .epa import RECORD_FIELDS, record_fields
     from .hybrids import read_tests
 
     first = tests[0]
     key, rule = system_of(first["make"], first["model"], first["displacement_l"])
     if key is None:
         return None, rule, []
-    values, hows, used, test_rows = read_tests(tests, MHEV_CYCLES, _bags, "mild hybrid")
-    if not used:
-        return None, "mild hybrid, no usable test: no FTP bag, HWY or US06 figure", test_rows
-    first = used[0]
-    problem = record_problem(first, (*RECORD_FIELDS, "nv_ratio"))
-    if problem:
-        return None, f"mild hybrid, {problem}", test_rows
+    fields, figures = (*RECORD_FIELDS, "nv_ratio"), "no FTP bag, HWY or US06 figure"
+    values, hows, first, test_rows, why = read_tests(
+        tests, MHEV_CYCLES, _bags, "mild hybrid", fields, figures
+    )
+    if why:
+        return None, why, test_rows
     code = first["transmission_code"].upper()
     kind = TRANSMISSION_KIND.get(code, "other")
     n_gears = first["n_gears"]
