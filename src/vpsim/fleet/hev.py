@@ -370,6 +370,7 @@ def hev_parameters(rec: HEVRecord, technology: dict | None = None):
         RATED_SPEED_RADPS,
         WHEEL_RADIUS_M,
         bore_stroke,
+        converter_fields,
         fold_road_load,
         gear_ratios,
     )
@@ -416,7 +417,9 @@ def hev_parameters(rec: HEVRecord, technology: dict | None = None):
         sections["split"] = {"generator_rated_power": sizes["generator"]}
     else:
         ratios, final = gear_ratios(rec)
-        sections["transmission"] = {"gearbox_ratios": ratios, "final_drive": final}
+        # a torque-converter automatic (codes A, SA: Ford's and Toyota's 10-speeds keep their converter
+        # between the machine and the gearbox) gets the conventional automatics' converter and lock-up
+        sections["transmission"] = {"gearbox_ratios": ratios, "final_drive": final, **converter_fields(rec)}
     for key, value in (technology or {}).items():
         sec, _, fld = key.partition(".")
         if sec not in sections:
