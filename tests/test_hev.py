@@ -151,3 +151,62 @@ def test_ecms_walk_keeps_the_minimum_on_time_as_the_exhaustive_search():
     w = walk.series["engine_speed_radps"]
     forced = w[stops[inside]] < IDLE_SPEED
     assert (runs_ok | forced).all()
+
+
+# --- a torque converter between the machine and the gearbox (Ford's and Toyota's 10-speed P2s) -------------
+
+P2_CONVERTER = {"converter_capacity_factor": 15.0, "lockup_min_gear": 2, "lockup_min_speed": 7.0}
+
+
+def test_converter_pump_point_by_hand():
+    """vehicle.converter_pump_point at a point worked by hand: nu = 0.425 (mu = 1.5 on the multiplication
+    branch of mu_s = 2, nu_c = 0.85; phi = 1/K^2 = 1/225): turbine 100 rad/s, pump 100 / 0.425 rad/s, pump
+    torque (100 / 0.425)^2 / 225, turbine torque 1.5 times it; no torque passed without traction."""
+    from vpsim.model import vehicle as vh
+    from vpsim.model.record import record
+
+    c = record(HEV.with_changes(transmission=P2_CONVERTER))
+    w_p = 100.0 / 0.425
+    t_p = w_p * w_p / 225.0
+    got = vh.converter_pump_point(100.0, 2.0, 1.5 * t_p, c)
+    assert got[0] == pytest.approx(w_p, rel=1e-12)
+    assert got[1] == pytest.approx(2.0 / 0.425, rel=1e-12)
+    assert got[2] == pytest.approx(t_p, rel=1e-12)
+    assert got[3] == pytest.approx(1.5, rel=1e-12)
+    assert got[4] == 1.0
+    assert vh.converter_pump_point(100.0, -1.0, -50.0, c) == (100.0, -1.0, 0.0, 1.0, 0.0)
+    assert vh.converter_pump_point(0.0, 0.0, 30.0, c) == (0.0, 0.0, 0.0, 1.0, 0.0)
+
+
+@pytest.mark.parametrize("method", ["backward", "forward"])
+def test_p2_converter_slips_below_lockup_costs_fuel_and_closes_the_balance(method):
+    """The P2 with a converter after its machine: below lock-up (gear 1, under 7 m/s) the machine turns
+    faster than the gearbox's input while it drives, the converter's loss is booked as driveline loss (the
+    balance still closes to rounding), and the car burns more than the stiff P2 on UDDS."""
+    q = HEV.with_changes(transmission=P2_CONVERTER)
+    base = vpsim.simulate("udds", method, HEV, ems="ecms")
+    conv = vpsim.simulate("udds", method, q, ems="ecms")
+    assert abs(conv.energy.relative_residual) < 1e-9
+    assert conv.energy.terms["driveline_loss"] > base.energy.terms["driveline_loss"]
+    assert conv.electric["fuel_l_per_100km_cs"] > base.electric["fuel_l_per_100km_cs"]
+    if method == "backward":
+        df = conv.to_dataframe()
+        from vpsim.model.record import ratios as total_ratios
+
+        ratios = np.asarray(total_ratios(q.transmission))
+        w_in = ratios[df["gear"].astype(int) - 1] * df["speed_mps"] / q.vehicle.wheel_radius
+        unlocked = ((df["gear"] == 1) | (df["speed_mps"] < 7.0)) & (df["machine_torque_nm"] > 0.0)
+        unlocked &= df["accel_mps2"] > 0.0
+        assert unlocked.sum() > 50
+        slip = df.loc[unlocked, "machine_speed_radps"] / w_in[unlocked]
+        assert (slip > 1.0).all()
+
+
+def test_p2_converter_locked_everywhere_is_the_stiff_p2_bit_for_bit():
+    """Locked from gear 1 at any speed the converter changes nothing (every management, backward)."""
+    locked = HEV.with_changes(transmission={**P2_CONVERTER, "lockup_min_gear": 1, "lockup_min_speed": 0.0})
+    for ems in EMS:
+        a = vpsim.simulate("udds", "backward", HEV, ems=ems)
+        b = vpsim.simulate("udds", "backward", locked, ems=ems)
+        assert a.fuel_kg == b.fuel_kg
+        np.testing.assert_array_equal(a.series["machine_speed_radps"], b.series["machine_speed_radps"])

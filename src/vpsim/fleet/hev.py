@@ -50,10 +50,11 @@ The vehicle (:func:`hev_parameters`), from the layout's preset (``hev_split`` af
   32-47 kW whatever the car);
 * the battery: the preset's pack (hybrid packs are 0.75-1.9 kWh across the range, by the makers'
   specifications: Prius 0.75 / 1.31, Corolla 1.31, Camry 1.0-1.6, RAV4 1.59, Highlander and Sienna 1.9,
-  Escape and Maverick 1.1, Ioniq 1.56, Sonata 1.76, Tucson 1.49 kWh); a P2's with as many strings in
-  parallel as its machine's rated power needs at the cell's discharge limit (:func:`pack_strings`: the P2's
-  machine draws on the pack alone), a power split's the preset's one string (its MG2 is fed by MG1 as much as
-  by the pack: sized to MG2's rating the Camry's pack was 6.6 kWh; :func:`battery_strings`);
+  Escape and Maverick 1.1, Ioniq 1.56, Sonata 1.76, Tucson 1.49, F-150 1.5, Tundra 1.87 kWh): the preset's
+  one string for either layout (:func:`battery_strings`; the power split's 1.31 kWh, the P2's 1.54 kWh). A
+  split's pack sized to MG2's rating had been 6.6 kWh for the Camry; a P2's sized to its machine's rated
+  power at the cell's discharge limit (:func:`pack_strings`) had been two strings, 3.1 kWh, for every P2 of
+  the list, the Ioniq itself included (one string gives 31 kW at the cell's 20 C against its 32 kW machine);
 * the machines' losses: the loss model (:mod:`vpsim.model.machine`, fitted on 1990s maps) times
   :data:`MACHINE_LOSS_SCALE`, the level the 2022 single-machine permanent-magnet EVs' drive units fit out of
   fold (``vpsim fleet``, class ``bev``: 0.14-0.15 in every fold); MG1 of a split shares it;
@@ -284,11 +285,12 @@ def pack_strings(base, machine_power_w: float) -> int:
 
 
 def battery_strings(rec: HEVRecord, base, machine_power_w: float) -> int:
-    """The pack's strings in parallel by the module's rule: a power split's the preset's, a P2's
-    :func:`pack_strings` for its machine."""
-    if rec.layout == "hev_split":
-        return int(base.battery.cells_in_parallel)
-    return pack_strings(base, machine_power_w)
+    """The pack's strings in parallel by the module's rule: the preset's (one string, 1.31 kWh for a power
+    split, 1.54 kWh for a P2: the makers' hybrid packs are 0.75-1.9 kWh whatever the car). ``rec`` and
+    ``machine_power_w`` are kept for the callers; the machine's power is not what sizes a hybrid's pack."""
+    if rec.layout not in PRESET:
+        raise ValueError(f"unknown hybrid layout {rec.layout!r}")
+    return int(base.battery.cells_in_parallel)
 
 
 def machine_sizes(rec: HEVRecord, base) -> dict[str, float]:
@@ -319,6 +321,7 @@ def hev_parameters(rec: HEVRecord, technology: dict | None = None):
         RATED_SPEED_RADPS,
         WHEEL_RADIUS_M,
         bore_stroke,
+        converter_fields,
         fold_road_load,
         gear_ratios,
     )
@@ -365,7 +368,9 @@ def hev_parameters(rec: HEVRecord, technology: dict | None = None):
         sections["split"] = {"generator_rated_power": sizes["generator"]}
     else:
         ratios, final = gear_ratios(rec)
-        sections["transmission"] = {"gearbox_ratios": ratios, "final_drive": final}
+        # a torque-converter automatic (codes A, SA: Ford's and Toyota's 10-speeds keep their converter
+        # between the machine and the gearbox) gets the conventional automatics' converter and lock-up
+        sections["transmission"] = {"gearbox_ratios": ratios, "final_drive": final, **converter_fields(rec)}
     for key, value in (technology or {}).items():
         sec, _, fld = key.partition(".")
         if sec not in sections:
@@ -475,11 +480,7 @@ def hev_vehicle_toml(rec: HEVRecord, params, source: str = "", technology_note: 
         "engine.thermal_efficiency": technology_note or "the preset's",
         "electric.accessory_power": technology_note or "the preset's (W)",
         "machine.rated_power": f"{sizes} (W)",
-        "battery.cells_in_parallel": (
-            "the preset's pack"
-            if rec.layout == "hev_split"
-            else "the preset's pack, strings for the machine's rated power"
-        ),
+        "battery.cells_in_parallel": "the preset's pack (one string)",
         "machine.loss_scale": "the 2022 PM EVs' fitted drive-loss level (vpsim.fleet.hev.MACHINE_LOSS_SCALE)",
         "split.generator_rated_power": f"{sizes} (W)",
         "transmission.final_drive": (

@@ -65,7 +65,7 @@ MISS_TOLERANCE_N = 1e-9
 
 @kernel(_nrt=False)
 def dp_kernel(
-    v, a, dt, ratio, c, e, m, tabs, h, levels, line_speed, line_max, line_min, soc_grid, jcost, packs
+    v, a, dt, ratio, gear, c, e, m, tabs, h, levels, line_speed, line_max, line_min, soc_grid, jcost, packs
 ):
     """Backward: jcost[k, i, s] the least fuel (kg) from interval k to the end at charge soc_grid[i] with the
     engine in state s (0 off, 1 on) before it. jcost[K] is the terminal cost, filled by the caller; ``packs``
@@ -80,7 +80,7 @@ def dp_kernel(
         for q in range(5):
             packs[i, q] = st[q]
     for k in range(v.size - 1, -1, -1):
-        interval = hy.p2_interval(v[k], a[k], ratio[k], c, e, m, tabs, h)
+        interval = hy.p2_interval(v[k], a[k], ratio[k], gear[k], c, e, m, tabs, h)
         w = interval[1]  # the engine's speed were it to run
         t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
         runs = interval[5]
@@ -153,7 +153,7 @@ def causal_kernel(
         g, j = gear_index(time_s, k, sched_t, sched_gear, j)
         ratio = ratios[g]
         # what the interval and the charge fix, once for all the choices
-        interval = hy.p2_interval(v, a, ratio, c, e, m, tabs, h)
+        interval = hy.p2_interval(v, a, ratio, g + 1, c, e, m, tabs, h)
         w = interval[1]  # the engine's speed were it to run
         t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
         t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
@@ -269,7 +269,9 @@ def run(
         ratio = ratios[gear - 1]
         jcost = np.empty((n + 1, grid.size, 2))
         jcost[n] = hy.terminal_cost(params, grid, soc_start)
-        dp_kernel(v, a, dt, ratio, c, e, m, tabs, h, levels, *lines, grid, jcost, np.empty((grid.size, 5)))
+        dp_kernel(
+            v, a, dt, ratio, gear, c, e, m, tabs, h, levels, *lines, grid, jcost, np.empty((grid.size, 5))
+        )
     else:
         jcost = np.zeros((1, 2, 2))
     rows = np.empty((N_ROWS, n))

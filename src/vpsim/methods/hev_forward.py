@@ -136,7 +136,7 @@ def p2_kernel(
         ratio = ratios[g]
         battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
         vm = v + 0.5 * a * dt
-        interval = hy.p2_interval(vm, a, ratio, c, e, m, tabs, h)
+        interval = hy.p2_interval(vm, a, ratio, g + 1, c, e, m, tabs, h)
         w = interval[1]  # the engine's speed were it to run
         t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
         t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
@@ -160,7 +160,7 @@ def p2_kernel(
             a = no_rollback(hy.delivered_acceleration(a, pt[13], c), v, dt)
             for _ in range(SECANT_STEPS):
                 vm = v + 0.5 * a * dt
-                interval = hy.p2_interval(vm, a, ratio, c, e, m, tabs, h)
+                interval = hy.p2_interval(vm, a, ratio, g + 1, c, e, m, tabs, h)
                 pt = hy.p2_choice(interval, battery, on_c, te, c, e, m, tabs, h)
                 g1 = pt[13] - pt[12]
                 if abs(g1) <= BALANCE_N:

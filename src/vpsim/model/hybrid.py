@@ -70,8 +70,9 @@ def can_run(w, c):
 
 
 @equation
-def p2_point(v, a, ratio, soc, on, t_e, c, e, m, tabs, h):
-    """The P2 hybrid's operating point at speed v, acceleration a in the gear of total ratio i, with the
+def p2_point(v, a, ratio, gear, soc, on, t_e, c, e, m, tabs, h):
+    """The P2 hybrid's operating point at speed v, acceleration a in the gear ``gear`` (1-based) of total
+    ratio i, with the
     engine on (``on`` > 0, crank torque from ``t_e``, its torque at the shaft) or off (H1). Returns
     (w, dw, T_in, T_e, T_cr, p_i, mdot_f, T_m, I, U_oc, R, P_machine, brake N, missing N, at the machine's
     limit, at the battery's limit, engine on, c_m^1.8).
@@ -81,25 +82,36 @@ def p2_point(v, a, ratio, soc, on, t_e, c, e, m, tabs, h):
     (:func:`p2_choice`); the management, trying many choices at one interval, evaluates the first once."""
     soc_grid, ocv, r_dis, r_chg = tabs[0], tabs[1], tabs[2], tabs[3]
     battery = el.battery_state(soc, e, soc_grid, ocv, r_dis, r_chg)
-    return p2_choice(p2_interval(v, a, ratio, c, e, m, tabs, h), battery, on, t_e, c, e, m, tabs)
+    return p2_choice(p2_interval(v, a, ratio, gear, c, e, m, tabs, h), battery, on, t_e, c, e, m, tabs, h)
 
 
 @equation
-def p2_interval(v, a, ratio, c, e, m, tabs, h):
-    """What an interval (speed v, acceleration a, total ratio i) fixes whatever the management chooses:
-    (v >= 0, w, dw, wheel force F_w, input-shaft demand T_in (H1), the engine may run, c_m^1.8 at w, the
-    machine's envelope (T_min, T_max) at its own speed, the ratio i, the clutch's state).
+def p2_interval(v, a, ratio, gear, c, e, m, tabs, h):
+    """What an interval (speed v, acceleration a, total ratio i of the 1-based ``gear``) fixes whatever the
+    management chooses: (v >= 0, w, dw, wheel force F_w, input-shaft demand T_in (H1), the engine may run,
+    c_m^1.8 at w, the machine's envelope (T_min, T_max) at its own speed, the ratio i, the clutch's state,
+    the torque ratio from the machine's shaft to the gearbox's input).
 
-    The P2 (``h.mild`` 0): w is the gearbox input's speed, the clutch always closed for the machine. The mild
-    hybrid (``h.mild`` 1, :func:`mild_clutch`): w is the crank's speed (the machine turns at
-    ``h.belt_ratio`` w), held at the idle speed while the clutch slips or is open."""
+    The P2 (``h.mild`` 0): w is the machine's speed, the clutch always closed for the machine. Without a
+    torque converter, or with its lock-up clutch closed (:func:`vpsim.model.vehicle.converter_locked`), the
+    machine turns at the gearbox input's speed and the ratio is 1. With a converter between machine and
+    gearbox (the longitudinal 10-speed P2s of Ford and Toyota) and its lock-up clutch open, the machine (and
+    the engine with it) is the pump (:func:`vpsim.model.vehicle.converter_pump_point`): w the pump's speed,
+    T_in the pump's torque, the ratio mu(nu); it passes traction only (the clutch's state "slipping"), a
+    braking demand goes to the friction brakes. The mild hybrid (``h.mild`` 1, :func:`mild_clutch`): w is
+    the crank's speed (the machine turns at ``h.belt_ratio`` w), held at the idle speed while the clutch
+    slips or is open."""
     vv = v if v > 0.0 else 0.0
     w = vh.engine_speed(vv, ratio, c)
     dw = vh.engine_speed(a, ratio, c)
     f = vh.wheel_force(vv, a, c)
     t_in = el.shaft_torque(f, ratio, c)
-    runs = can_run(w, c)
     clutch = CLUTCH_CLOSED
+    mu = 1.0
+    if h.mild == 0.0 and not vh.converter_locked(gear, vv, c):
+        w, dw, t_in, mu, _ = vh.converter_pump_point(w, dw, t_in, c)
+        clutch = CLUTCH_SLIPPING  # the open converter passes a driving torque only
+    runs = can_run(w, c)
     if h.mild > 0.0:
         runs = True  # on the crank, the engine may idle at rest (the clutch open)
         clutch = mild_clutch(vv, w, t_in, c)
@@ -107,7 +119,7 @@ def p2_interval(v, a, ratio, c, e, m, tabs, h):
             w = c.idle_speed
             dw = 0.0
     t_min, t_max = el.envelope(h.belt_ratio * w, m, e, tabs[7], tabs[8], tabs[9])
-    return vv, w, dw, f, t_in, runs, en.speed_power(w, c), t_min, t_max, ratio, clutch
+    return vv, w, dw, f, t_in, runs, en.speed_power(w, c), t_min, t_max, ratio, clutch, mu
 
 
 @inline
@@ -117,7 +129,7 @@ def p2_choice(interval, battery, on, t_e, c, e, m, tabs, h):
     (:func:`vpsim.model.electric.battery_state`). The mild hybrid's engine with ``on`` 0 is dragged with its
     fuel cut (``t_e`` then its closed-throttle crank torque) while the clutch is closed, else stopped
     (:func:`mild_engine_choice`); its machine acts on the crank through the belt (:func:`belt_to_crank`)."""
-    vv, w0, dw0, f, t_in, runs, cm18, t_min, t_max, ratio, clutch = interval
+    vv, w0, dw0, f, t_in, runs, cm18, t_min, t_max, ratio, clutch, mu = interval
     te, t_cr, p, mdot, running, w, dw = engine_of_choice(on, runs, clutch, t_e, w0, dw0, cm18, c, h)
     t_pass = clutch_passes(t_in, clutch)  # the demand the clutch passes to the crank's side
     t_ask = crank_to_belt(t_pass - te + el.rotor_torque(dw, e), h)
@@ -127,7 +139,7 @@ def p2_choice(interval, battery, on, t_e, c, e, m, tabs, h):
     t_m = belt_to_crank(t_mb, h)
     t_net = te + t_m - el.rotor_torque(dw, e)
     t_net_passed = clutch_passes(t_net, clutch)
-    missing, brake = shortfall_and_brake(f, el.wheel_force_of_shaft(t_net_passed, ratio, c))
+    missing, brake = shortfall_and_brake(f, el.wheel_force_of_shaft(mu * t_net_passed, ratio, c))
     return (
         w,
         dw,

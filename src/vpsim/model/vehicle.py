@@ -271,6 +271,23 @@ def converter_speed_ratio(t_t, w_t, c):
 
 
 @equation
+def converter_pump_point(w_t, dw_t, t_t, c):
+    """The unlocked converter seen from its pump side, for a pump that can turn at any speed (a P2 hybrid's
+    machine drives it; the engine joins it at or above idle): with the turbine (gearbox input) at speed
+    ``w_t``, acceleration ``dw_t``, asked for torque ``t_t``, returns (pump speed w_t / nu, its acceleration
+    dw_t / nu, pump torque t_t / mu(nu), torque ratio mu(nu), traction passed 1 or 0). With traction
+    (``t_t`` > 0, ``w_t`` > 0) nu is :func:`converter_speed_ratio`'s root; without (braking, coasting, at
+    rest) the unlocked converter passes no torque: the pump turns with the turbine, unloaded, and the
+    friction brakes take a braking demand (the quasi-static converter has no overrun branch to regenerate
+    through)."""
+    if t_t <= 0.0 or w_t <= 0.0:
+        return w_t, dw_t, 0.0, 1.0, 0.0
+    nu = converter_speed_ratio(t_t, w_t, c)
+    mu = converter_torque_ratio(nu, c)
+    return w_t / nu, dw_t / nu, t_t / mu, mu, 1.0
+
+
+@equation
 def converter_locked(gear, v, c):
     """No converter, or its lock-up clutch closed: in gear ``gear`` (1-based) >= ``lockup_min_gear`` at or
     above ``lockup_min_speed``."""

@@ -1,0 +1,62 @@
+"""The full hybrids' part of the fleet run alone: out-of-fold errors per class in a few minutes (not shipped).
+
+    python benchmarks/hev_out_of_fold.py ../shared/data/epa/22-tstcar.csv
+    python benchmarks/hev_out_of_fold.py LIST --csv rows.csv   # also the per-vehicle rows
+
+Runs exactly the fleet run's full-hybrid part (``vpsim.fleet.run._run_hevs``: the same family folds, classes,
+technology grid and fit, one backward ECMS run per vehicle and test at its fold's technology) in this
+process, without the peer, on the list's full hybrids only (the conventional cars, EVs and mild hybrids are
+not read into it). Prints per class and test n / median / median |error| / p90 |error| of mpg, the P2s
+together, each class's fitted technology per fold, and the CPU time (about 4 min on one core).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from vpsim.fleet import hev
+from vpsim.fleet import run as fleet_run
+from vpsim.fleet.epa import read_test_car_list
+
+
+def _stats(errors) -> str:
+    e = np.asarray([x for x in errors if np.isfinite(x)])
+    if e.size == 0:
+        return "  0"
+    a = np.abs(e)
+    return f"{e.size:3d}  {np.median(e):+6.1f} / {np.median(a):5.2f} / {np.quantile(a, 0.9):5.2f} %"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("list", help="the EPA test car list (22-tstcar.csv)")
+    ap.add_argument("--folds", type=int, default=5)
+    ap.add_argument("--csv", help="write the per-vehicle rows (with their class) to this file")
+    a = ap.parse_args()
+    cars = read_test_car_list(a.list)
+    recs = cars.hev_vehicles
+    t0 = time.process_time()
+    out = fleet_run._run_hevs(recs, a.folds, "family", fleet_run._Serial(), {}, False, {})
+    cpu = time.process_time() - t0
+    cls = {(v.vehicle_id, v.configuration): hev.hev_class(v) for v in recs}
+    rows = [{**r, "class": cls[(r["vehicle_id"], r["configuration"])]} for r in out["rows"]]
+    print(f"full hybrids: n  median / median|error| / p90|error| (mpg, out of fold; CPU {cpu:.0f} s)")
+    groups = [(c, (c,)) for c in hev.CLASSES] + [("hev_p2 + converter", ("hev_p2", "hev_p2_converter"))]
+    for name, members in groups:
+        for cyc in hev.HEV_CYCLES:
+            e = [r["error_pct"] for r in rows if r["cycle"] == cyc and r["class"] in members]
+            if e:
+                print(f"  {name:19s} {cyc:8s} {_stats(e)}")
+    for key, t in out["technology"].items():
+        print(f"  {key:24s} eta {t[hev.TECH_PARAMS[0]]:.4f}  accessories {t[hev.TECH_PARAMS[1]]:6.0f} W")
+    if a.csv:
+        import pandas as pd
+
+        pd.DataFrame(rows).to_csv(a.csv, index=False)
+
+
+if __name__ == "__main__":
+    main()
