@@ -127,3 +127,53 @@ def test_from_epa_takes_the_fleets_mild_hybrid_fit(shared_dir, tmp_path, capsys)
     assert main([*args, "--technology", str(tech)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "mhev.all_vehicles has no fit for this car's class mhev_p0" in err
+
+
+def test_the_three_parameter_fit_recovers_a_known_technology():
+    """The mild hybrids' fit (efficiency, accessories, friction) on a grid made from a known law recovers the
+    law's parameters: fuel per row = (a + b xi) / eta + c P (the indicated work and the friction's over the
+    efficiency, the accessories' fuel linear in their power), rows of different a, b, c (the cycles'
+    weights); the law is linear in xi between the friction nodes, as the fit interpolates it, and the true
+    values sit on the fine axes."""
+    import numpy as np
+
+    rng = np.random.default_rng(3)
+    n = 40
+    a, b, c = rng.uniform(4.0, 8.0, n), rng.uniform(0.5, 2.0, n), rng.uniform(2e-4, 8e-4, n)
+
+    def law(eta, xi, acc):
+        return (a + b * xi) / eta + c * acc
+
+    eta_k, acc_k = mhev.EFFICIENCY_AXIS, mhev.ACCESSORY_NODES_W
+    grid = np.empty((n, eta_k.size, mhev.FRICTION_AXIS.size, len(acc_k)))
+    for i, e in enumerate(eta_k):
+        for f, xi in enumerate(mhev.FRICTION_AXIS):
+            for j, p in enumerate(acc_k):
+                grid[:, i, f, j] = np.log(law(e, xi, p))
+    truth = {
+        "engine.thermal_efficiency": 0.46,
+        "engine.friction_coefficient": 0.8,
+        "electric.accessory_power": 1200.0,
+    }
+    measured = np.log(
+        law(
+            *(
+                truth[k]
+                for k in (
+                    "engine.thermal_efficiency",
+                    "engine.friction_coefficient",
+                    "electric.accessory_power",
+                )
+            )
+        )
+    )
+    params, loss = mhev.fit(grid, measured)
+    assert set(params) == set(mhev.TECH_PARAMS)
+    assert params["engine.thermal_efficiency"] == pytest.approx(0.46, abs=1e-9)
+    assert params["engine.friction_coefficient"] == pytest.approx(0.8, abs=1e-9)
+    assert params["electric.accessory_power"] == pytest.approx(1200.0, abs=1e-6)
+    assert loss < 1e-9
+    assert mhev.on_bounds(params) == {}
+    assert mhev.on_bounds({**params, "engine.friction_coefficient": 0.1}) == {
+        "engine.friction_coefficient": "low"
+    }

@@ -41,7 +41,8 @@ axle ratio, the fleet's wheel radius, driveline efficiency and measured idle), t
 machine's power needs at the cell's limit (:func:`vpsim.fleet.hev.pack_strings`). Energy management: ECMS.
 
 Technology per class (``mhev_p0``, ``mhev_p1``: the layouts; :data:`TECH_PARAMS`, fitted out of fold by
-family as the other classes): ``engine.thermal_efficiency`` and ``electric.accessory_power``.
+family as the other classes): ``engine.thermal_efficiency``, ``electric.accessory_power`` and
+``engine.friction_coefficient`` (the conventional classes' engine parameters, :mod:`vpsim.fleet.calibrate`).
 """
 
 from __future__ import annotations
@@ -52,13 +53,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import calibrate as cal
 from .epa import (
     BOOST_SPECIFIC_POWER_KW_PER_L,
     HP_TO_KW,
     TRANSMISSION_KIND,
     CertificationRecord,
 )
-from .techgrid import TechGrid
+from .techgrid import TechGrid, bounds_hit
 
 MHEV_CYCLES = ("ftp_bag2", "ftp_bag3", "hwy", "us06")
 CLASSES = ("mhev_p0", "mhev_p1")
@@ -92,20 +94,27 @@ P1_BASE_SPEED = 64.0  # rad/s (16 kW / 250 Nm)
 P1_MAX_SPEED = 700.0  # rad/s (6,700 rpm)
 P1_INERTIA = 0.04  # kg m^2: a disc rotor of some 0.25 m between engine and gearbox (reconstructed)
 
-# --- technology: two parameters ---------------------------------------------------------------------------
-TECH_PARAMS = ("engine.thermal_efficiency", "electric.accessory_power")
+# --- technology: three parameters, the conventional classes' -----------------------------------------------
+# the engine's indicated efficiency and friction coefficient, as the conventional classes fit them
+# (vpsim.fleet.calibrate), and the accessories' power, on the electric network (the 12 V loads, and what else
+# costs fuel per second). The friction was the preset's (hofman2011, 1.34) until the mild hybrids' own
+# friction was fitted out of fold like the conventional cars' (docs/fleet.md, "Mild hybrids")
+TECH_PARAMS = ("engine.thermal_efficiency", "electric.accessory_power", "engine.friction_coefficient")
 # the full hybrids' efficiency axis: 0.30-0.50 was set first, and the fit on the first 20 mild hybrids sat
-# on its 0.50 (fleet/tuned.py declares the change). The engine's friction is the preset's (hofman2011, 1.34):
-# a lower friction from the conventional fleet's class fits was tried and not kept (docs/fleet.md)
+# on its 0.50 (fleet/tuned.py declares the change)
 EFFICIENCY_AXIS = np.array([0.34, 0.38, 0.42, 0.46, 0.50, 0.54])
 EFFICIENCY_FINE = np.round(np.arange(0.34, 0.54001, 0.0025), 5)
 ACCESSORY_NODES_W = (0.0, 1000.0)
 ACCESSORY_AXIS = np.arange(0.0, 3000.1, 25.0)  # the conventional classes' accessory range (calibrate)
+FRICTION_AXIS = cal.FRICTION_AXIS  # the conventional classes' friction nodes (0.1-2.9) and search
+FRICTION_FINE = np.round(np.linspace(FRICTION_AXIS[0], FRICTION_AXIS[-1], cal.FINE), 5)
 BOUND_REASONS = {
     ("engine.thermal_efficiency", "low"): "0.34 indicated efficiency is below any 2022 engine's",
     ("engine.thermal_efficiency", "high"): "0.54 indicated efficiency is beyond the best production engines",
     ("electric.accessory_power", "low"): "no accessory load is the physical lower end",
     ("electric.accessory_power", "high"): "3 kW is the conventional classes' bound (vpsim.fleet.calibrate)",
+    ("engine.friction_coefficient", "low"): cal.BOUND_REASONS[("engine.friction_coefficient", "low")],
+    ("engine.friction_coefficient", "high"): "2.9 is the conventional classes' bound (vpsim.fleet.calibrate)",
 }
 
 
@@ -332,18 +341,62 @@ def _cycle(name: str):
 
 
 def grid_chunk(items: list[tuple[MHEVRecord, tuple[str, ...]]]) -> list[dict]:
-    """Backward ECMS runs of each (record, tests) at every efficiency node and both accessory nodes:
-    ``log_fuel`` (len(EFFICIENCY_AXIS), 2) of ln charge-sustaining L/100 km, or ``error``; the vehicle is
-    built per test (its road load folded over that cycle)."""
+    """Backward ECMS runs of each (record, tests) at every efficiency and friction node and both accessory
+    nodes: ``log_fuel`` (len(EFFICIENCY_AXIS), len(FRICTION_AXIS), 2) of ln charge-sustaining L/100 km, or
+    ``error``; the vehicle is built per test (its road load folded over that cycle)."""
     from .hybrids import cs_fuel_of
 
-    return GRID.grid_chunk(items, mhev_parameters, cs_fuel_of(_cycle), "log_fuel", "fuel", per_test=True)
+    def friction_grid(base, figure_of, what):
+        # (efficiency, accessories) at each friction node, stacked on the friction axis
+        return np.stack(
+            [
+                GRID.log_grid(
+                    base.with_changes(engine={TECH_PARAMS[2].split(".")[1]: float(xi)}), figure_of, what
+                )
+                for xi in FRICTION_AXIS
+            ],
+            axis=1,
+        )
+
+    return GRID.grid_chunk(
+        items, mhev_parameters, cs_fuel_of(_cycle), "log_fuel", "fuel", per_test=True, grid_of=friction_grid
+    )
 
 
+# (efficiency, accessories) at one friction: the full hybrids' two-parameter grid
 GRID = TechGrid(
-    TECH_PARAMS, EFFICIENCY_AXIS, EFFICIENCY_FINE, ACCESSORY_NODES_W, ACCESSORY_AXIS, "mild hybrid"
+    TECH_PARAMS[:2], EFFICIENCY_AXIS, EFFICIENCY_FINE, ACCESSORY_NODES_W, ACCESSORY_AXIS, "mild hybrid"
 )
-surrogate, fit, search_bounds, on_bounds = GRID.surrogate, GRID.fit, GRID.search_bounds, GRID.on_bounds
+
+
+def fit(grid: np.ndarray, log_measured: np.ndarray) -> tuple[dict, float]:
+    """The technology minimising mean |ln(predicted / measured)| over the rows; (params, loss). ``grid``:
+    rows x efficiency nodes x friction nodes x accessory nodes of ln fuel (:func:`grid_chunk`). At each
+    friction of :data:`FRICTION_FINE`, ln fuel is interpolated linearly in the friction between its nodes (the
+    friction mean effective pressure is linear in the coefficient, as the conventional grid takes it), and
+    the efficiency and accessories are searched as the full hybrids' (:class:`TechGrid`)."""
+    if grid.shape[0] == 0:
+        raise ValueError("no mild hybrid to fit the technology on")
+    j = np.clip(np.searchsorted(FRICTION_AXIS, FRICTION_FINE, side="right") - 1, 0, FRICTION_AXIS.size - 2)
+    w = (FRICTION_FINE - FRICTION_AXIS[j]) / (FRICTION_AXIS[j + 1] - FRICTION_AXIS[j])
+    best: tuple[dict, float] | None = None
+    for k, xi in enumerate(FRICTION_FINE):
+        params, loss = GRID.fit(
+            grid[:, :, j[k], :] * (1.0 - w[k]) + grid[:, :, j[k] + 1, :] * w[k], log_measured
+        )
+        if best is None or loss < best[1]:
+            best = ({**params, TECH_PARAMS[2]: float(xi)}, loss)
+    return best
+
+
+def search_bounds() -> dict[str, tuple[float, float]]:
+    """The range each technology parameter is searched in."""
+    return {**GRID.search_bounds(), TECH_PARAMS[2]: (float(FRICTION_FINE[0]), float(FRICTION_FINE[-1]))}
+
+
+def on_bounds(params: dict) -> dict[str, str]:
+    """{parameter: "low" | "high"} for each fitted value that sits on its search bound."""
+    return bounds_hit(search_bounds(), params)
 
 
 def predict_chunk(items: list[tuple[MHEVRecord, str, dict]]) -> list[dict]:
@@ -373,7 +426,7 @@ __all__ = [
 TOML_FIELDS = (
     ("vehicle", _VEHICLE),
     ("transmission", _TRANSMISSION),
-    ("engine", (*_ENGINE, "thermal_efficiency", "accessory_power")),
+    ("engine", (*_ENGINE, "thermal_efficiency", "friction_coefficient", "accessory_power")),
     ("machine", ("rated_power", "base_speed", "max_speed", "kind", "inertia")),
     ("battery", ("cell", "cells_in_series", "cells_in_parallel", "soc_initial", "soc_min", "soc_max")),
     ("electric", ("accessory_power",)),
@@ -396,6 +449,7 @@ def mhev_vehicle_toml(rec: MHEVRecord, params, source: str = "", technology_note
         "engine.bore": "record: displacement and cylinders",
         "engine.rated_power": "record: rated power (W)",
         "engine.thermal_efficiency": technology_note or "the preset's",
+        "engine.friction_coefficient": technology_note or "the preset's",
         "electric.accessory_power": technology_note or "the preset's (W)",
         "machine.rated_power": f"{sys_.source} (vpsim.fleet.mhev.SYSTEMS; W)",
         "battery.cells_in_parallel": "the preset's cell, strings for the machine's rated power",

@@ -1076,6 +1076,7 @@ def _hev_md(run, s) -> list[str]:
 def _hybrid_md(part: dict, hm, text: str, what: str) -> list[str]:
     """``text``, then the technology per fold and class of a hybrid fleet ``part`` (module ``hm``)."""
     L = ["", text]
+    extra = hm.TECH_PARAMS[2:]  # beyond the efficiency and the accessories (the mild hybrids' friction)
     if part.get("technology"):
         L += [
             "",
@@ -1084,8 +1085,10 @@ def _hybrid_md(part: dict, hm, text: str, what: str) -> list[str]:
             + ", ".join(f"`{k}` {lo:g}-{hi:g}" for k, (lo, hi) in hm.search_bounds().items())
             + "):",
             "",
-            "| fold.class | thermal efficiency | accessories, W | training rows | on a bound |",
-            "|---|---|---|---|---|",
+            "| fold.class | thermal efficiency | accessories, W | "
+            + "".join(f"{p.split('.')[1].replace('_', ' ')} | " for p in extra)
+            + "training rows | on a bound |",
+            "|---|---|---|---|---|" + "---|" * len(extra),
         ]
         for k, t in {
             **part["technology"],
@@ -1093,7 +1096,9 @@ def _hybrid_md(part: dict, hm, text: str, what: str) -> list[str]:
         }.items():
             hits = hm.on_bounds(t)
             L.append(
-                f"| {k} | {t[hm.TECH_PARAMS[0]]:.4f} | {t[hm.TECH_PARAMS[1]]:.0f} | {t['n_train']} | "
+                f"| {k} | {t[hm.TECH_PARAMS[0]]:.4f} | {t[hm.TECH_PARAMS[1]]:.0f} | "
+                + "".join(f"{t[p]:.3g} | " for p in extra)
+                + f"{t['n_train']} | "
                 + (", ".join(f"{p.split('.')[1]} {side}" for p, side in hits.items()) or "–")
                 + " |"
             )

@@ -87,10 +87,13 @@ class TechGrid:
             raise ValueError(f"non-finite {what} on the technology grid")
         return g
 
-    def grid_chunk(self, items, base_of, runner_of, column: str, what: str, *, per_test: bool = False):
-        """The grid (:meth:`log_grid`) of each (record, tests) of ``items``, a row per test with ``column``
-        (or None and ``error``). ``base_of(rec, test)`` builds the vehicle, once per record (``test`` None)
-        unless ``per_test``; ``runner_of(rec, test)`` gives the figure of a params' run on the test."""
+    def grid_chunk(
+        self, items, base_of, runner_of, column: str, what: str, *, per_test: bool = False, grid_of=None
+    ):
+        """The grid (:meth:`log_grid`, or ``grid_of(base, figure_of, what)`` where a class has more axes) of
+        each (record, tests) of ``items``, a row per test with ``column`` (or None and ``error``).
+        ``base_of(rec, test)`` builds the vehicle, once per record (``test`` None) unless ``per_test``;
+        ``runner_of(rec, test)`` gives the figure of a params' run on the test."""
         from .run import _kernels_on_one_thread, _one_line
 
         out = []
@@ -108,7 +111,7 @@ class TechGrid:
                             base = base_of(rec, name)
                         elif base is None:
                             raise ValueError(why)
-                        row[column] = self.log_grid(base, runner_of(rec, name), what)
+                        row[column] = (grid_of or self.log_grid)(base, runner_of(rec, name), what)
                     except Exception as exc:
                         row["error"] = _one_line(exc)
                     out.append(row)

@@ -44,7 +44,7 @@ HEV_KEYS = (
 )
 FIT_INFO = ("train_loss", "n_train", "basis")  # how a class's fit was made: written beside its values
 # a technology.json written before the accessories were fitted has no engine.accessory_power: the default
-OPTIONAL = ("engine.accessory_power",)
+OPTIONAL = ("engine.accessory_power", "engine.friction_coefficient")
 
 
 def _table(path, data, where: str, allowed) -> dict:
