@@ -88,12 +88,15 @@ def main(argv=None) -> int:
     ap.add_argument("new_src")
     ap.add_argument("--cycles", default="udds,nedc,us06", help="comma-separated cycle names")
     ap.add_argument("--runs", type=int, default=300, help="timed runs of each version per cycle")
+    ap.add_argument("--warmup", type=int, default=20, help="untimed runs of each version first (default 20)")
     ap.add_argument(
         "--scratch", type=Path, default=SCRATCH, help=f"where the copies live (default {SCRATCH})"
     )
     a = ap.parse_args(argv)
     if a.runs < 1:
         ap.error(f"--runs {a.runs}: expected at least 1")
+    if a.warmup < 0:
+        ap.error(f"--warmup {a.warmup}: expected 0 or more")
     _install(a.old_src, "vpsim_a", a.scratch)
     _install(a.new_src, "vpsim_b", a.scratch)
     for name in [m for m in sys.modules if m.split(".")[0] in ("vpsim_a", "vpsim_b")]:
@@ -106,7 +109,7 @@ def main(argv=None) -> int:
             run_b, res_b = _prepared("vpsim_b", cycle)
         except Exception as exc:  # a version's own error (an unknown cycle, ...): its one line, no traceback
             raise SystemExit(f"ab_forward: {cycle}: {exc}") from None
-        for _ in range(20):
+        for _ in range(a.warmup):
             run_a()
             run_b()
         ta, tb = np.empty(a.runs), np.empty(a.runs)

@@ -32,7 +32,7 @@ from ..model import engine as en
 from ..model import rules
 from ..model import tables as tb
 from ..model import vehicle as vh
-from ..model._compile import kernel
+from ..model._compile import compiled, kernel
 from ..model.engine import equation, inline
 from ..model.maps import (
     LINE_SPEED_STEP,
@@ -483,7 +483,7 @@ def run(
         return gear, rows, acc
 
     intervals = cycle_intervals(cycle)
-    if not run_kernel.overloads:  # compile (or load) outside the timing
+    if not compiled(run_kernel):  # compile (or load) outside the timing
         passes(cycle.time_s[:2], tuple(x[:1] for x in intervals), keep_series)
     stop_start = params.simulation.stop_start
     t0 = time.process_time()

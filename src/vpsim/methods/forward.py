@@ -75,7 +75,7 @@ from ..gears import GearSchedule, default_schedule, gearbox_ratio_series
 from ..model import engine as en
 from ..model import rules
 from ..model import vehicle as vh
-from ..model._compile import kernel
+from ..model._compile import compiled, kernel
 from ..model.record import kernel_records, memo, record
 from ..result import EnergyBalance, Result, TraceMiss, limits_of
 
@@ -355,7 +355,7 @@ def warm_up(solver: str | None = None) -> None:
     simulation only. Each solver's integrator is a kernel of its own: a run compiles only the one it uses."""
     solvers = SOLVERS if solver is None else (solver,)
     kernels = {"rosenbrock": _integrate_ros, "dopri5": _integrate}
-    if _start_state_kernel.overloads and all(kernels[s].overloads for s in solvers):
+    if compiled(_start_state_kernel, *(kernels[s] for s in solvers)):
         return
     from ..params import load_parameters
 

@@ -60,7 +60,7 @@ from ..gears import GearSchedule, default_schedule, gearbox_ratio_series
 from ..model import engine as en
 from ..model import rules
 from ..model import vehicle as vh
-from ..model._compile import kernel
+from ..model._compile import compiled, kernel
 from ..model.engine import inline
 from ..model.record import kernel_records, memo, record
 from ..model.record import ratios as total_ratios
@@ -524,7 +524,7 @@ def run(
         account(v, dv, v_c, rows, left, right, dt, c, extended, BAND_KMH / 3.6, np.empty(t.size), acc, extra)
         return t, v, dv, ddv, gear_s, v_c, rows, acc, extra
 
-    if not (invert_points.overloads and account.overloads):  # compile (or load) outside the timing
+    if not compiled(invert_points, account):  # compile (or load) outside the timing
         passes(cycle.time_s[:3], cycle.speed_mps[:3], keep_series)
     t_cpu = time.process_time()
     # the paper caps the step at 1 s (simulation.inverse_max_step): longer intervals of a coarse or gappy

@@ -201,3 +201,9 @@ def kernel(fn=None, **options):
     if options:  # part of the kernel's cache stamp (:func:`kernel_digest`)
         fn._vpsim_options = repr(sorted((k, repr(v)) for k, v in options.items()))
     return numba.njit(**{**_OPTIONS, **options})(fn)
+
+
+def compiled(*kernels) -> bool:
+    """Whether every kernel is compiled (or loaded from the cache) already; True for plain Python functions,
+    as the kernels are with Numba's JIT disabled (``NUMBA_DISABLE_JIT=1``, for debugging)."""
+    return all(getattr(k, "overloads", True) for k in kernels)
