@@ -210,3 +210,29 @@ def test_p2_converter_locked_everywhere_is_the_stiff_p2_bit_for_bit():
         b = vpsim.simulate("udds", "backward", locked, ems=ems)
         assert a.fuel_kg == b.fuel_kg
         np.testing.assert_array_equal(a.series["machine_speed_radps"], b.series["machine_speed_radps"])
+
+
+@pytest.mark.parametrize("preset", ["hev_split", "hev_p2", "mhev"])
+@pytest.mark.parametrize("method", ["backward", "forward", "inverse"])
+def test_every_hybrid_plots_its_battery_and_machine(preset, method):
+    """``.plot()`` (and so ``vpsim simulate --out``) for every hybrid layout and method: the split has no
+    gearbox (no gear column, once a KeyError), so no gear panel; every layout shows its state of charge."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    r = vpsim.simulate("nedc", method, preset, ems="ecms")
+    fig = r.plot(t_range=(0.0, 200.0))
+    labels = [ax.get_ylabel() for ax in fig.axes]
+    plt.close(fig)
+    assert "state of charge (%)" in labels and "machine torque (N m)" in labels, labels
+    assert ("gear" in labels) == (preset != "hev_split"), labels
+
+
+def test_simulate_out_writes_a_split_hybrids_figure(tmp_path):
+    from vpsim.cli.main import main
+
+    assert main(["simulate", "--vehicle", "hev_split", "--cycle", "nedc", "--out", str(tmp_path)]) == 0
+    for f in ("timeseries.csv", "summary.json", "timeseries.png"):
+        assert (tmp_path / f).stat().st_size > 100, f

@@ -625,7 +625,7 @@ class Result:
             ("speed (km/h)", [("speed_mps", 3.6, self.method), ("reference_speed_mps", 3.6, "cycle")]),
             # a CVT (more ratios than a stepped gearbox has gears): its ratio, not the grid point's number
             ("gearbox ratio", [("gearbox_ratio", 1, None)])
-            if "gearbox_ratio" in df and df["gear"].nunique() > MAX_STEPPED_GEARS
+            if "gearbox_ratio" in df and "gear" in df and df["gear"].nunique() > MAX_STEPPED_GEARS
             else ("gear", [("gear", 1, None)]),
             ("engine speed (rad/s)", [("engine_speed_radps", 1, None)]),
             ("machine speed (rad/s)", [("machine_speed_radps", 1, None)]),
@@ -644,7 +644,8 @@ class Result:
                 [("fuel_flow_kgps", 1e3, "model"), ("fuel_flow_used_kgps", 1e3, "with idle floor")],
             ),
         ]
-        if self.electric and df["gear"].nunique() == 1:  # a single reduction: no gear to show
+        # a single reduction, or a power split (no gearbox): no gear to show
+        if self.electric and ("gear" not in df or df["gear"].nunique() == 1):
             panels = [p for p in panels if p[0] not in ("gear", "gearbox ratio")]
         panels = [
             (lab, [c for c in cs if c[0] in df and np.any(np.isfinite(df[c[0]].to_numpy(float)))])
