@@ -3,6 +3,7 @@
     python benchmarks/mhev_oof.py ../shared/data/epa/22-tstcar.csv
     python benchmarks/mhev_oof.py LIST --csv DIR     # also the per-vehicle rows: DIR/mhev.csv, DIR/conv.csv
     python benchmarks/mhev_oof.py LIST --no-conventional
+    python benchmarks/mhev_oof.py LIST --converter   # the automatics' torque converter in the mild hybrids
 
 Runs exactly the fleet run's mild-hybrid part (``vpsim.fleet.run._run_mhevs``: the mild hybrids' family
 folds, the classes ``mhev_p0`` / ``mhev_p1``, the technology grid and fit, one backward ECMS run per
@@ -137,7 +138,13 @@ def main() -> None:
         metavar="SECTION.FIELD=VALUE",
         help="a change to every mild hybrid's parameters (repeatable), e.g. engine.friction_coefficient=0.7",
     )
+    ap.add_argument(
+        "--converter",
+        action="store_true",
+        help="the torque-converter automatics with their converter (mhev.CONVERTER; the fleet: off)",
+    )
     a = ap.parse_args()
+    mm.CONVERTER = a.converter or mm.CONVERTER
     changes = {k: float(v) for k, _, v in (x.partition("=") for x in a.set)}
     cars = read_test_car_list(a.list)
     system = {v.key: v.system for v in cars.mhev_vehicles}
@@ -145,7 +152,8 @@ def main() -> None:
     t0 = time.process_time()
     out = run_mhev(cars, changes=changes)
     rows = [{**r, "system": system[key[(r["vehicle_id"], r["configuration"])]]} for r in out["rows"]]
-    print(f"mild-hybrid model {changes or ''} (CPU {time.process_time() - t0:.0f} s)")
+    conv_note = " with converters" if mm.CONVERTER else ""
+    print(f"mild-hybrid model {changes or ''}{conv_note} (CPU {time.process_time() - t0:.0f} s)")
     report("  vpsim mild hybrid", rows)
     for name, t in out["technology"].items():
         print(f"    {name}: " + ", ".join(f"{k} {v:.4g}" for k, v in t.items() if isinstance(v, float)))

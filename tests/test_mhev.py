@@ -210,3 +210,67 @@ def test_the_forward_method_runs_the_mild_hybrid_within_3_percent_of_the_backwar
         fwd = vpsim.simulate(cycle, "forward", "mhev", ems="ecms").summary()
         assert abs(fwd["fuel_l_per_100km_cs"] / back["fuel_l_per_100km_cs"] - 1.0) < 0.03
         assert abs(fwd["energy_relative_residual"]) < 1e-9
+
+
+# --- a torque converter between the crank and the gearbox (the mild hybrids' automatics) -----------------
+
+MILD_CONVERTER = {"converter_capacity_factor": 15.0, "lockup_min_gear": 2, "lockup_min_speed": 7.0}
+
+
+def test_converter_engine_point_by_hand():
+    """vehicle.converter_engine_point worked by hand (mu_s = 2, nu_c = 0.85, phi = 1/K^2 = 1/225): above idle
+    the pump point of nu = 0.425 (mu = 1.5); a pump below idle speed held at idle, passing mu phi idle^2 at
+    nu = w_t / idle, more than asked; a standing turbine at the stall, T_t = mu_s phi w_p^2."""
+    from vpsim.model import vehicle as vh
+    from vpsim.model.record import record
+
+    c = record(MHEV.with_changes(transmission=MILD_CONVERTER))
+    w_p = 100.0 / 0.425
+    t_p = w_p * w_p / 225.0
+    got = vh.converter_engine_point(100.0, 2.0, 1.5 * t_p, c)
+    assert got == pytest.approx((w_p, 2.0 / 0.425, t_p, 1.5, 0.0), rel=1e-12)
+    idle = c.idle_speed
+    nu = 20.0 / idle
+    mu = 2.0 - nu / 0.85
+    held = vh.converter_engine_point(20.0, 1.0, 1.0, c)
+    assert held == pytest.approx((idle, 0.0, idle * idle / 225.0, mu, 1.0), rel=1e-12)
+    assert held[3] * held[2] > 1.0  # passes more than the 1 N m asked: the brakes hold the rest
+    stall = vh.converter_engine_point(0.0, 0.0, 2.0 * 400.0**2 / 225.0, c)  # 400 rad/s > idle
+    assert stall == pytest.approx((400.0, 0.0, 400.0**2 / 225.0, 2.0, 0.0), rel=1e-12)
+
+
+@pytest.mark.parametrize("method", ["backward", "forward"])
+def test_mild_converter_slips_recovers_less_and_closes_the_balance(method):
+    """The mild hybrid with a converter after its crank: below lock-up the crank turns faster than the gearbox
+    input while it drives (the pump), the converter passes no braking (less recuperated), its loss is booked
+    as driveline loss (the balance closes to rounding) and the car burns more than with a clutch."""
+    q = MHEV.with_changes(transmission=MILD_CONVERTER)
+    base = vpsim.simulate("udds", method, MHEV, ems="ecms")
+    conv = vpsim.simulate("udds", method, q, ems="ecms")
+    assert abs(conv.energy.relative_residual) < 1e-9
+    assert conv.energy.terms["driveline_loss"] > base.energy.terms["driveline_loss"]
+    assert conv.electric["regen_wh"] < base.electric["regen_wh"]
+    assert conv.electric["fuel_l_per_100km_cs"] > base.electric["fuel_l_per_100km_cs"]
+    if method == "backward":
+        from vpsim.model.record import ratios as total_ratios
+
+        df = conv.to_dataframe()
+        ratios = np.asarray(total_ratios(q.transmission))
+        w_in = ratios[df["gear"].astype(int) - 1] * df["speed_mps"] / q.vehicle.wheel_radius
+        unlocked = ((df["gear"] == 1) | (df["speed_mps"] < 7.0)) & (df["speed_mps"] > 0.5)
+        driving = unlocked & (df["accel_mps2"] > 0.0) & (df["engine_speed_radps"] > 0.0)
+        assert driving.sum() > 50
+        assert (df.loc[driving, "engine_speed_radps"] > w_in[driving]).all()
+        # no traction below lock-up: the machine takes nothing from the wheels (it may charge from the engine)
+        coasting = unlocked & (df["accel_mps2"] < 0.0) & ~df["engine_on"].astype(bool)
+        assert coasting.sum() > 20
+        assert (df.loc[coasting, "machine_torque_nm"] == 0.0).all()
+
+
+def test_mild_converter_locked_everywhere_is_the_clutch_car_bit_for_bit():
+    locked = MHEV.with_changes(transmission={**MILD_CONVERTER, "lockup_min_gear": 1, "lockup_min_speed": 0.0})
+    for ems in ("rule", "ecms"):
+        a = vpsim.simulate("udds", "backward", MHEV, ems=ems)
+        b = vpsim.simulate("udds", "backward", locked, ems=ems)
+        assert a.fuel_kg == b.fuel_kg
+        np.testing.assert_array_equal(a.series["machine_torque_nm"], b.series["machine_torque_nm"])

@@ -405,6 +405,21 @@ def _toml_string(text: str) -> str:
 
 
 # the notes of the record's own fields, which every vehicle file takes alike
+# a vehicle file's torque converter fields (written where the car has one: converter_keys) and their notes
+CONVERTER_KEYS = ("converter_capacity_factor", "lockup_min_gear", "lockup_min_speed")
+CONVERTER_NOTES = {
+    "transmission.converter_capacity_factor": f"default: stalls at {CONVERTER_STALL_RPM:g} rpm under the "
+    "torque of the rated power (rad/s per sqrt(N m); 0: none, the clutch slips at launch instead)",
+    "transmission.lockup_min_gear": "default: lock-up clutch closed from this gear",
+    "transmission.lockup_min_speed": f"default: ... and above {LOCKUP_MIN_SPEED_KMH:g} km/h (m/s)",
+}
+
+
+def converter_keys(params: Parameters) -> tuple[str, ...]:
+    """The transmission fields a vehicle file of ``params`` writes for its torque converter (none without)."""
+    return CONVERTER_KEYS if params.transmission.converter_capacity_factor > 0 else ()
+
+
 RECORD_NOTES = {
     "vehicle.mass": "record: equivalent test weight",
     "vehicle.road_load_a": "record: target coast-down A (N)",
@@ -493,10 +508,7 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         if math.isfinite(rec.axle_ratio)
         else "default: N/V with a 0.70 top gear",
         "transmission.efficiency": "default",
-        "transmission.converter_capacity_factor": f"default: stalls at {CONVERTER_STALL_RPM:g} rpm under the "
-        "torque of the rated power (rad/s per sqrt(N m); 0: none, the clutch slips at launch instead)",
-        "transmission.lockup_min_gear": "default: lock-up clutch closed from this gear",
-        "transmission.lockup_min_speed": f"default: ... and above {LOCKUP_MIN_SPEED_KMH:g} km/h (m/s)",
+        **CONVERTER_NOTES,
         "engine.bore": f"record: {rec.displacement_l:g} L, {rec.cylinders} cyl., S/B {STROKE_BORE_RATIO}",
         "engine.thermal_efficiency": technology_note or "preset",
         "engine.friction_coefficient": technology_note or "preset",
@@ -529,7 +541,7 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
             + (("cvt_ratio_step",) if params.transmission.is_cvt else ())
             + ("shift_engine_speed", "shift_point_engine_speed")
             + ("shift_point_speed", "shift_point_speed_step")
-            + (tuple(converter_fields(rec)) if params.transmission.converter_capacity_factor > 0 else ()),
+            + converter_keys(params),
         ),
         (
             "engine",

@@ -100,7 +100,11 @@ def p2_interval(v, a, ratio, gear, c, e, m, tabs, h):
     T_in the pump's torque, the ratio mu(nu); it passes traction only (the clutch's state "slipping"), a
     braking demand goes to the friction brakes. The mild hybrid (``h.mild`` 1, :func:`mild_clutch`): w is
     the crank's speed (the machine turns at ``h.belt_ratio`` w), held at the idle speed while the clutch
-    slips or is open."""
+    slips or is open. A mild hybrid with a torque converter (the automatics of BMW, Mercedes, RAM, Volvo,
+    Jaguar Land Rover) has it in the clutch's place while its lock-up is open: with traction the crank is
+    the pump (:func:`vpsim.model.vehicle.converter_engine_point`, the engine car's converter: w the pump's
+    speed, at idle or above, T_in its torque, the ratio mu(nu); the clutch's state "converter"), without
+    the converter passes nothing (the state "open"): no recuperation below lock-up."""
     vv = v if v > 0.0 else 0.0
     w = vh.engine_speed(vv, ratio, c)
     dw = vh.engine_speed(a, ratio, c)
@@ -108,14 +112,21 @@ def p2_interval(v, a, ratio, gear, c, e, m, tabs, h):
     t_in = el.shaft_torque(f, ratio, c)
     clutch = CLUTCH_CLOSED
     mu = 1.0
-    if h.mild == 0.0 and not vh.converter_locked(gear, vv, c):
+    unlocked = not vh.converter_locked(gear, vv, c)
+    if h.mild == 0.0 and unlocked:
         w, dw, t_in, mu, _ = vh.converter_pump_point(w, dw, t_in, c)
         clutch = CLUTCH_SLIPPING  # the open converter passes a driving torque only
     runs = can_run(w, c)
     if h.mild > 0.0:
         runs = True  # on the crank, the engine may idle at rest (the clutch open)
-        clutch = mild_clutch(vv, w, t_in, c)
-        if clutch != CLUTCH_CLOSED:
+        if unlocked and t_in > 0.0:  # the crank drives the converter's pump, at idle speed or above
+            w, dw, t_in, mu, _ = vh.converter_engine_point(w, dw, t_in, c)
+            clutch = CLUTCH_CONVERTER
+        elif unlocked:  # no traction: the unlocked converter passes none, the crank is free
+            clutch = CLUTCH_OPEN
+        else:
+            clutch = mild_clutch(vv, w, t_in, c)
+        if clutch == CLUTCH_OPEN or clutch == CLUTCH_SLIPPING:
             w = c.idle_speed
             dw = 0.0
     t_min, t_max = el.envelope(h.belt_ratio * w, m, e, tabs[7], tabs[8], tabs[9])
@@ -131,14 +142,15 @@ def p2_choice(interval, battery, on, t_e, c, e, m, tabs, h):
     (:func:`mild_engine_choice`); its machine acts on the crank through the belt (:func:`belt_to_crank`)."""
     vv, w0, dw0, f, t_in, runs, cm18, t_min, t_max, ratio, clutch, mu = interval
     te, t_cr, p, mdot, running, w, dw = engine_of_choice(on, runs, clutch, t_e, w0, dw0, cm18, c, h)
-    t_pass = clutch_passes(t_in, clutch)  # the demand the clutch passes to the crank's side
+    passing = clutch_passing(clutch, running)
+    t_pass = clutch_passes(t_in, passing)  # the demand the clutch passes to the crank's side
     t_ask = crank_to_belt(t_pass - te + el.rotor_torque(dw, e), h)
     t_mb, i, u_oc, r, p_m, at_m, at_b = el.machine_and_battery_at(
         t_ask, t_pass < 0.0, vv, h.belt_ratio * w, t_min, t_max, battery, 0.0, e, m, tabs
     )
     t_m = belt_to_crank(t_mb, h)
     t_net = te + t_m - el.rotor_torque(dw, e)
-    t_net_passed = clutch_passes(t_net, clutch)
+    t_net_passed = clutch_passes(t_net, passing)
     missing, brake = shortfall_and_brake(f, el.wheel_force_of_shaft(mu * t_net_passed, ratio, c))
     return (
         w,
@@ -177,19 +189,29 @@ def engine_of_choice(on, runs, clutch, t_e, w, dw, cm18, c, h):
 
 
 @equation
+def clutch_passing(clutch, running):
+    """The clutch's state for the torque it passes with the engine ``running`` (1) or stopped (0): a mild
+    hybrid's stopped crank turns no pump, so its unlocked converter passes nothing ("open")."""
+    if clutch == CLUTCH_CONVERTER and running <= 0.0:
+        return CLUTCH_OPEN
+    return clutch
+
+
+@equation
 def clutch_passes(t_net, clutch):
     """The torque the clutch passes of ``t_net`` (the net torque on its engine side, or the gearbox's
     demand): all of it closed, none open, only a driving torque slipping (a slipping clutch passes no
     braking)."""
     if clutch == CLUTCH_OPEN:
         return 0.0
-    if clutch == CLUTCH_SLIPPING:
+    if clutch == CLUTCH_SLIPPING or clutch == CLUTCH_CONVERTER:
         return t_net if t_net > 0.0 else 0.0
     return t_net
 
 
-# the clutch between the mild hybrid's crank and its gearbox (the P2's machine is always behind it: closed)
-CLUTCH_OPEN, CLUTCH_CLOSED, CLUTCH_SLIPPING = 0, 1, 2
+# the clutch between the mild hybrid's crank and its gearbox (the P2's machine is always behind it: closed);
+# CLUTCH_CONVERTER: a mild hybrid's unlocked torque converter with traction, the crank its pump
+CLUTCH_OPEN, CLUTCH_CLOSED, CLUTCH_SLIPPING, CLUTCH_CONVERTER = 0, 1, 2, 3
 
 
 @equation

@@ -28,8 +28,6 @@ energy balance of :class:`vpsim.result.EnergyBalance` from one definition.
 
 from __future__ import annotations
 
-import math
-
 from . import engine as en
 from . import vehicle as vh
 from .engine import equation, inline
@@ -191,21 +189,11 @@ def converter_point(f_wheel, w_wheel, dw_wheel, ratio, c):
     ``w_wheel`` >= 0; at 0 the converter stalls): (pump speed w_e, dw_e/dt, T_cr demanded, brake force). The
     pump's acceleration is the turbine's over nu (quasi-static: the slip's own change is left out)."""
     t_t = vh.wheel_to_engine_torque(f_wheel, ratio, c)  # turbine = gearbox input torque (15),(16)
-    if w_wheel > 0.0:
-        nu = vh.converter_speed_ratio(t_t, w_wheel, c)
-        w_p = w_wheel / nu
-    else:  # stall: T_t = mu_s phi_s w_p^2
-        nu = 0.0
-        w_p = math.sqrt(t_t / (vh.converter_torque_ratio(0.0, c) * vh.converter_capacity(0.0, c)))
-    if w_p >= c.idle_speed:
-        t_p = t_t / vh.converter_torque_ratio(nu, c)
-        dw_p = dw_wheel / nu if nu > 0.0 else 0.0
+    w_p, dw_p, t_p, mu, held = vh.converter_engine_point(w_wheel, dw_wheel, t_t, c)
+    if held == 0.0:
         return w_p, dw_p, t_p + c.inertia * dw_p + en.accessory_torque(w_p, c), 0.0
     # the engine idles: at idle speed the converter passes more than the wheels ask, the brakes hold it
-    nu = w_wheel / c.idle_speed
-    t_p = vh.converter_capacity(nu, c) * c.idle_speed * c.idle_speed
-    t_passed = vh.converter_torque_ratio(nu, c) * t_p
-    brake = vh.engine_to_wheel_force(t_passed, ratio, c) - f_wheel
+    brake = vh.engine_to_wheel_force(mu * t_p, ratio, c) - f_wheel
     return c.idle_speed, 0.0, t_p + en.accessory_torque(c.idle_speed, c), (brake if brake > 0.0 else 0.0)
 
 

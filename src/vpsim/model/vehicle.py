@@ -288,6 +288,28 @@ def converter_pump_point(w_t, dw_t, t_t, c):
 
 
 @equation
+def converter_engine_point(w_t, dw_t, t_t, c):
+    """The unlocked converter with traction (``t_t`` > 0) driven by an engine that turns at idle speed or
+    faster (the engine car, a mild hybrid's crank with its machine): the pump at w_t / nu (nu the root of
+    :func:`converter_speed_ratio`; at a standing turbine the stall, T_t = mu_s phi_s w_p^2) with torque
+    T_t / mu(nu). Where that speed is below idle the engine idles and the converter, at nu = w_t / idle,
+    passes mu(nu) phi(nu) idle^2, more than asked (creep: the brakes hold the rest). Returns (w_p, dw_p, T_p,
+    mu(nu), held at idle 1 or 0); the pump's acceleration is the turbine's over nu (quasi-static)."""
+    if w_t > 0.0:
+        nu = converter_speed_ratio(t_t, w_t, c)
+        w_p = w_t / nu
+    else:  # stall
+        nu = 0.0
+        w_p = math.sqrt(t_t / (converter_torque_ratio(0.0, c) * converter_capacity(0.0, c)))
+    if w_p >= c.idle_speed:
+        mu = converter_torque_ratio(nu, c)
+        return w_p, (dw_t / nu if nu > 0.0 else 0.0), t_t / mu, mu, 0.0
+    nu = w_t / c.idle_speed
+    t_p = converter_capacity(nu, c) * c.idle_speed * c.idle_speed
+    return c.idle_speed, 0.0, t_p, converter_torque_ratio(nu, c), 1.0
+
+
+@equation
 def converter_locked(gear, v, c):
     """No converter, or its lock-up clutch closed: in gear ``gear`` (1-based) >= ``lockup_min_gear`` at or
     above ``lockup_min_speed``."""
