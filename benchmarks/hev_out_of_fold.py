@@ -2,6 +2,7 @@
 
     python benchmarks/hev_out_of_fold.py ../shared/data/epa/22-tstcar.csv
     python benchmarks/hev_out_of_fold.py LIST --csv rows.csv   # also the per-vehicle rows
+    python benchmarks/hev_out_of_fold.py LIST --set electric.regen_share=0.7 --layout hev_p2   # one change
 
 Runs exactly the fleet run's full-hybrid part (``vpsim.fleet.run._run_hevs``: the same family folds, classes,
 technology grid and fit, one backward ECMS run per vehicle and test at its fold's technology) in this
@@ -36,12 +37,35 @@ def main() -> None:
     ap.add_argument("list", help="the EPA test car list (22-tstcar.csv)")
     ap.add_argument("--folds", type=int, default=5)
     ap.add_argument("--csv", help="write the per-vehicle rows (with their class) to this file")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.FIELD=VALUE",
+        help="a change to the full hybrids' parameters (repeatable), e.g. electric.regen_share=0.7",
+    )
+    ap.add_argument(
+        "--layout", choices=("hev_split", "hev_p2"), help="make the --set changes to this layout only"
+    )
     a = ap.parse_args()
+    changes = {k: float(v) for k, _, v in (x.partition("=") for x in a.set)}
     cars = read_test_car_list(a.list)
     recs = cars.hev_vehicles
+    shipped = hev.hev_parameters
+
+    def build(rec, technology=None):  # the changes first: the fitted technology overrides them
+        mine = changes if a.layout in (None, rec.layout) else {}
+        return shipped(rec, {**mine, **(technology or {})})
+
+    hev.hev_parameters = build
     t0 = time.process_time()
-    out = fleet_run._run_hevs(recs, a.folds, "family", fleet_run._Serial(), {}, False, {})
+    try:
+        out = fleet_run._run_hevs(recs, a.folds, "family", fleet_run._Serial(), {}, False, {})
+    finally:
+        hev.hev_parameters = shipped
     cpu = time.process_time() - t0
+    if changes:
+        print(f"changes {changes} to {a.layout or 'every layout'}")
     cls = {(v.vehicle_id, v.configuration): hev.hev_class(v) for v in recs}
     rows = [{**r, "class": cls[(r["vehicle_id"], r["configuration"])]} for r in out["rows"]]
     print(f"full hybrids: n  median / median|error| / p90|error| (mpg, out of fold; CPU {cpu:.0f} s)")
