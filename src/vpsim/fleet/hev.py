@@ -470,20 +470,10 @@ def hev_vehicle_toml(rec: HEVRecord, params, source: str = "", technology_note: 
     record block; ``[record.measured_mpg]`` holds ``udds`` (the hot UDDS, FTP bags 3 + 4), ``hwy``, ``us06``:
     ``vpsim simulate`` compares them with the charge-sustaining figure."""
     from ..textio import printable
-    from .vehicle import (
-        CONVERTER_NOTES,
-        RECORD_NOTES,
-        converter_keys,
-        record_block,
-        toml_head,
-        toml_section,
-        with_record_block,
-    )
+    from .vehicle import hybrid_sections, record_block, toml_head, with_record_block
 
     sizes = "the layout's rule (vpsim.fleet.hev): the preset's, scaled"
     notes = {
-        **RECORD_NOTES,
-        **CONVERTER_NOTES,
         "engine.bore": "record: displacement and cylinders",
         "engine.rated_power": "record: rated power (the engine's, W)",
         "engine.thermal_efficiency": technology_note or "the preset's",
@@ -498,13 +488,8 @@ def hev_vehicle_toml(rec: HEVRecord, params, source: str = "", technology_note: 
     }
     about = [printable(f"# layout {rec.layout}: {rec.layout_rule}")]
     lines = toml_head(rec, source, "hev", PRESET[rec.layout], params.name, about, rec.layout)
-    flat = params.flat()
-    for sec, fields_ in TOML_FIELDS:
-        if sec == "split" and rec.layout != "hev_split":
-            continue
-        if sec == "transmission":  # a torque-converter automatic's converter (fleet: converter_fields)
-            fields_ = (*fields_, *converter_keys(params))
-        lines += toml_section(sec, fields_, flat, notes, present_only=True)
+    fields = [(sec, f) for sec, f in TOML_FIELDS if sec != "split" or rec.layout == "hev_split"]
+    lines += hybrid_sections(params, fields, notes)
     measured = {TOML_TEST_NAME[c]: v for c, v in rec.measured_mpg.items()}
     block = record_block(
         rec,

@@ -449,20 +449,10 @@ def mhev_vehicle_toml(rec: MHEVRecord, params, source: str = "", technology_note
     ``[record.measured_mpg]`` holds the fleet's tests (``ftp_bag2``, ``ftp_bag3``, ``hwy``, ``us06``), which
     ``vpsim simulate`` compares with the charge-sustaining figure."""
     from ..textio import printable
-    from .vehicle import (
-        CONVERTER_NOTES,
-        RECORD_NOTES,
-        converter_keys,
-        record_block,
-        toml_head,
-        toml_section,
-        with_record_block,
-    )
+    from .vehicle import hybrid_sections, record_block, toml_head, with_record_block
 
     sys_ = SYSTEMS[rec.system]
     notes = {
-        **RECORD_NOTES,
-        **CONVERTER_NOTES,
         "engine.bore": "record: displacement and cylinders",
         "engine.rated_power": "record: rated power (W)",
         "engine.thermal_efficiency": technology_note or "the preset's",
@@ -474,11 +464,7 @@ def mhev_vehicle_toml(rec: MHEVRecord, params, source: str = "", technology_note
     }
     about = [printable(f"# mild hybrid {rec.layout}: {sys_.source}")]
     lines = toml_head(rec, source, "mhev", PRESET, params.name, about, "mhev")
-    flat = params.flat()
-    for sec, fields_ in TOML_FIELDS:
-        if sec == "transmission":  # a torque-converter automatic's converter (fleet: converter_fields)
-            fields_ = (*fields_, *converter_keys(params))
-        lines += toml_section(sec, fields_, flat, notes, present_only=True)
+    lines += hybrid_sections(params, TOML_FIELDS, notes)
     block = record_block(
         rec,
         rec.road_load_si,

@@ -48,7 +48,14 @@ from ..gears import GearRule
 from ..model import vehicle as vh
 from ..params import Parameters, load_parameters
 from ..textio import printable
-from .epa import CERT_FUEL_KG_PER_L, CERT_FUEL_LHV_J_PER_KG, MPH_TO_MPS, VehicleRecord, coastdown_record
+from .epa import (
+    CERT_FUEL_KG_PER_L,
+    CERT_FUEL_LHV_J_PER_KG,
+    MPH_TO_MPS,
+    RECORD_FIELDS,
+    VehicleRecord,
+    coastdown_record,
+)
 
 BASE_PRESET = "hofman2011"
 WHEEL_RADIUS_M = 0.33  # dynamic radius of a typical 2022 passenger-car tyre (e.g. 225/60 R17: 0.34 m)
@@ -220,13 +227,7 @@ def converter_fields(rec: VehicleRecord) -> dict:
 # class (calibrate.vehicle_class) and the peer read nothing else. Two records equal in these are one vehicle
 # to the model, whatever their measurements (report.repeatability; a test checks the list is complete).
 MODEL_INPUTS = (
-    "etw_lb",
-    "target_a_lbf",
-    "target_b_lbf_per_mph",
-    "target_c_lbf_per_mph2",
-    "displacement_l",
-    "cylinders",
-    "rated_hp",
+    *RECORD_FIELDS,  # the fields every engine's record holds (epa)
     "boosted",
     "transmission_kind",
     "n_gears",
@@ -462,6 +463,21 @@ def toml_section(sec: str, fields_, flat: dict, notes: dict, *, present_only: bo
         val = _toml_value(list(v) if isinstance(v, tuple) else v)
         lines.append(f"{f} = {val}" + (f"  # {note}" if note else ""))
     lines.append("")
+    return lines
+
+
+def hybrid_sections(params: Parameters, toml_fields, notes: dict) -> list[str]:
+    """The sections of a hybrid's vehicle file: :func:`toml_section` of each (section, fields) of
+    ``toml_fields`` that ``params`` holds, the torque converter's fields added to the transmission where the
+    car has one (:func:`converter_keys`), each line with its note (``notes`` over :data:`RECORD_NOTES` and
+    :data:`CONVERTER_NOTES`)."""
+    flat = params.flat()
+    notes = {**RECORD_NOTES, **CONVERTER_NOTES, **notes}
+    lines: list[str] = []
+    for sec, fields_ in toml_fields:
+        if sec == "transmission":  # a torque-converter automatic's converter (fleet: converter_fields)
+            fields_ = (*fields_, *converter_keys(params))
+        lines += toml_section(sec, fields_, flat, notes, present_only=True)
     return lines
 
 
