@@ -60,7 +60,7 @@ from .epa import (
     TRANSMISSION_KIND,
     CertificationRecord,
 )
-from .techgrid import TechGrid, bounds_hit
+from .techgrid import TechGrid, ThirdAxis
 
 MHEV_CYCLES = ("ftp_bag2", "ftp_bag3", "hwy", "us06")
 CLASSES = ("mhev_p0", "mhev_p1")
@@ -354,57 +354,17 @@ def grid_chunk(items: list[tuple[MHEVRecord, tuple[str, ...]]]) -> list[dict]:
     ``error``; the vehicle is built per test (its road load folded over that cycle)."""
     from .hybrids import cs_fuel_of
 
-    def friction_grid(base, figure_of, what):
-        # (efficiency, accessories) at each friction node, stacked on the friction axis
-        return np.stack(
-            [
-                GRID.log_grid(
-                    base.with_changes(engine={TECH_PARAMS[2].split(".")[1]: float(xi)}), figure_of, what
-                )
-                for xi in FRICTION_AXIS
-            ],
-            axis=1,
-        )
-
-    return GRID.grid_chunk(
-        items, mhev_parameters, cs_fuel_of(_cycle), "log_fuel", "fuel", per_test=True, grid_of=friction_grid
-    )
+    return TECH.grid_chunk(items, mhev_parameters, cs_fuel_of(_cycle), "log_fuel", "fuel", per_test=True)
 
 
-# (efficiency, accessories) at one friction: the full hybrids' two-parameter grid
+# (efficiency, accessories) at one friction: the full hybrids' two-parameter grid; the friction its third
+# axis. At each friction of FRICTION_FINE, ln fuel is interpolated linearly in the friction between its nodes
+# (the friction mean effective pressure is linear in the coefficient, as the conventional grid takes it)
 GRID = TechGrid(
     TECH_PARAMS[:2], EFFICIENCY_AXIS, EFFICIENCY_FINE, ACCESSORY_NODES_W, ACCESSORY_AXIS, "mild hybrid"
 )
-
-
-def fit(grid: np.ndarray, log_measured: np.ndarray) -> tuple[dict, float]:
-    """The technology minimising mean |ln(predicted / measured)| over the rows; (params, loss). ``grid``:
-    rows x efficiency nodes x friction nodes x accessory nodes of ln fuel (:func:`grid_chunk`). At each
-    friction of :data:`FRICTION_FINE`, ln fuel is interpolated linearly in the friction between its nodes (the
-    friction mean effective pressure is linear in the coefficient, as the conventional grid takes it), and
-    the efficiency and accessories are searched as the full hybrids' (:class:`TechGrid`)."""
-    if grid.shape[0] == 0:
-        raise ValueError("no mild hybrid to fit the technology on")
-    j = np.clip(np.searchsorted(FRICTION_AXIS, FRICTION_FINE, side="right") - 1, 0, FRICTION_AXIS.size - 2)
-    w = (FRICTION_FINE - FRICTION_AXIS[j]) / (FRICTION_AXIS[j + 1] - FRICTION_AXIS[j])
-    best: tuple[dict, float] | None = None
-    for k, xi in enumerate(FRICTION_FINE):
-        params, loss = GRID.fit(
-            grid[:, :, j[k], :] * (1.0 - w[k]) + grid[:, :, j[k] + 1, :] * w[k], log_measured
-        )
-        if best is None or loss < best[1]:
-            best = ({**params, TECH_PARAMS[2]: float(xi)}, loss)
-    return best
-
-
-def search_bounds() -> dict[str, tuple[float, float]]:
-    """The range each technology parameter is searched in."""
-    return {**GRID.search_bounds(), TECH_PARAMS[2]: (float(FRICTION_FINE[0]), float(FRICTION_FINE[-1]))}
-
-
-def on_bounds(params: dict) -> dict[str, str]:
-    """{parameter: "low" | "high"} for each fitted value that sits on its search bound."""
-    return bounds_hit(search_bounds(), params)
+TECH = ThirdAxis(TECH_PARAMS[2], FRICTION_AXIS, FRICTION_FINE, GRID)
+fit, search_bounds, on_bounds = TECH.fit, TECH.search_bounds, TECH.on_bounds
 
 
 def predict_chunk(items: list[tuple[MHEVRecord, str, dict]]) -> list[dict]:

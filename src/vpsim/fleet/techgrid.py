@@ -1,10 +1,12 @@
-"""A class's two technology parameters fitted on a grid of real runs (the electric and hybrid fleets).
+"""A class's technology parameters fitted on a grid of real runs (the electric and hybrid fleets).
 
 Each vehicle is run at the nodes of its first parameter (``axis``) and at two accessory powers
 (``accessory_nodes_w``); the figure (wall energy, fuel) is then interpolated in its logarithm between the
 first parameter's nodes onto ``fine``, and linearly in the accessory power (the figure is linear in a constant
 load) onto ``accessory_axis``. The fit minimises the mean |ln(predicted / measured)| over a fold's training
 rows; every reported figure then comes from one real run at the fitted values, not from this surrogate.
+A third parameter (:class:`ThirdAxis`: the mild hybrids' engine friction, the full hybrids' machine losses)
+stacks that grid at its own nodes and is searched on its own fine axis, interpolated linearly between them.
 """
 
 from __future__ import annotations
@@ -116,3 +118,57 @@ class TechGrid:
                         row["error"] = _one_line(exc)
                     out.append(row)
         return out
+
+
+@dataclass(frozen=True, eq=False)
+class ThirdAxis:
+    """A third technology parameter ``name`` over a :class:`TechGrid` ``grid``: every vehicle is run on the
+    grid at each of its ``nodes``; at each value of ``fine`` the logarithm of the figure is interpolated
+    linearly between its two nodes, and the grid's two parameters searched there as :meth:`TechGrid.fit`."""
+
+    name: str
+    nodes: np.ndarray
+    fine: np.ndarray
+    grid: TechGrid
+
+    def log_grid(self, base, figure_of, what: str) -> np.ndarray:
+        """:meth:`TechGrid.log_grid` at each node: (len(grid.axis), len(nodes), 2)."""
+        sec, fld = self.name.split(".")
+        return np.stack(
+            [
+                self.grid.log_grid(base.with_changes(**{sec: {fld: float(x)}}), figure_of, what)
+                for x in self.nodes
+            ],
+            axis=1,
+        )
+
+    def grid_chunk(self, items, base_of, runner_of, column: str, what: str, *, per_test: bool = False):
+        """:meth:`TechGrid.grid_chunk` with this axis's :meth:`log_grid`."""
+        return self.grid.grid_chunk(
+            items, base_of, runner_of, column, what, per_test=per_test, grid_of=self.log_grid
+        )
+
+    def fit(self, grid: np.ndarray, log_measured: np.ndarray) -> tuple[dict, float]:
+        """The technology minimising mean |ln(predicted / measured)| over the rows; (params, loss).
+        ``grid``: rows x grid.axis x nodes x accessory nodes of the figure's logarithm."""
+        if grid.shape[0] == 0:
+            raise ValueError(f"no {self.grid.what} to fit the technology on")
+        nodes, fine = self.nodes, self.fine
+        j = np.clip(np.searchsorted(nodes, fine, side="right") - 1, 0, nodes.size - 2)
+        w = (fine - nodes[j]) / (nodes[j + 1] - nodes[j])
+        best: tuple[dict, float] | None = None
+        for k, x in enumerate(fine):
+            params, loss = self.grid.fit(
+                grid[:, :, j[k], :] * (1.0 - w[k]) + grid[:, :, j[k] + 1, :] * w[k], log_measured
+            )
+            if best is None or loss < best[1]:
+                best = ({**params, self.name: float(x)}, loss)
+        return best
+
+    def search_bounds(self) -> dict[str, tuple[float, float]]:
+        """The range each technology parameter is searched in."""
+        return {**self.grid.search_bounds(), self.name: (float(self.fine[0]), float(self.fine[-1]))}
+
+    def on_bounds(self, params: dict) -> dict[str, str]:
+        """{parameter: "low" | "high"} for each fitted value that sits on its search bound."""
+        return bounds_hit(self.search_bounds(), params)
