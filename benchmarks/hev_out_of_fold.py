@@ -9,7 +9,7 @@ technology grid and fit, one backward ECMS run per vehicle and test at its fold'
 process, without the peer, on the list's full hybrids only (the conventional cars, EVs and mild hybrids are
 not read into it). Prints per class and test n / median / median |error| / p90 |error| of mpg, the P2s
 together, all of them (the fleet report's ``by_powertrain.hev``),
-each class's fitted technology per fold, and the CPU time (about 4 min on one core).
+each class's fitted technology per fold, and the CPU time (about 15 min on one core).
 """
 
 from __future__ import annotations
@@ -79,7 +79,9 @@ def main() -> None:
             if e:
                 print(f"  {name:19s} {cyc:8s} {_stats(e)}")
     for key, t in out["technology"].items():
-        print(f"  {key:24s} eta {t[hev.TECH_PARAMS[0]]:.4f}  accessories {t[hev.TECH_PARAMS[1]]:6.0f} W")
+        eta, acc = t[hev.TECH_PARAMS[0]], t[hev.TECH_PARAMS[1]]
+        extra = "".join(f"  {p.split('.')[1]} {t[p]:.3g}" for p in hev.TECH_PARAMS[2:])
+        print(f"  {key:24s} eta {eta:.4f}  accessories {acc:6.0f} W{extra}")
     if a.csv:
         import pandas as pd
 

@@ -119,32 +119,44 @@ def test_from_epa_writes_a_hybrid_that_simulates_against_its_record(shared_dir, 
 
 
 def test_fit_recovers_a_known_technology():
-    """Synthetic fuel: F = W (0.44 / eta) + a P_acc, measured at eta 0.47, 600 W: the fit finds them on its
-    fine axes (ln F is not linear in eta, so within the interpolation's error)."""
+    """Synthetic fuel: F = W (0.44 / eta) + m L + a P_acc, measured at eta 0.47, loss level L 0.63, 600 W:
+    the fit finds them on its fine axes (ln F is linear in neither eta nor L: within the interpolation's
+    error)."""
     import numpy as np
 
     rng = np.random.default_rng(3)
     n = 40
     w = rng.uniform(3.0, 9.0, n)
+    m = rng.uniform(0.5, 2.0, n)  # the loss level's weight differs from car to car, or it would not be found
     a = rng.uniform(2e-4, 6e-4, n)
 
-    def fuel(eta, acc):
-        return w * 0.44 / eta + a * acc
+    def fuel(eta, scale, acc):
+        return w * 0.44 / eta + m * scale + a * acc
 
     grid = np.stack(
         [
-            [[math.log(fuel(e, acc)[k]) for acc in hev.ACCESSORY_NODES_W] for e in hev.EFFICIENCY_AXIS]
+            [
+                [[math.log(fuel(e, x, acc)[k]) for acc in hev.ACCESSORY_NODES_W] for x in hev.LOSS_SCALE_AXIS]
+                for e in hev.EFFICIENCY_AXIS
+            ]
             for k in range(n)
         ]
     )
-    params, loss = hev.fit(grid, np.log(fuel(0.47, 600.0)))
+    assert grid.shape == (n, hev.EFFICIENCY_AXIS.size, hev.LOSS_SCALE_AXIS.size, 2)
+    params, loss = hev.fit(grid, np.log(fuel(0.47, 0.63, 600.0)))
     assert params["engine.thermal_efficiency"] == pytest.approx(0.47, abs=0.005)
+    assert params["machine.loss_scale"] == pytest.approx(0.63, abs=0.03)
     assert params["electric.accessory_power"] == pytest.approx(600.0, abs=50.0)
     assert loss < 0.005
-    assert hev.on_bounds({"engine.thermal_efficiency": 0.54, "electric.accessory_power": 0.0}) == {
+    assert hev.on_bounds(
+        {"engine.thermal_efficiency": 0.54, "electric.accessory_power": 0.0, "machine.loss_scale": 1.5}
+    ) == {
         "engine.thermal_efficiency": "high",
         "electric.accessory_power": "low",
+        "machine.loss_scale": "high",
     }
+    with pytest.raises(ValueError, match="no hybrid"):
+        hev.fit(grid[:0], np.log(fuel(0.47, 0.63, 600.0))[:0])
 
 
 def test_from_epa_takes_the_fleets_hybrid_fit(shared_dir, tmp_path, capsys):
@@ -155,7 +167,7 @@ def test_from_epa_takes_the_fleets_hybrid_fit(shared_dir, tmp_path, capsys):
 
     lst = _real_list(shared_dir)
     tech = tmp_path / "technology.json"
-    fit = {"engine.thermal_efficiency": 0.5175, "electric.accessory_power": 375.0}
+    fit = {"engine.thermal_efficiency": 0.5175, "electric.accessory_power": 375.0, "machine.loss_scale": 0.42}
     tech.write_text(json.dumps({"hev": {"all_vehicles": {"hev_split": fit}}}))
     car = tmp_path / "c.toml"
     args = ["vehicle", "from-epa", str(lst), "--id", "20-ZE1H", "--config", "0", "--out", str(car)]
@@ -163,6 +175,8 @@ def test_from_epa_takes_the_fleets_hybrid_fit(shared_dir, tmp_path, capsys):
     p = load_parameters(car)
     assert p.engine.thermal_efficiency == pytest.approx(0.5175)
     assert p.electric.accessory_power == pytest.approx(375.0)
+    assert p.machine.loss_scale == pytest.approx(0.42)
+    assert "fleet fit" in car.read_text().split("loss_scale", 1)[1].splitlines()[0]
     # a technology.json without a hybrid fit: one line naming what is missing
     tech.write_text(json.dumps({"bev": {}}))
     capsys.readouterr()

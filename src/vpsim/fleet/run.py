@@ -794,6 +794,13 @@ def _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings) 
     return _run_hybrids(mhevs, part, folds, group_by, executor, peer_state, progress, timings)
 
 
+# a hybrid part's third technology parameter in its rows, under the column name the other parts give it
+HYBRID_EXTRA_COLUMNS = {
+    "engine.friction_coefficient": "friction_coefficient",
+    "machine.loss_scale": "machine_loss_scale",
+}
+
+
 class HybridFleet(NamedTuple):
     """A hybrid part of the fleet for :func:`_run_hybrids`: its module ``hm`` (:mod:`vpsim.fleet.hev` or
     :mod:`.mhev`: ``fit``, ``CLASSES``, ``TECH_PARAMS``, ``grid_chunk``, ``predict_chunk``,
@@ -892,6 +899,7 @@ def _run_hybrids(recs, part: HybridFleet, folds, group_by, executor, peer_state,
                 "machine_kw": math.nan,
                 "thermal_efficiency": t[hm.TECH_PARAMS[0]],
                 "accessory_power_w": t[hm.TECH_PARAMS[1]],
+                **{HYBRID_EXTRA_COLUMNS[p]: t[p] for p in hm.TECH_PARAMS[2:]},
                 "trace_miss_s": math.nan,
                 "fastsim_mpg": math.nan,
                 "fastsim_error_pct": math.nan,

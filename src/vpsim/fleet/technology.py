@@ -43,8 +43,9 @@ HEV_KEYS = (
     "peer_fastsim_calibrated_out_of_fold",
 )
 FIT_INFO = ("train_loss", "n_train", "basis")  # how a class's fit was made: written beside its values
-# a technology.json written before the accessories were fitted has no engine.accessory_power: the default
-OPTIONAL = ("engine.accessory_power", "engine.friction_coefficient")
+# a technology.json written before these were fitted (the conventional accessories, the mild hybrids'
+# friction, the full hybrids' machine losses) has none: the vehicle file keeps its default
+OPTIONAL = ("engine.accessory_power", "engine.friction_coefficient", "machine.loss_scale")
 
 
 def _table(path, data, where: str, allowed) -> dict:
