@@ -297,6 +297,27 @@ def test_fleet_on_the_real_list(shared_dir, tmp_path, capsys):
         assert all(
             0.6 <= t["efficiency_scale"] <= 1.6 and 0 <= t["accessory_power_w"] <= 2500 for t in fits.values()
         )
+    # each hybrid part's rows carry its third technology parameter, within its search range
+    import pandas as pd
+
+    assert pd.read_csv(out / "vehicles_hev.csv")["machine_loss_scale"].between(0.01, 1.5).all()
+    assert pd.read_csv(out / "vehicles_mhev.csv")["friction_coefficient"].between(0.1, 2.9).all()
+    # the printed summary: each hybrid test beside its peer, calibrated then defaults, as the summary has them
+    text = capsys.readouterr().out
+
+    def trio(x):  # a test with too few rows has no figure: a dash
+        keys = ("median_error_pct", "median_abs_error_pct", "p90_abs_error_pct")
+        return " ".join("       –" if x[k] is None else f"{x[k]:+7.1f}%" for k in keys)
+
+    for pt, title in (("hev", "full hybrids:"), ("mhev", "mild hybrids:")):
+        lines = text.split(title, 1)[1].splitlines()
+        fs = s["peer"]["fastsim_by_powertrain"][pt]
+        fc = s["peer"]["fastsim_calibrated_by_powertrain"][pt]
+        for c, v in s["by_powertrain"][pt]["cycles"].items():
+            want = f"{c:10s} {v['n']:5d} {trio(v)}"
+            if fs.get("measured") is not False:
+                want += f"   {trio(fc[c])}   {trio(fs[c])}"
+            assert want in lines, (pt, c)
 
 
 def test_a_manual_gets_the_drivers_shift_point(tmp_path):

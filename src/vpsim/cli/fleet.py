@@ -117,20 +117,24 @@ def fleet(
         click.echo(line)
     if not measured:
         click.echo(f"FASTSim not measured: {fs.get('reason')}")
-    bev = s["by_powertrain"]["bev"]
-    fsb = s["peer"]["fastsim_by_powertrain"]["bev"]
-    fcb = s["peer"]["fastsim_calibrated_by_powertrain"]["bev"]
-    click.echo(f"battery-electric: {bev['n_vehicles']} vehicles ({bev['status']}), MPGe")
-    for c, v in bev["cycles"].items():
-        line = f"{c:10s} {v['n']:5d} {trio(v)}"
-        if "measured" not in fsb:
-            line += f"   {trio(fcb[c])}   {trio(fsb[c])}"
-        click.echo(line)
-    hv = s["by_powertrain"]["hev"]
-    click.echo(f"full hybrids: {hv['n_vehicles']} vehicles ({hv['status']}), mpg charge-sustaining (ECMS)")
-    fsh = s["peer"]["fastsim_by_powertrain"]["hev"]
-    for c, v in hv["cycles"].items():
-        click.echo(f"{c:10s} {v['n']:5d} {trio(v)}" + ("" if "measured" in fsh else f"   {trio(fsh[c])}"))
+    # the electric and hybrid parts, each beside its peer (calibrated, then defaults) as the engine cars
+    parts = (
+        ("bev", "battery-electric: {n} vehicles ({status}), MPGe"),
+        ("hev", "full hybrids: {n} vehicles ({status}), mpg charge-sustaining (ECMS)"),
+        ("mhev", "mild hybrids: {n} vehicles ({status}), mpg charge-sustaining (ECMS)"),
+    )
+    for pt, title in parts:
+        part = s["by_powertrain"][pt]
+        peer = s["peer"]["fastsim_by_powertrain"].get(pt, {})
+        peer_cal = s["peer"]["fastsim_calibrated_by_powertrain"].get(pt, {})
+        click.echo(title.format(n=part["n_vehicles"], status=part["status"]))
+        if "vehicle" in peer and part["cycles"]:
+            click.echo(f"  (peer: {peer['vehicle']})")
+        for c, v in part["cycles"].items():
+            line = f"{c:10s} {v['n']:5d} {trio(v)}"
+            if "measured" not in peer and c in peer:
+                line += f"   {trio(peer_cal[c]) if c in peer_cal else _NOT_RUN}   {trio(peer[c])}"
+            click.echo(line)
     rep = {c: r for c, r in info.get("record_repeatability", {}).items() if r.get("rows")}
     if rep:
         beyond = "rows_beyond_12_pct_whatever_the_model"
@@ -157,6 +161,9 @@ def fleet(
         f"wrote {out}/vehicles.csv, vehicles_ev.csv, vehicles_hev.csv, summary.json, run.json, report.md, "
         "excluded.csv, technology.json, figures"
     )
+
+
+_NOT_RUN = f"{'not run':>26s}"  # a peer column without figures, as wide as trio()'s three
 
 
 def _f(x) -> str:

@@ -357,9 +357,9 @@ def grid_chunk(items: list[tuple[MHEVRecord, tuple[str, ...]]]) -> list[dict]:
     return TECH.grid_chunk(items, mhev_parameters, cs_fuel_of(_cycle), "log_fuel", "fuel", per_test=True)
 
 
-# (efficiency, accessories) at one friction: the full hybrids' two-parameter grid; the friction its third
-# axis. At each friction of FRICTION_FINE, ln fuel is interpolated linearly in the friction between its nodes
-# (the friction mean effective pressure is linear in the coefficient, as the conventional grid takes it)
+# (efficiency, accessories) at one friction, the friction its third axis: at each friction of FRICTION_FINE,
+# ln fuel is interpolated linearly in the friction between its nodes (the friction mean effective pressure is
+# linear in the coefficient, as the conventional grid takes it)
 GRID = TechGrid(
     TECH_PARAMS[:2], EFFICIENCY_AXIS, EFFICIENCY_FINE, ACCESSORY_NODES_W, ACCESSORY_AXIS, "mild hybrid"
 )

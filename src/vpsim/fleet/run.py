@@ -148,14 +148,26 @@ class FleetRun:
         (charge-sustaining, ECMS)."""
         import pandas as pd
 
-        return pd.DataFrame(self.hev.get("rows", []), columns=HEV_COLUMNS)
+        from . import hev
+
+        return pd.DataFrame(self.hev.get("rows", []), columns=hybrid_columns(hev))
 
     def mhev_frame(self):
         """One row per mild hybrid x test (``ftp_bag2``, ``ftp_bag3``, ``hwy``, ``us06``): mpg measured and
         predicted (charge-sustaining, ECMS); ``layout`` is its class (``mhev_p0``, ``mhev_p1``)."""
         import pandas as pd
 
-        return pd.DataFrame(self.mhev.get("rows", []), columns=HEV_COLUMNS)
+        from . import mhev
+
+        return pd.DataFrame(self.mhev.get("rows", []), columns=hybrid_columns(mhev))
+
+
+def hybrid_columns(module) -> list[str]:
+    """A hybrid part's columns: :data:`HEV_COLUMNS`, its technology's third parameter after the accessories
+    (``module``: :mod:`vpsim.fleet.hev` or :mod:`.mhev`)."""
+    cols = list(HEV_COLUMNS)
+    at = cols.index("accessory_power_w") + 1
+    return cols[:at] + [HYBRID_EXTRA_COLUMNS[p] for p in module.TECH_PARAMS[2:]] + cols[at:]
 
 
 def _vehicle_class(rec: VehicleRecord) -> str:
