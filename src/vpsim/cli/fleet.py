@@ -18,7 +18,9 @@ from .main import cli
     "cycles",
     default="ftp_bag2,ftp_bag3,hwy,us06",
     show_default=True,
-    help="Comma-separated subset of ftp_bag2, ftp_bag3, hwy, us06.",
+    help="Comma-separated subset of ftp_bag2, ftp_bag3, hwy, us06: the engine cars' tests. The EVs (udds, "
+    "hwy), full hybrids (udds_hot, hwy, us06) and mild hybrids (ftp_bag2, ftp_bag3, hwy, us06) run all of "
+    "theirs.",
 )
 @click.option(
     "--folds",
