@@ -78,6 +78,12 @@ def main() -> None:
             e = [r["error_pct"] for r in rows if r["cycle"] == cyc and r["class"] in members]
             if e:
                 print(f"  {name:19s} {cyc:8s} {_stats(e)}")
+    failed = [r for r in rows if r["status"] == "failed"]
+    if failed:  # a change the model refuses fails its rows: say so, not an empty class
+        print(
+            f"  {len(failed)} rows failed, e.g. {failed[0]['vehicle_id']} {failed[0]['cycle']}: "
+            f"{failed[0]['detail']}"
+        )
     for key, t in out["technology"].items():
         eta, acc = t[hev.TECH_PARAMS[0]], t[hev.TECH_PARAMS[1]]
         extra = "".join(f"  {p.split('.')[1]} {t[p]:.3g}" for p in hev.TECH_PARAMS[2:])

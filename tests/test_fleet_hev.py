@@ -7,6 +7,7 @@ import math
 
 import pytest
 
+from vpsim.errors import VpsimError
 from vpsim.fleet import hev
 from vpsim.fleet.epa import read_test_car_list
 from vpsim.params import load_parameters
@@ -80,6 +81,13 @@ def test_real_hybrids_are_read(shared_dir):
     assert camry.machine.rated_power > 85e3 and camry.battery.cells_in_parallel == 1
     assert ioniq.battery.cells_in_parallel == 1 < hev.pack_strings(load_parameters("hev_p2"), 32e3)
     assert camry.machine.loss_scale == ioniq.machine.loss_scale == hev.MACHINE_LOSS_SCALE
+    # a change goes into any section of the parameters, one the record does not fill too; a key that names
+    # no section is one line, not a silently ignored change
+    changed = hev.hev_parameters(recs["AE-U0G6GD048F#0"], {"hybrid.ecms_min_on_time": 5.0})
+    assert changed.hybrid.ecms_min_on_time == 5.0 and ioniq.hybrid.ecms_min_on_time == 0.0
+    for bad in ("hybridx.ecms_min_on_time", "hybrid"):
+        with pytest.raises(VpsimError, match="is not section.field"):
+            hev.hev_parameters(corolla, {bad: 5.0})
 
 
 def test_from_epa_writes_a_hybrid_that_simulates_against_its_record(shared_dir, tmp_path, capsys):

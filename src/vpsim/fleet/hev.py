@@ -386,9 +386,9 @@ def hev_parameters(rec: HEVRecord, technology: dict | None = None):
         sections["transmission"] = {"gearbox_ratios": ratios, "final_drive": final, **converter_fields(rec)}
     for key, value in (technology or {}).items():
         sec, _, fld = key.partition(".")
-        if sec not in sections:
+        if not fld or not hasattr(base, sec):
             raise VpsimError(f"technology parameter {key!r} is not section.field")
-        sections[sec][fld] = value
+        sections.setdefault(sec, {})[fld] = value
     p = base.with_changes(**sections)
     if rec.boosted:
         from ..model import engine as en
