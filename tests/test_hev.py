@@ -113,8 +113,8 @@ def test_inverse_method_within_3_percent_of_backward(runs, cycle):
 @pytest.mark.parametrize("cycle", ["udds", "hwfet", "us06"])
 def test_ecms_walk_finds_the_exhaustive_searchs_choices(cycle):
     """The ECMS's cost is convex in the engine's torque on this car (hybrid.running_cost_convex), so a walk
-    downhill from the last running level finds the level trying every one finds: the same choices at every
-    step (bit for bit), backward and inverse."""
+    downhill from where the last step's choice points (hybrid.walk_guess) finds the level trying every one
+    finds: the same choices at every step (bit for bit), backward and inverse."""
     from vpsim.cycles import load_cycle
     from vpsim.methods import hev
 
@@ -124,6 +124,19 @@ def test_ecms_walk_finds_the_exhaustive_searchs_choices(cycle):
         assert walk.fuel_kg == every.fuel_kg
         for k in ("engine_on", "engine_torque_nm", "machine_torque_nm", "soc"):
             assert np.array_equal(walk.series[k], every.series[k]), k
+
+
+def test_walk_guess_by_hand():
+    """The walk starts at the level nearest t_in + share on the levels' torques (0, 10, ..., 230 N m here: 24
+    levels from 0 to 230), clamped to them; without a last choice (NaN) at level 0."""
+    from vpsim.model.hybrid import walk_guess
+
+    assert walk_guess(math.nan, 50.0, 24, 0.0, 230.0) == 0
+    assert walk_guess(0.0, 50.0, 24, 0.0, 230.0) == 5  # 50 N m: level 5 exactly
+    assert walk_guess(-20.0, 50.0, 24, 0.0, 230.0) == 3  # the engine 20 N m below the demand: 30 N m
+    assert walk_guess(4.9, 50.0, 24, 0.0, 230.0) == 5 and walk_guess(5.1, 50.0, 24, 0.0, 230.0) == 6
+    assert walk_guess(500.0, 50.0, 24, 0.0, 230.0) == 23 and walk_guess(-500.0, 50.0, 24, 0.0, 230.0) == 0
+    assert walk_guess(0.0, 50.0, 24, 40.0, 40.0) == 0  # no torque range (t_low = t_high): level 0
 
 
 def test_ecms_walk_keeps_the_minimum_on_time_as_the_exhaustive_search():

@@ -144,7 +144,7 @@ def causal_kernel(
     on = 0.0
     on_time = 0.0
     j = 0
-    level = 0
+    share = math.nan  # the last walk's engine share of the demand (hybrid.walk_guess): none yet
     walk = hy.running_cost_convex(c, e) and not exhaustive and h.mild == 0.0  # (mild: convexity not shown)
     for k in range(time_s.size - 1):
         dt = time_s[k + 1] - time_s[k]
@@ -159,9 +159,9 @@ def causal_kernel(
         t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
         battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
         if ems == hy.EMS_ECMS and walk and hy.pack_covers_no_drive(interval, battery, e, m, tabs):
-            # the exhaustive search's choice by a walk from the last step's level, where the cost is convex
-            pt, level = hy.p2_ecms_walk(
-                interval, battery, soc, on, on_time, dt, levels, t_low, t_high, level, c, e, m, tabs, h
+            # the exhaustive search's choice by a walk from the last step's share, where the cost is convex
+            pt, share = hy.p2_ecms_walk(
+                interval, battery, soc, on, on_time, dt, levels, t_low, t_high, share, c, e, m, tabs, h
             )
         else:
             choice_on, choice_te = hy.p2_choose(

@@ -10,7 +10,7 @@ Time advances on a grid that steps on every cycle sample and at most ``electric.
   load); it holds the car at rest while the cycle stands, and the car does not roll back;
 * the **energy management** (the backward method's own per-step choice, :func:`vpsim.model.hybrid.p2_choose`
   or :func:`vpsim.model.split.split_choose`, rule or ECMS; the P2's ECMS found, as on the backward method,
-  by a walk from the last step's torque level, :func:`vpsim.model.hybrid.p2_ecms_walk`, where its cost is
+  by a walk from the last step's engine share, :func:`vpsim.model.hybrid.p2_ecms_walk`, where its cost is
   convex) splits that demand between the engine and the
   machines, with the engine's state, its running time and the state of charge it has at that moment; the
   ECMS prices a choice over the cycle's sample period, as on the backward method (priced over the 0.25 s
@@ -32,6 +32,7 @@ follow the cycle's schedule in time, as the inverse method's. ``dp`` needs the w
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 
 import numpy as np
@@ -124,7 +125,7 @@ def p2_kernel(
     inv_line = tb.inverse_spacing(line_speed)
     kp, ki, u_lo, u_hi, aw = drv
     v, z, soc, on, on_time, j = v_ref[0], 0.0, soc_start, 0.0, 0.0, 0
-    level = 0
+    share = math.nan  # the last walk's engine share of the demand (hybrid.walk_guess): none yet
     walk = hy.running_cost_convex(c, e) and not exhaustive and h.mild == 0.0  # as the backward method's
     speeds[0] = v
     for k in range(grid.size - 1):
@@ -141,10 +142,10 @@ def p2_kernel(
         t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
         t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
         if ems == hy.EMS_ECMS and walk and hy.pack_covers_no_drive(interval, battery, e, m, tabs):
-            # the exhaustive search's choice by a walk from the last step's level, where the cost is convex
+            # the exhaustive search's choice by a walk from the last step's share, where the cost is convex
             # (as the backward method); the choice (engine on, its torque) is the point's
-            pt, level = hy.p2_ecms_walk(
-                interval, battery, soc, on, on_time, period[k], levels, t_low, t_high, level, c, e, m, tabs, h
+            pt, share = hy.p2_ecms_walk(
+                interval, battery, soc, on, on_time, period[k], levels, t_low, t_high, share, c, e, m, tabs, h
             )
             on_c, te = pt[16], pt[3]
         else:

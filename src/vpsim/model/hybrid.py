@@ -756,11 +756,24 @@ def p2_choose(
 
 
 @equation
-def p2_ecms_walk(interval, battery, soc, on, on_time, dt, levels, t_low, t_high, level, c, e, m, tabs, h):
-    """The P2 ECMS's choice as :func:`p2_choose` makes it, found by a walk (:func:`ecms_cheapest_level`) from
-    the last step's torque ``level`` instead of trying every level: for a cost convex in the engine's torque
-    (:func:`running_cost_convex`, a pack not at its empty end: :func:`pack_covers_no_drive`). Returns the
-    chosen point and the level to start the next step's walk from."""
+def walk_guess(share, t_in, levels, t_low, t_high):
+    """The torque level an ECMS walk (:func:`ecms_cheapest_level`) starts from: the one nearest the engine
+    torque that leaves the demand at the crank ``t_in`` the same engine share as the last step's choice
+    (``share`` = its engine torque less its demand: the machine's torque held, which moves less from step
+    to step than the level does when the demand changes); level 0 without a last choice (``share`` NaN)."""
+    if share != share or t_high <= t_low:
+        return 0
+    j = math.floor((t_in + share - t_low) * (levels - 1.0) / (t_high - t_low) + 0.5)
+    return int(min(max(j, 0.0), levels - 1.0))
+
+
+@equation
+def p2_ecms_walk(interval, battery, soc, on, on_time, dt, levels, t_low, t_high, share, c, e, m, tabs, h):
+    """The P2 ECMS's choice as :func:`p2_choose` makes it, found by a walk (:func:`ecms_cheapest_level`)
+    instead of trying every level, from the level :func:`walk_guess` makes of the last step's ``share``: for a
+    cost convex in the engine's torque (:func:`running_cost_convex`, a pack not at its empty end:
+    :func:`pack_covers_no_drive`) the walk ends where the exhaustive search does, whatever its start. Returns
+    the chosen point and the share the next step's walk starts from (the running choice's, chosen or not)."""
     s_factor = equivalence_factor(soc, h)
     pt = p2_choice(interval, battery, 0.0, 0.0, c, e, m, tabs, h)
     best = ecms_cost(pt, dt, 0.0, s_factor, c, e, h) + stop_price(on, interval[0] > 0.0, dt, h)
@@ -768,12 +781,14 @@ def p2_ecms_walk(interval, battery, soc, on, on_time, dt, levels, t_low, t_high,
         if must_keep_running(on, on_time, h):
             best = math.inf
         start = start_share(dt, h) if on == 0.0 else 0.0
+        guess = walk_guess(share, interval[4], levels, t_low, t_high)
         cost, level, p_run = ecms_cheapest_level(
-            interval, battery, start, s_factor, dt, levels, t_low, t_high, level, c, e, m, tabs, h
+            interval, battery, start, s_factor, dt, levels, t_low, t_high, guess, c, e, m, tabs, h
         )
+        share = engine_torque_level(level, levels, t_low, t_high) - interval[4]
         if cost < best:
             pt = p_run
-    return pt, level
+    return pt, share
 
 
 @equation
