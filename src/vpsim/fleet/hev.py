@@ -56,8 +56,9 @@ The vehicle (:func:`hev_parameters`), from the layout's preset (``hev_split`` af
   power at the cell's discharge limit (:func:`pack_strings`) had been two strings, 3.1 kWh, for every P2 of
   the list, the Ioniq itself included (one string gives 31 kW at the cell's 20 C against its 32 kW machine);
 * the machines' losses: the loss model (:mod:`vpsim.model.machine`, fitted on 1990s maps) times
-  :data:`MACHINE_LOSS_SCALE`, the level the 2022 single-machine permanent-magnet EVs' drive units fit out of
-  fold (``vpsim fleet``, class ``bev``: 0.14-0.15 in every fold); MG1 of a split shares it;
+  ``machine.loss_scale``, fitted per class (below); without a fleet fit :data:`MACHINE_LOSS_SCALE`, the level
+  the 2022 single-machine permanent-magnet EVs' drive units fit out of fold (``vpsim fleet``, class ``bev``:
+  0.14-0.15 in every fold); MG1 of a split shares it;
 * transmission: a power split's ring-to-wheel ratio is the record's axle ratio where plausible
   (:data:`SPLIT_AXLE_RANGE`), else the preset's; the wheel radius the fleet's default; a P2's gearbox as a
   conventional car's of the same code and gears (:func:`vpsim.fleet.vehicle.gear_ratios`, from N/V and the
