@@ -86,6 +86,8 @@ from .epa import (
     TRANSMISSION_KIND,
     CertificationRecord,
 )
+from .ev import BOUND_REASONS as EV_BOUND_REASONS
+from .ev import LOSS_SCALE_FINE
 from .techgrid import TechGrid, ThirdAxis
 
 HEV_CYCLES = ("udds_hot", "hwy", "us06")
@@ -134,15 +136,13 @@ BOUND_REASONS = {
     ("engine.thermal_efficiency", "high"): "0.54 indicated efficiency is beyond the best production engines",
     ("electric.accessory_power", "low"): "no accessory load is the physical lower end",
     ("electric.accessory_power", "high"): "1.5 kW with climate control off is beyond a car's 12 V loads",
-    ("machine.loss_scale", "low"): "a hundredth of the fitted loss model is all but a lossless machine and "
-    "inverter",
-    ("machine.loss_scale", "high"): "1.5 x the loss model is below the 1990s machines it was fitted on",
+    # the loss level's search range and its reasons are the EV class's
+    **{k: r for k, r in EV_BOUND_REASONS.items() if k[0] == "machine.loss_scale"},
 }
 # the loss level's run nodes and its fine axis (the EV class's). Between the nodes, ln fuel interpolated is
 # within 0.5 % of a real run (one car of each class, its tests, at 0.05-1.25), but 1.3 % once where the
 # ECMS's choices jump (a Hyundai P2's highway at 0.35); the reported figures come from real runs
 LOSS_SCALE_AXIS = np.array([0.01, 0.15, 0.5, 1.0, 1.5])
-LOSS_SCALE_FINE = np.round(np.arange(0.01, 1.5001, 0.01), 4)
 
 
 @dataclass(frozen=True)
