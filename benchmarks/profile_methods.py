@@ -61,6 +61,72 @@ def profile_backward(p, cyc, schedule, em):
         f"fixed cost (2-interval cycle) {fixed:.1f} us"
     )
     print(top(lambda: backward.run(cyc, p, engine_map=em, schedule=schedule), 2000))
+    split_backward(p, cyc, schedule, em)
+
+
+def split_backward(p, cyc, schedule, em):
+    """One UDDS run in each mode (``vpsim bench`` times ``simulate``, whose default is the realistic mode),
+    split into the compiled pass with and without the rows the series are made from, ``sample_rows`` (the
+    series at the samples) and the Python around them."""
+    kind, m_speed, m_torque, table, l_speed, l_max, l_min = backward._map_arrays(em, p)
+    recs = backward.kernel_records(p)
+    ratios = backward.total_ratios(p.transmission)
+    intervals = backward.cycle_intervals(cyc)
+    n = cyc.time_s.size - 1
+    gear = np.empty(n, dtype=np.int64)
+    rows = np.empty((backward.N_ROWS, n))
+    acc = np.empty(backward.N_ACC)
+    out = np.empty((backward.N_SAMPLE_ROWS, n + 1))
+    generated = True
+    peer = _peer_udds_us()
+    if peer is not None:
+        print(f"FASTSim's UDDS walk {peer:.0f} us here (vpsim bench's peer): 100x needs {peer / 100:.1f} us")
+    for mode in ("realistic", "paper"):
+        extended = mode == "realistic"
+
+        def kernel(r, extended=extended):
+            backward.run_kernel(
+                cyc.time_s, *intervals, schedule.time_s, schedule.gear, ratios, recs, extended, kind,
+                m_speed, m_torque, table, l_speed, l_max, l_min, generated, gear, r, acc,
+            )  # fmt: skip
+
+        call = median_us(lambda m=mode: simulate(cyc, "backward", p, gears=schedule, mode=m), 2000)
+        with_rows = median_us(lambda: kernel(rows), 2000)
+        sums_only = median_us(lambda: kernel(np.empty((backward.N_ROWS, 0))), 2000)
+        kernel(rows)
+        sample = median_us(lambda: backward.sample_rows(rows, gear, recs, generated, out), 2000)
+        print(
+            f"backward udds, {mode} mode: simulate {call:.1f} us = the pass {with_rows:.1f} us "
+            f"({sums_only:.1f} us without the series' rows) + sample_rows {sample:.1f} us + "
+            f"{call - with_rows - sample:.1f} us of Python"
+        )
+
+
+def _peer_udds_us():
+    """The median of FASTSim's UDDS walk as ``vpsim bench`` times it (after a second's warm-up), or None
+    when FASTSim is not installed."""
+    import warnings
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            import fastsim as fsim
+    except ImportError:
+        return None
+    from vpsim.bench import PEER_CYCLES, PEER_VEHICLE
+
+    veh = fsim.Vehicle.from_resource(PEER_VEHICLE)
+    cyc = fsim.Cycle.from_resource(PEER_CYCLES["udds"])
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < 1.0:
+        fsim.SimDrive(veh, cyc).walk()
+    ts = []
+    for _ in range(100):
+        sd = fsim.SimDrive(veh, cyc)
+        t = time.perf_counter()
+        sd.walk()
+        ts.append(time.perf_counter() - t)
+    return statistics.median(ts) * 1e6
 
 
 def profile_forward(p, cyc, schedule):
