@@ -103,8 +103,8 @@ def split_backward(p, cyc, schedule, em):
 
 
 def _peer_udds_us():
-    """The median of FASTSim's UDDS walk as ``vpsim bench`` times it (after a second's warm-up), or None
-    when FASTSim is not installed."""
+    """The median of FASTSim's UDDS walk timed with ``vpsim bench``'s own helpers (after a second's warm-up),
+    or None when FASTSim is not installed."""
     import warnings
 
     try:
@@ -113,20 +113,14 @@ def _peer_udds_us():
             import fastsim as fsim
     except ImportError:
         return None
-    from vpsim.bench import PEER_CYCLES, PEER_VEHICLE
+    from vpsim.bench import PEER_CYCLES, PEER_VEHICLE, _block, _walk
 
     veh = fsim.Vehicle.from_resource(PEER_VEHICLE)
     cyc = fsim.Cycle.from_resource(PEER_CYCLES["udds"])
     t0 = time.perf_counter()
     while time.perf_counter() - t0 < 1.0:
-        fsim.SimDrive(veh, cyc).walk()
-    ts = []
-    for _ in range(100):
-        sd = fsim.SimDrive(veh, cyc)
-        t = time.perf_counter()
-        sd.walk()
-        ts.append(time.perf_counter() - t)
-    return statistics.median(ts) * 1e6
+        _walk(fsim.SimDrive(veh, cyc))
+    return _block(_walk, lambda: fsim.SimDrive(veh, cyc), 100) * 1e6
 
 
 def profile_forward(p, cyc, schedule):
