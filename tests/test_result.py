@@ -129,3 +129,14 @@ def test_machine_ratings_a_model_cannot_divide_by_are_refused(tmp_path, capsys):
         assert main(["simulate", "--vehicle", str(car), "--cycle", "udds", "--json"]) == 2
         err = capsys.readouterr().err
         assert f"{sec}.{name} = 2.22507e-311 is outside the plausible range" in err
+
+
+def test_energy_terms_are_energy_balance_fields_in_order():
+    """The kernels return the energy terms in rules.ENERGY_TERMS order and the backward method builds its
+    EnergyBalance from them by position: the two orders must be one."""
+    import dataclasses
+
+    from vpsim.model.rules import ENERGY_TERMS
+    from vpsim.result import EnergyBalance
+
+    assert tuple(f.name for f in dataclasses.fields(EnergyBalance)) == ENERGY_TERMS

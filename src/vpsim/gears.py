@@ -88,9 +88,14 @@ def _held_index(times, t):
 def gearbox_ratio_series(params, gear) -> np.ndarray:
     """The gearbox ratio engaged for gear numbers ``gear`` (1-based; a CVT's grid point), for the series; a
     number below 1 gives the first, beyond the last gear the last."""
-    steps = memo(params.transmission, "gearbox_steps_array", _steps_array)
+    steps = gearbox_steps(params.transmission)
     # one call (np.clip's own overhead, or a maximum and a minimum, cost a run's 5-10 us)
     return np.take(steps, np.asarray(gear, dtype=np.int64) - 1, mode="clip")
+
+
+def gearbox_steps(transmission) -> np.ndarray:
+    """The gearbox ratio of each gear (a CVT's grid), read-only, cached per transmission."""
+    return memo(transmission, "gearbox_steps_array", _steps_array)
 
 
 def _steps_array(transmission) -> np.ndarray:
