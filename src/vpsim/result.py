@@ -15,6 +15,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from .model.record import memo
+
 # name -> unit; the order is the DataFrame's column order
 SERIES = {
     "time_s": "s",
@@ -384,8 +386,6 @@ def _union_s(w, f, exact) -> float:
 
 def limits_of(params) -> dict:
     """The physical limits a run is assessed against (:func:`flags`)."""
-    from .model.record import memo
-
     return dict(memo(params, "limits", _limits))  # (once per parameter set: every run's result carries it)
 
 
@@ -409,11 +409,16 @@ def _refuse_non_finite(r) -> None:
     stopped being finite, where there is one."""
     # (every simulate builds a Result: plain attribute reads and math.isfinite, not asdict's deep copy, which
     # cost a third of a backward UDDS run)
-    bad = [k for k, v in (("fuel_kg", r.fuel_kg), ("distance_m", r.distance_m)) if not math.isfinite(v)]
+    terms = {}
     if r.energy is not None:
         terms = r.energy.terms if isinstance(r.energy, ElectricBalance) else vars(r.energy)
-        bad += [f"energy term {k}" for k, v in terms.items() if not math.isfinite(v)]
     soc_end = r.electric.get("soc_end")
+    # a NaN or an infinity in any of them makes the sum one (finite values that overflow only send the
+    # check below, which finds nothing): one test for the usual case
+    if math.isfinite(r.fuel_kg + r.distance_m + sum(terms.values()) + (0.0 if soc_end is None else soc_end)):
+        return
+    bad = [k for k, v in (("fuel_kg", r.fuel_kg), ("distance_m", r.distance_m)) if not math.isfinite(v)]
+    bad += [f"energy term {k}" for k, v in terms.items() if not math.isfinite(v)]
     if soc_end is not None and not math.isfinite(soc_end):
         bad.append("final state of charge")
     if not bad:

@@ -16,6 +16,7 @@ from pathlib import Path
 from .cycles import Cycle, load_cycle
 from .errors import VpsimError
 from .gears import GearSchedule, default_schedule, load_schedule
+from .model.rules import canonical_mode
 from .params import HYBRIDS, Parameters, load_parameters
 
 METHODS = ("backward", "forward", "inverse")
@@ -60,8 +61,6 @@ def simulate(
     """
     if method not in METHODS:
         raise VpsimError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
-    from .model.rules import canonical_mode
-
     mode = canonical_mode(mode)
     if not isinstance(params, Parameters):
         params = load_parameters(params)

@@ -476,6 +476,23 @@ def account(v, dv, vc, rows, left, right, dt, recs, realistic, band, weight, acc
         acc[_A_UMAX] = acc[_A_UMIN]
 
 
+def _subdivided(cycle, max_step: float):
+    """:func:`vpsim.cycles.resample.subdivide` of the cycle to the step cap, kept on the (immutable) cycle
+    per step: every run on it shares the result (read-only arrays)."""
+    return memo(
+        cycle,
+        f"inverse_subdivided_{max_step!r}",
+        lambda cyc: _readonly(subdivide(cyc.time_s, cyc.speed_mps, max_step)),
+    )
+
+
+def _readonly(arrays):
+    for x in arrays:
+        if x is not None:
+            x.setflags(write=False)
+    return arrays
+
+
 def run(
     cycle,
     params,
@@ -530,7 +547,7 @@ def run(
     # the paper caps the step at 1 s (simulation.inverse_max_step): longer intervals of a coarse or gappy
     # trace
     # are subdivided, so the trapezoid follows the smoothed speed and the method drives the trace's distance
-    time_s, speed, samples = subdivide(cycle.time_s, cycle.speed_mps, params.simulation.inverse_max_step)
+    time_s, speed, samples = _subdivided(cycle, params.simulation.inverse_max_step)
     t, v, dv, ddv, gear_s, v_c, rows, acc, extra = passes(time_s, speed, keep_series)
     cpu = time.process_time() - t_cpu
     if samples is not None:  # series at the cycle's own samples
@@ -544,21 +561,22 @@ def run(
             rows[:, samples],
         )
 
-    fuel_kg, distance = float(acc[_A_FUEL]), float(acc[_A_DIST])
-    energy = EnergyBalance(**{key: float(acc[q]) for q, key in enumerate(rules.ENERGY_TERMS)})
-    below_s, above_s = float(acc[_A_BELOW]), float(acc[_A_ABOVE])
+    sums = acc.tolist()  # (Python floats, in one call)
+    fuel_kg, distance = sums[_A_FUEL], sums[_A_DIST]
+    energy = EnergyBalance(*sums[: rules.N_TERMS])  # (rules.ENERGY_TERMS is its field order)
+    below_s, above_s = sums[_A_BELOW], sums[_A_ABOVE]
     trace = TraceMiss(
         seconds=below_s + above_s,
-        max_speed_error_mps=float(acc[_A_ERRMAX]),
+        max_speed_error_mps=sums[_A_ERRMAX],
         infeasible_throttle_s=below_s + above_s,
         details={
             "below_min_throttle_s": below_s,
             "above_max_throttle_s": above_s,
-            "standstill_s": float(acc[_A_STAND]),
-            "braked_s": float(acc[_A_BRAKED]),
-            "min_throttle_demand_m2": float(acc[_A_UMIN]),
-            "max_throttle_demand_m2": float(acc[_A_UMAX]),
-            "rms_speed_error_mps": math.sqrt(acc[_A_ERR2] / acc[_A_WSUM]) if acc[_A_WSUM] > 0 else 0.0,
+            "standstill_s": sums[_A_STAND],
+            "braked_s": sums[_A_BRAKED],
+            "min_throttle_demand_m2": sums[_A_UMIN],
+            "max_throttle_demand_m2": sums[_A_UMAX],
+            "rms_speed_error_mps": math.sqrt(sums[_A_ERR2] / sums[_A_WSUM]) if sums[_A_WSUM] > 0 else 0.0,
             "seconds_outside_band": float(acc[_A_OUT]),
             "band_kmh": BAND_KMH,
             "smoothing_a_s": a,
