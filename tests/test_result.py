@@ -140,3 +140,41 @@ def test_energy_terms_are_energy_balance_fields_in_order():
     from vpsim.result import EnergyBalance
 
     assert tuple(f.name for f in dataclasses.fields(EnergyBalance)) == ENERGY_TERMS
+
+
+def test_one_update_init_keeps_the_dataclass_contract():
+    """Result, EnergyBalance and TraceMiss fill their __dict__ in one update (result._one_update_init): the
+    same parameters and defaults as the fields, a fresh object from each default factory, frozen after, and
+    __post_init__ still run (a non-finite total refused)."""
+    import dataclasses
+    import inspect
+
+    import pytest
+
+    from vpsim.errors import NonFiniteRunError
+    from vpsim.result import EnergyBalance, Result, TraceMiss
+
+    for cls in (Result, EnergyBalance, TraceMiss):
+        params = list(inspect.signature(cls).parameters.values())
+        fields = dataclasses.fields(cls)
+        assert [p.name for p in params] == [f.name for f in fields]
+        for p, f in zip(params, fields, strict=True):
+            if f.default is not dataclasses.MISSING:
+                assert p.default is f.default
+            elif f.default_factory is dataclasses.MISSING:
+                assert p.default is inspect.Parameter.empty
+    a, b = TraceMiss(), TraceMiss(seconds=1.0)
+    assert a.details == {} and a.details is not b.details and b.seconds == 1.0
+    assert a == TraceMiss(0.0, 0.0, 0.0, 0.0, {})
+    e = EnergyBalance(*range(12))
+    assert vars(e) == {f.name: float(i) for i, f in enumerate(dataclasses.fields(EnergyBalance))}
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        e.indicated = 1.0
+    kw = dict(method="backward", cycle="c", driver=None, mode="paper", series={}, distance_m=1.0)
+    kw.update(fuel_density_kg_per_l=0.745, cpu_time_s=0.0, steps=1)
+    r1, r2 = Result(fuel_kg=0.1, **kw), Result(fuel_kg=0.1, **kw)
+    assert r1.solver == {} and r1.solver is not r2.solver and r1.limits is not r2.limits
+    assert r1.trace_miss == TraceMiss() and r1.energy is None and r1.notes == ()
+    assert dataclasses.replace(r1, steps=5).steps == 5
+    with pytest.raises(NonFiniteRunError):
+        Result(fuel_kg=float("nan"), **kw)

@@ -10,6 +10,7 @@ True
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import asdict, dataclass, field
 
@@ -36,6 +37,44 @@ SERIES = {
 }
 
 
+def _one_update_init(cls):
+    """Give the frozen dataclass ``cls`` an ``__init__`` that fills the instance's ``__dict__`` in one update.
+
+    The generated one calls ``object.__setattr__`` once per field (a frozen class's only way past its own
+    ``__setattr__``): for :class:`Result`'s 18 fields about 3 of the 20 us of Python around a backward run,
+    which every run pays (``vpsim bench``'s linearity: a call's fixed cost). The same parameters, defaults
+    and default factories (a fresh object per call), then ``__post_init__`` as before; a field the
+    generated ``__init__`` would treat otherwise (``init=False``, keyword-only) is refused here.
+    """
+    fields = dataclasses.fields(cls)
+    if any(not f.init or f.kw_only for f in fields):
+        raise TypeError(f"{cls.__name__}: init=False and keyword-only fields are not supported")
+    ns = {"_MISSING": dataclasses.MISSING}
+    params, items = [], []
+    for f in fields:
+        value = f.name
+        if f.default is not dataclasses.MISSING:
+            ns[f"_default_{f.name}"] = f.default
+            params.append(f"{f.name}=_default_{f.name}")
+        elif f.default_factory is not dataclasses.MISSING:
+            ns[f"_factory_{f.name}"] = f.default_factory
+            params.append(f"{f.name}=_MISSING")
+            value = f"_factory_{f.name}() if {f.name} is _MISSING else {f.name}"
+        else:
+            params.append(f.name)
+        items.append(f"{f.name!r}: {value}")
+    src = f"def __init__(self, {', '.join(params)}):\n    self.__dict__.update({{{', '.join(items)}}})\n"
+    if hasattr(cls, "__post_init__"):
+        src += "    self.__post_init__()\n"
+    exec(src, ns)  # noqa: S102 - source built above from the class's own field names
+    init = ns["__init__"]
+    init.__qualname__ = f"{cls.__qualname__}.__init__"
+    init.__module__ = cls.__module__
+    cls.__init__ = init
+    return cls
+
+
+@_one_update_init
 @dataclass(frozen=True)
 class EnergyBalance:
     """Energy bookkeeping over a run (J), from the model's own quantities.
@@ -150,6 +189,7 @@ ELECTRIC_KEYS = ("electric_wh_per_km", "wall_wh_per_km", "mpge", "soc_start", "s
 HYBRID_KEYS = ("fuel_l_per_100km_cs", "engine_starts")
 
 
+@_one_update_init
 @dataclass(frozen=True)
 class TraceMiss:
     """Where the powertrain could not do what the cycle (or driver) asked.
@@ -439,6 +479,7 @@ def _refuse_non_finite(r) -> None:
     )
 
 
+@_one_update_init
 @dataclass(frozen=True)
 class Result:
     """Outcome of one simulation: time series (``series``), summary figures, energy balance."""
