@@ -577,7 +577,7 @@ def run(
             "min_throttle_demand_m2": sums[_A_UMIN],
             "max_throttle_demand_m2": sums[_A_UMAX],
             "rms_speed_error_mps": math.sqrt(sums[_A_ERR2] / sums[_A_WSUM]) if sums[_A_WSUM] > 0 else 0.0,
-            "seconds_outside_band": float(acc[_A_OUT]),
+            "seconds_outside_band": sums[_A_OUT],
             "band_kmh": BAND_KMH,
             "smoothing_a_s": a,
         },
