@@ -7,6 +7,7 @@ that every method, the batch runs and the maps compute from it and from nothing 
 from __future__ import annotations
 
 import ast
+import json
 import math
 import os
 import shutil
@@ -834,6 +835,37 @@ def test_a_kernel_compiled_with_other_options_is_another_stamp(monkeypatch):
     assert "_nrt" in fn._vpsim_options
     monkeypatch.setattr(fn, "_vpsim_options", fn._vpsim_options + "fastmath={'arcp'}")
     assert digest(fn) != before
+
+
+def test_numba_target_loads_without_importing_scipy_linalg():
+    """A fresh process's first kernel (compiled or loaded) does not import scipy.linalg for Numba's BLAS
+    probe (a quarter of a cold start), the probe's answer is Numba's own, Numba's check is restored, and a
+    compiled BLAS call still works (it imports SciPy then)."""
+    code = textwrap.dedent(
+        """
+        import json, sys
+        import numba, numpy as np
+        from vpsim.model import _compile
+        numba.njit(lambda x: x + 1)(1)  # the CPU target loads, as at a kernel's first use
+        from numba.np import arraymath, linalg
+        imported = "scipy.linalg" in sys.modules
+        real = linalg.ensure_blas.__globals__["ensure_blas"]  # the function numba.np.linalg defines
+        restored = arraymath.ensure_blas is linalg.ensure_blas is real
+        try:
+            import scipy.linalg.cython_blas
+            expected = True
+        except ImportError:
+            expected = False
+        dot = numba.njit(lambda a, b: np.dot(a, b))(np.arange(3.0), np.ones(3))
+        print(json.dumps([_compile.ARRAYMATH_EARLY, imported, arraymath._HAVE_BLAS, expected, restored, dot]))
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    early, imported, have_blas, expected, restored, dot = json.loads(out.stdout.splitlines()[-1])
+    assert early and not imported and restored
+    assert have_blas == expected
+    assert dot == 3.0
 
 
 def test_no_method_file_grows_past_800_lines():

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import importlib.util
+import sys
 import types
 
 import numba
@@ -190,6 +192,44 @@ def _install() -> bool:
 
 
 KERNEL_STAMPS = _install()  # whether each kernel's cache is stamped with the sources it uses (see above)
+
+
+def _scipy_present() -> None:
+    """Numba's BLAS probe answered without importing SciPy: raises ImportError where SciPy is absent."""
+    if importlib.util.find_spec("scipy") is None:
+        raise ImportError("scipy 0.16+ is required for linear algebra")
+
+
+def _load_arraymath_without_scipy_linalg() -> bool:
+    """Import ``numba.np.arraymath`` with its BLAS probe answered by whether SciPy is installed; True if done.
+
+    Numba imports that module when its CPU target first loads (the first kernel compiled, or loaded from
+    the cache), and the module asks at import whether BLAS is there by importing ``scipy.linalg``: 0.22-0.26
+    s on the 2-core development machine, a quarter of a fresh process's first run (2026-12-06, UDDS from
+    the cache: 1.00-1.09 s wall, 0.75-0.88 s without it). The answer (``arraymath._HAVE_BLAS``) only chooses
+    how compiled ``np.correlate``/``np.convolve`` multiply, which no vpsim kernel uses; compiling any BLAS
+    call still goes through Numba's own check (restored here), which imports SciPy then. Left to Numba
+    where its module layout differs or the module is already loaded."""
+    if "numba.np.arraymath" in sys.modules:
+        return False
+    try:
+        from numba.np import linalg
+    except ImportError:  # pragma: no cover - a Numba whose linalg module moved
+        return False
+    real = getattr(linalg, "ensure_blas", None)
+    if real is None:  # pragma: no cover
+        return False
+    linalg.ensure_blas = _scipy_present
+    try:
+        from numba.np import arraymath
+    finally:
+        linalg.ensure_blas = real
+    if getattr(arraymath, "ensure_blas", None) is _scipy_present:
+        arraymath.ensure_blas = real
+    return True
+
+
+ARRAYMATH_EARLY = _load_arraymath_without_scipy_linalg()
 
 _OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
 
