@@ -624,24 +624,34 @@ def charge_sustaining_fuel(fuel_kg, terms, q_hv) -> tuple[float, float]:
     """(fuel corrected for the battery's net energy change, that change relative to the fuel's energy).
 
     SAE J1711's charge-balance rule: a net energy change within 1 % of the fuel's energy needs no correction;
-    beyond it the fuel is corrected. J1711 corrects by the slope of fuel against energy change over several
-    tests; from one run, the engine's own average efficiency over it (crank work over fuel energy) times a
-    charging path of 0.9 (machine generating and battery charging) stands for that slope, documented in
-    docs/model.md."""
+    beyond it the fuel is corrected (:func:`battery_corrected_fuel`)."""
     import math
 
-    chem = terms["chemical"]  # energy the battery gave (negative: it was charged)
     fuel_energy = fuel_kg * q_hv
     if fuel_energy <= 0.0:
         return fuel_kg, math.nan
-    ratio = chem / fuel_energy
+    ratio = terms["chemical"] / fuel_energy  # energy the battery gave (negative: it was charged)
     if abs(ratio) <= 0.01:
         return fuel_kg, ratio
+    return battery_corrected_fuel(fuel_kg, terms, q_hv), ratio
+
+
+def battery_corrected_fuel(fuel_kg, terms, q_hv) -> float:
+    """The fuel corrected for the battery's net energy change whatever its size (no 1 % band): the figure
+    that varies smoothly with a run's end charge, to compare runs whose changes fall on either side of
+    J1711's band. J1711 corrects by the slope of fuel against energy change over several tests; from one
+    run, the engine's own average efficiency over it (crank work over fuel energy) times a charging path
+    of 0.9 (machine generating and battery charging) stands for that slope, documented in docs/model.md."""
+    import math
+
+    fuel_energy = fuel_kg * q_hv
+    if fuel_energy <= 0.0:
+        return fuel_kg
     crank = terms["indicated"] - terms["friction"] - terms["pumping"]
     eta = crank / fuel_energy * 0.9
     if not eta > 0.0:
-        return math.nan, ratio
-    return fuel_kg + chem / (q_hv * eta), ratio
+        return math.nan
+    return fuel_kg + terms["chemical"] / (q_hv * eta)
 
 
 def electric_figures(params, terms, fuel_kg, distance_m, soc_start, soc_end, regen_j, starts, on_s, ems):
@@ -650,9 +660,11 @@ def electric_figures(params, terms, fuel_kg, distance_m, soc_start, soc_end, reg
     both ends, the regenerated energy, the engine's starts and running time."""
     import math
 
-    fuel_cs, nec = charge_sustaining_fuel(fuel_kg, terms, params.engine.fuel_heating_value)
+    q_hv, density = params.engine.fuel_heating_value, params.simulation.fuel_density
+    fuel_cs, nec = charge_sustaining_fuel(fuel_kg, terms, q_hv)
     km = distance_m / 1e3
-    litres_cs = fuel_cs / params.simulation.fuel_density
+    litres_cs = fuel_cs / density
+    litres_corrected = battery_corrected_fuel(fuel_kg, terms, q_hv) / density
     return {
         "electric_wh_per_km": terms["chemical"] / 3.6e3 / km if km > 1e-3 else math.nan,
         "wall_wh_per_km": math.nan,
@@ -661,6 +673,7 @@ def electric_figures(params, terms, fuel_kg, distance_m, soc_start, soc_end, reg
         "soc_end": float(soc_end),
         "regen_wh": float(regen_j) / 3600.0,
         "fuel_l_per_100km_cs": litres_cs / (km / 100.0) if km > 1e-3 else math.nan,
+        "fuel_l_per_100km_corrected": litres_corrected / (km / 100.0) if km > 1e-3 else math.nan,
         "net_energy_change_ratio": nec,
         "engine_starts": int(starts),
         "engine_on_s": float(on_s),
