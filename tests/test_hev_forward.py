@@ -45,23 +45,40 @@ def test_energy_balance_closes_and_the_kinetic_term_is_the_speed_left_at_the_end
         assert fwd.energy.terms["vehicle_kinetic"] == pytest.approx(0.5 * mass * v_end**2, abs=1e-6), key
 
 
-# the forward car's charge-sustaining fuel against the backward method's; the one exception: the power split
-# on US06, where the backward method misses 10-15 s of the trace at full power (120-150 kJ of wheel work it
-# does not deliver) and the forward car, behind the trace there, delivers it catching up (measured +3.5 %
-# rule, +3.6 % ECMS)
-TOLERANCE = {("hev_split", "us06"): 0.04}
-
-
 @pytest.mark.parametrize("car", sorted(CARS))
 @pytest.mark.parametrize("cycle", CYCLES)
 def test_forward_within_3_percent_of_backward(runs, car, cycle):
+    """The fuel corrected for the battery's energy change (at any size of it: J1711's 1 % band makes the
+    charge-sustaining figure jump between runs whose changes fall on either side of it) within 3 % of the
+    backward method's, and the end charge within 0.03, on every car, cycle and management; the power split
+    on US06 included, where both methods miss the trace at full power (measured 2026-12-06: at most 2.0 %
+    apart, the P2's UDDS ECMS 1.0 % where its J1711 figures are 3.8 % apart)."""
     for ems in EMS:
         back, fwd = runs[car, cycle, ems]
-        assert fwd.electric["fuel_l_per_100km_cs"] == pytest.approx(
-            back.electric["fuel_l_per_100km_cs"], rel=TOLERANCE.get((car, cycle), 0.03)
+        assert fwd.electric["fuel_l_per_100km_corrected"] == pytest.approx(
+            back.electric["fuel_l_per_100km_corrected"], rel=0.03
         ), ems
         assert fwd.electric["engine_starts"] > 0
         assert abs(fwd.electric["soc_end"] - back.electric["soc_end"]) < 0.03
+
+
+def test_the_corrected_fuel_is_the_charge_sustaining_one_beyond_the_band(runs):
+    """fuel_l_per_100km_corrected applies J1711's correction at any size of the battery's energy change: equal
+    to the charge-sustaining figure where the change exceeds 1 % of the fuel's energy, and where it does not
+    the fuel moved by the change's fuel equivalent (lower where the battery was charged)."""
+    for key, pair in runs.items():
+        for r in pair:
+            e = r.electric
+            nec, cs, corrected = (
+                e["net_energy_change_ratio"],
+                e["fuel_l_per_100km_cs"],
+                e["fuel_l_per_100km_corrected"],
+            )
+            if abs(nec) > 0.01:
+                assert corrected == cs, key
+            else:
+                assert cs == pytest.approx(r.fuel_l_per_100km, rel=1e-12), key
+                assert math.copysign(1.0, corrected - cs) == math.copysign(1.0, nec) or nec == 0.0, key
 
 
 def test_the_speed_stays_in_the_band_where_the_powertrain_can_follow(runs):
@@ -77,6 +94,8 @@ def test_the_speed_stays_in_the_band_where_the_powertrain_can_follow(runs):
         assert s["max_speed_error_mps"] >= err.max() - 1e-12
         if key[1] != "us06":
             assert s["speed_not_followed_s"] == 0.0 and fwd.solver["max_speed_error_mps"] < band, key
+        if fwd.solver["powertrain_limited_s"] == 0.0:  # the driver reads the trace's step ahead: on it
+            assert fwd.solver["max_speed_error_mps"] < 1e-9, key
 
 
 def test_a_demand_the_powertrain_cannot_give_is_counted(runs):

@@ -1,5 +1,5 @@
-"""The hybrids on the forward method: a causal controller drives the car, whose speed is integrated from the
-force its powertrain delivers (what hardware-in-the-loop runs).
+"""The hybrids on the forward method: a driver and a causal energy management drive the car, whose speed is
+integrated from the force its powertrain delivers (what hardware-in-the-loop runs).
 
 Time advances on a grid that steps on every cycle sample and at most ``electric.forward_max_step`` apart
 (:func:`step_grid`). At each step, from what is known at its start:
@@ -7,7 +7,10 @@ Time advances on a grid that steps on every cycle sample and at most ``electric.
 * the **driver** (the battery-electric car's PI driver: gains ``electric.forward_kp``, ``forward_ki``, the
   law :func:`vpsim.drivers.pi.pi_law` with back-calculation anti-windup, tracking time half the integral
   time) turns the speed error e = v_cycle(t) - v into an acceleration command u (a wheel force m u + road
-  load); it holds the car at rest while the cycle stands, and the car does not roll back;
+  load), added to the trace's own acceleration over the step, (v_cycle(t + dt) - v_cycle(t)) / dt: the
+  driver reads the trace over the step ahead, as a test driver reads the driver's aid (:func:`driver_command`;
+  on the trace and within what the powertrain gives, the car stays on it to rounding); it holds the car at
+  rest while the cycle stands over the step, and the car does not roll back;
 * the **energy management** (the backward method's own per-step choice, :func:`vpsim.model.hybrid.p2_choose`
   or :func:`vpsim.model.split.split_choose`, rule or ECMS; the P2's ECMS found, as on the backward method,
   by a walk from the last step's engine share, :func:`vpsim.model.hybrid.p2_ecms_walk`, where its cost is
@@ -71,15 +74,24 @@ def no_rollback(a, v, dt):
 
 
 @equation
-def driver_step(err, z, a, u, drv, dt):
-    """The driver's integral after a step: the PI law's rate with the delivered acceleration a as the limit
-    its command met (back-calculation anti-windup, :func:`vpsim.drivers.pi.pi_law`)."""
+def driver_command(err, z, ff, drv):
+    """The driver's acceleration command over a step: the trace's own acceleration over it, ``ff`` (the driver
+    reads the trace ahead), plus the PI law on the speed error, the sum within the command's range."""
     kp, ki, u_lo, u_hi, aw = drv
-    lo, hi = u_lo, u_hi
+    return ff + pi_law(err, z, kp, ki, u_lo - ff, u_hi - ff, aw)[0]
+
+
+@equation
+def driver_step(err, z, a, u, ff, drv, dt):
+    """The driver's integral after a step: the PI law's rate with the delivered acceleration a as the limit
+    its command met (back-calculation anti-windup, :func:`vpsim.drivers.pi.pi_law`); ``ff`` as in
+    :func:`driver_command`."""
+    kp, ki, u_lo, u_hi, aw = drv
+    lo, hi = u_lo - ff, u_hi - ff
     if a < u:
-        hi = a
+        hi = a - ff
     elif a > u:
-        lo = a
+        lo = a - ff
     return z + dt * pi_law(err, z, kp, ki, lo, hi, aw)[1]
 
 
@@ -123,7 +135,6 @@ def p2_kernel(
     final state of charge. ``exhaustive``: the ECMS tries every torque level even where a walk finds the same
     one (as the backward method's :func:`vpsim.methods.hev.causal_kernel`)."""
     inv_line = tb.inverse_spacing(line_speed)
-    kp, ki, u_lo, u_hi, aw = drv
     v, z, soc, on, on_time, j = v_ref[0], 0.0, soc_start, 0.0, 0.0, 0
     share = math.nan  # the last walk's engine share of the demand (hybrid.walk_guess): none yet
     walk = hy.running_cost_convex(c, e) and not exhaustive and h.mild == 0.0  # as the backward method's
@@ -131,8 +142,9 @@ def p2_kernel(
     for k in range(grid.size - 1):
         dt = grid[k + 1] - grid[k]
         err = v_ref[k] - v
-        u = pi_law(err, z, kp, ki, u_lo, u_hi, aw)[0]
-        a = driven_acceleration(u, v, v_ref[k], dt)
+        ff = (v_ref[k + 1] - v_ref[k]) / dt
+        u = driver_command(err, z, ff, drv)
+        a = driven_acceleration(u, v, max(v_ref[k], v_ref[k + 1]), dt)
         g, j = gear_index(grid, k, sched_t, sched_gear, j)
         ratio = ratios[g]
         battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
@@ -172,7 +184,7 @@ def p2_kernel(
         on_time = on_time + dt if running > 0.0 else 0.0
         on = running
         hev.store_row(rows, k, grid[k], v, a, g, pt, running, missing, ratio, soc, c)
-        z = driver_step(err, z, a, u, drv, dt)
+        z = driver_step(err, z, a, u, ff, drv, dt)
         soc += bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
         v = max(v + a * dt, 0.0)
         speeds[k + 1] = v
@@ -209,14 +221,14 @@ def split_kernel(
 ):
     """The power-split forward: as :func:`p2_kernel`, on the power split's choice and point."""
     eng, opt, inv_cap = sp.line_tables(lines, best, cap)
-    kp, ki, u_lo, u_hi, aw = drv
     v, z, soc, on, on_time = v_ref[0], 0.0, soc_start, 0.0, 0.0
     speeds[0] = v
     for k in range(grid.size - 1):
         dt = grid[k + 1] - grid[k]
         err = v_ref[k] - v
-        u = pi_law(err, z, kp, ki, u_lo, u_hi, aw)[0]
-        a = driven_acceleration(u, v, v_ref[k], dt)
+        ff = (v_ref[k + 1] - v_ref[k]) / dt
+        u = driver_command(err, z, ff, drv)
+        a = driven_acceleration(u, v, max(v_ref[k], v_ref[k + 1]), dt)
         battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
         vm = v + 0.5 * a * dt
         interval = sp.split_interval(vm, a, ratio, c, e, m, g, s, tabs)
@@ -248,7 +260,7 @@ def split_kernel(
         on_time = on_time + dt if running > 0.0 else 0.0
         on = running
         hev_split.store_row(rows, k, grid[k], v, a, pt, running, missing, ratio, soc, c)
-        z = driver_step(err, z, a, u, drv, dt)
+        z = driver_step(err, z, a, u, ff, drv, dt)
         soc += bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt
         v = max(v + a * dt, 0.0)
         speeds[k + 1] = v
