@@ -28,10 +28,14 @@ def test_energy_balance_closes_with_the_engine_and_the_battery(runs):
 
 
 def test_dynamic_programming_bounds_ecms_and_ecms_beats_the_rules(runs):
-    """The charge-sustaining fuel: DP (the optimum on its grid) <= ECMS <= rules, on every cycle."""
+    """DP (the optimum on its grid) <= ECMS <= rules on every cycle: strictly in the fuel corrected for the
+    battery's energy change; in J1711's charge-sustaining figure within 0.05 %, which its 1 % band takes on
+    UDDS (the ECMS's 0.97 % draw from the pack goes uncorrected: 2.819 against the DP's 2.820 L/100 km)."""
     for cycle in ("udds", "hwfet", "us06"):
+        corrected = {m: runs[cycle, m].electric["fuel_l_per_100km_corrected"] for m in EMS}
+        assert corrected["dp"] < corrected["ecms"] < corrected["rule"], (cycle, corrected)
         cs = {m: runs[cycle, m].electric["fuel_l_per_100km_cs"] for m in EMS}
-        assert cs["dp"] <= cs["ecms"] * 1.005, (cycle, cs)
+        assert cs["dp"] <= cs["ecms"] * 1.0005, (cycle, cs)
         assert cs["ecms"] <= cs["rule"], (cycle, cs)
 
 
