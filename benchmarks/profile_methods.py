@@ -2,6 +2,7 @@
 
     python benchmarks/profile_methods.py            # all methods
     python benchmarks/profile_methods.py backward   # one
+    python benchmarks/profile_methods.py linearity  # the backward's ns per interval, x1 against x16 FTP-75
 
 Prints, for each method, the median wall time of a run with inputs prepared, its split into the compiled
 kernel and the Python around it, and the ten most expensive functions under cProfile. Wall times on a
@@ -153,6 +154,51 @@ def profile_inverse(p, cyc, schedule):
     print(top(lambda: simulate(cyc, "inverse", p, gears=schedule), 500))
 
 
+def profile_linearity(p, em):
+    """Why the backward linearity (FTP-75 x16 against x1) moves between runs: ns per interval of a whole
+    simulate call on the cycle repeated exactly and on the same cycle with 3 % noise on every sample's speed
+    (a trace that does not repeat), 15 interleaved rounds."""
+    import gc
+
+    base = load_cycle("ftp75")
+    rng = np.random.default_rng(0)
+
+    def noisy(c):
+        v = c.speed_mps * (1.0 + 0.03 * rng.standard_normal(c.speed_mps.size)) * (c.speed_mps > 0)
+        return Cycle(f"{c.name} noisy", c.time_s, np.maximum(v, 0.0))
+
+    cases = {}
+    for label, cyc in (
+        ("x1", base),
+        ("x16", base.repeat(16)),
+        ("x1 with noise", noisy(base)),
+        ("x16 with noise", noisy(base.repeat(16))),
+    ):
+        schedule = default_schedule(cyc, p, em)
+        cases[label] = (
+            lambda cyc=cyc, s=schedule: simulate(cyc, "backward", p, gears=s),
+            cyc.time_s.size - 1,
+        )
+    per = {k: [] for k in cases}
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        for _ in range(15):
+            for k, (fn, n) in cases.items():
+                reps = max(3, int(0.03 / (80e-9 * n)))
+                fn()
+                t0 = time.perf_counter()
+                for _ in range(reps):
+                    fn()
+                per[k].append((time.perf_counter() - t0) / reps / n * 1e9)
+    finally:
+        if enabled:
+            gc.enable()
+    print("backward simulate, ns per interval (median of 15 rounds):")
+    for k, v in per.items():
+        print(f"  ftp75 {k:15s} {statistics.median(v):6.1f}")
+
+
 def main(argv):
     which = argv or ["backward", "forward", "inverse"]
     p = load_parameters("hofman2011")
@@ -165,6 +211,8 @@ def main(argv):
         profile_forward(p, cyc, schedule)
     if "inverse" in which:
         profile_inverse(p, cyc, schedule)
+    if "linearity" in which:
+        profile_linearity(p, em)
 
 
 if __name__ == "__main__":
