@@ -273,3 +273,28 @@ def test_shift_speeds_come_from_the_parameter_set_in_any_speed_unit(tmp_path):
     cvt = load_parameters(path)
     with pytest.raises(vpsim.CycleError, match="a CVT chooses its ratio"):  # the rule given directly
         default_schedule(load_cycle("udds"), cvt, rule=GearRule(upshift_speed=6.7))
+
+
+def test_a_derived_schedule_is_kept_per_parameter_set_and_cycle(params):
+    """simulate without a schedule derives the gear rule's once per (parameter set, cycle) and reuses it:
+    the same gears as a fresh derivation, read-only (it is shared), each cycle object its own (an equal but
+    distinct cycle is derived anew), at most gears.SCHEDULES_KEPT per parameter set, the oldest dropped."""
+    cyc = load_cycle("udds")
+    first = gears.schedule_for(cyc, params)
+    fresh = gears.default_schedule(cyc, params, cached_engine_map(params.engine))
+    np.testing.assert_array_equal(first.gear, fresh.gear)
+    np.testing.assert_array_equal(first.time_s, fresh.time_s)
+    assert gears.schedule_for(cyc, params) is first
+    with pytest.raises(ValueError):
+        first.gear[0] = 2
+    twin = Cycle("udds", cyc.time_s.copy(), cyc.speed_mps.copy())
+    assert gears.schedule_for(twin, params) is not first
+    shorts = [Cycle(f"c{k}", np.array([0.0, 1.0, 2.0]), np.array([0.0, 0.5 + k, 0.0])) for k in range(40)]
+    kept = [gears.schedule_for(c, params) for c in shorts]
+    assert len(params.__dict__["_derived"]["default_schedules"]) == gears.SCHEDULES_KEPT
+    assert gears.schedule_for(shorts[-1], params) is kept[-1]
+    assert gears.schedule_for(shorts[0], params) is not kept[0]  # dropped, derived anew
+    a = vpsim.simulate(cyc, "backward", params)
+    b = vpsim.simulate(cyc, "backward", params, gears=fresh)
+    assert a.fuel_kg == b.fuel_kg
+    np.testing.assert_array_equal(a.series["gear"], b.series["gear"])

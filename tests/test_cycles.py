@@ -442,3 +442,18 @@ def test_equality_and_hash():
     assert a != Cycle("d", [0, 1, 3], [0, 2, 0])
     assert a != "c"
     assert len({a, b}) == 1
+
+
+def test_a_shipped_cycle_is_read_once_and_shared():
+    """load_cycle of a standard cycle (or a phase) returns the one immutable Cycle each time, equal to the
+    file's own reading; its arrays stay read-only."""
+    from vpsim.cycles import _read_csv
+
+    a, b = load_cycle("udds"), load_cycle("UDDS")
+    assert a is b and load_cycle("ftp_bag2") is load_cycle("ftp_bag2")
+    with resources.files("vpsim.cycles").joinpath("data", "udds.csv").open(encoding="utf-8") as fh:
+        direct = _read_csv(fh, "udds.csv", speed_unit=None, name="udds")
+    np.testing.assert_array_equal(a.speed_mps, direct.speed_mps)
+    np.testing.assert_array_equal(a.time_s, direct.time_s)
+    with pytest.raises(ValueError):
+        a.speed_mps[3] = 1.0

@@ -183,6 +183,29 @@ def interval_demand(cycle: Cycle, ratio, params):
     return v, a, w_e, dw_e, t_cr, t_e
 
 
+SCHEDULES_KEPT = 16  # derived schedules kept per parameter set (the oldest goes first)
+
+
+def schedule_for(cycle: Cycle, params) -> GearSchedule:
+    """:func:`default_schedule` of ``cycle`` for ``params`` on the engine's generated map (what a method
+    derives when given no schedule), derived once per (parameter set, cycle) and kept on the parameter set:
+    both are immutable. The rule's Python took 0.9 ms on UDDS, seven times the backward run it served. The
+    schedule returned is shared, so its arrays are read-only."""
+    from .model.maps import cached_engine_map
+
+    kept = memo(params, "default_schedules", lambda p: {})
+    hit = kept.get(id(cycle))
+    if hit is not None and hit[0] is cycle:  # (the entry holds the cycle: its id is not reused meanwhile)
+        return hit[1]
+    schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
+    schedule.time_s.setflags(write=False)
+    schedule.gear.setflags(write=False)
+    if len(kept) >= SCHEDULES_KEPT:
+        kept.pop(next(iter(kept)), None)
+    kept[id(cycle)] = (cycle, schedule)
+    return schedule
+
+
 def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | None = None) -> GearSchedule:
     """Derive the gear schedule of ``cycle`` once, by the documented rule (module docstring): ``rule``, or
     the one ``params`` sets (:meth:`GearRule.of`: the preset's is the documented 200 rad/s).

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from .cycles import Cycle, load_cycle
 from .errors import VpsimError
-from .gears import GearSchedule, default_schedule, load_schedule
+from .gears import GearSchedule, load_schedule, schedule_for
 from .model.rules import canonical_mode
 from .params import HYBRIDS, Parameters, load_parameters
 
@@ -34,9 +34,7 @@ def resolve_inputs(cycle, params, gears=None):
     else:
         schedule = load_schedule(Path(gears), params.transmission.n_gears, cycle=cycle)
     if schedule is None:
-        from .model.maps import cached_engine_map
-
-        schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
+        schedule = schedule_for(cycle, params)
     return cycle, params, schedule
 
 

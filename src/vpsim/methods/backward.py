@@ -27,7 +27,7 @@ import time
 import numpy as np
 from numba import prange
 
-from ..gears import GearSchedule, default_schedule, gearbox_steps
+from ..gears import GearSchedule, default_schedule, gearbox_steps, schedule_for
 from ..model import engine as en
 from ..model import rules
 from ..model import tables as tb
@@ -431,6 +431,8 @@ def run(
     mode = rules.canonical_mode(mode)
     if engine_map is None:
         engine_map = cached_engine_map(params.engine)
+        if schedule is None:
+            schedule = schedule_for(cycle, params)
     elif not isinstance(engine_map, GeneratedEngineMap) and not isinstance(engine_map, EngineMap):
         raise TypeError(
             f"engine_map must implement vpsim.model.maps.EngineMap, got {type(engine_map).__name__}"

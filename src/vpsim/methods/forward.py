@@ -71,7 +71,7 @@ from numba.extending import register_jitable
 
 from ..drivers.pi import PIDriver
 from ..errors import VpsimError
-from ..gears import GearSchedule, default_schedule, gearbox_ratio_series
+from ..gears import GearSchedule, gearbox_ratio_series, schedule_for
 from ..model import engine as en
 from ..model import rules
 from ..model import vehicle as vh
@@ -551,9 +551,7 @@ def run(
         lambda p: PIDriver.from_params(p, driver, mode, tracking_time_s),
     )
     if schedule is None:
-        from ..model.maps import cached_engine_map
-
-        schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
+        schedule = schedule_for(cycle, params)
     duration = float(cycle.time_s[-1] - cycle.time_s[0])
     h_max = duration / 50.0 if max_step is None else float(max_step)
     if not h_max > 0:

@@ -215,13 +215,13 @@ def store_row(rows, k, t, v, a, g, pt, running, missing, ratio, soc, c):
 
 
 def _inputs(cycle, params, schedule=None):
-    from ..gears import default_schedule
+    from ..gears import schedule_for
     from ..model.maps import cached_engine_map
     from ..model.record import memo
 
     engine_map = cached_engine_map(params.engine)
     if schedule is None:
-        schedule = default_schedule(cycle, params, engine_map)
+        schedule = schedule_for(cycle, params)
     return (engine_map, schedule, *memo(params, "p2_records", _records))
 
 

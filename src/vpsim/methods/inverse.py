@@ -56,7 +56,7 @@ from ..cycles import Cycle
 from ..cycles.resample import subdivide
 from ..drivers.smoothing import SmoothingDriver, bump_kernel, bump_kernel_cdf, bump_kernel_moment
 from ..errors import VpsimError
-from ..gears import GearSchedule, default_schedule, gearbox_ratio_series
+from ..gears import GearSchedule, gearbox_ratio_series, schedule_for
 from ..model import engine as en
 from ..model import rules
 from ..model import vehicle as vh
@@ -510,9 +510,7 @@ def run(
     if not (math.isfinite(a) and a > 0.0):
         raise VpsimError(f"smoothing half-width a = {a:g} s must be positive")
     if schedule is None:
-        from ..model.maps import cached_engine_map
-
-        schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
+        schedule = schedule_for(cycle, params)
     c = kernel_records(params)
     ratios = total_ratios(params.transmission)
     coef = gear_coefficients(params)
