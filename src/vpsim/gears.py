@@ -201,7 +201,10 @@ def schedule_for(cycle: Cycle, params) -> GearSchedule:
     schedule.time_s.setflags(write=False)
     schedule.gear.setflags(write=False)
     if len(kept) >= SCHEDULES_KEPT:
-        kept.pop(next(iter(kept)), None)
+        try:
+            kept.pop(next(iter(kept)), None)
+        except (RuntimeError, StopIteration):  # another thread changed the table meanwhile: keep it
+            pass
     kept[id(cycle)] = (cycle, schedule)
     return schedule
 
