@@ -190,7 +190,9 @@ def schedule_for(cycle: Cycle, params) -> GearSchedule:
     """:func:`default_schedule` of ``cycle`` for ``params`` on the engine's generated map (what a method
     derives when given no schedule), derived once per (parameter set, cycle) and kept on the parameter set:
     both are immutable. The rule's Python took 0.9 ms on UDDS, seven times the backward run it served. The
-    schedule returned is shared, so its arrays are read-only."""
+    schedule returned is shared: do not write into its arrays. (They stay writable, as a fresh derivation's:
+    compiled kernels specialise on an array's writability, and a read-only schedule would be a signature the
+    install's compiled cache does not hold, compiled again on a user's first run.)"""
     from .model.maps import cached_engine_map
 
     kept = memo(params, "default_schedules", lambda p: {})
@@ -198,8 +200,6 @@ def schedule_for(cycle: Cycle, params) -> GearSchedule:
     if hit is not None and hit[0] is cycle:  # (the entry holds the cycle: its id is not reused meanwhile)
         return hit[1]
     schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
-    schedule.time_s.setflags(write=False)
-    schedule.gear.setflags(write=False)
     if len(kept) >= SCHEDULES_KEPT:
         try:
             kept.pop(next(iter(kept)), None)
