@@ -8,6 +8,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import vpsim
 from vpsim.cycles import Cycle, load_cycle
@@ -160,3 +162,25 @@ def test_forward_ecms_walk_finds_the_exhaustive_searchs_choices(cycle):
     assert walk.fuel_kg == every.fuel_kg
     for k in ("engine_on", "engine_torque_nm", "machine_torque_nm", "soc", "speed_mps"):
         assert np.array_equal(walk.series[k], every.series[k]), k
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    car=st.sampled_from(sorted(CARS)),
+    speeds=st.lists(st.floats(0.0, 25.0), min_size=2, max_size=30),
+    ems=st.sampled_from(EMS),
+)
+def test_the_driver_stays_on_any_trace_the_powertrain_can_follow(car, speeds, ems):
+    """On a trace of gentle steps (at most 1.5 m/s^2, from and back to rest), wherever the powertrain was
+    never at its limit the forward car is on the trace to rounding at every step (the driver adds the
+    trace's acceleration over the step to its PI law), and the balance closes."""
+    v = [0.0]
+    for target in speeds:  # each sample moves towards the drawn speed by at most 1.5 m/s in its second
+        v.append(v[-1] + float(np.clip(target - v[-1], -1.5, 1.5)))
+    while v[-1] > 0.0:
+        v.append(max(v[-1] - 1.5, 0.0))
+    cyc = Cycle("gentle", np.arange(len(v), dtype=float), np.array(v))
+    r = vpsim.simulate(cyc, "forward", CARS[car], ems=ems)
+    assert abs(r.energy.relative_residual) < 1e-12
+    if r.solver["powertrain_limited_s"] == 0.0:
+        assert r.solver["max_speed_error_mps"] < 1e-9
