@@ -41,7 +41,7 @@ from ..model.maps import (
     GeneratedEngineMap,
     cached_engine_map,
 )
-from ..model.record import kernel_records, memo
+from ..model.record import kernel_records, memo, readonly
 from ..model.record import ratios as total_ratios
 from ..model.tables import gear_index
 from ..result import EnergyBalance, Result, TraceMiss, limits_of
@@ -383,10 +383,7 @@ def _intervals(cycle) -> tuple:
     dt = t[1:] - t[:-1]
     v = 0.5 * (vs[1:] + vs[:-1])
     a = (vs[1:] - vs[:-1]) / dt
-    out = (dt, v, a, en.speed_power_scaled(v))
-    for x in out:
-        x.setflags(write=False)
-    return out
+    return readonly((dt, v, a, en.speed_power_scaled(v)))
 
 
 def _map_arrays(engine_map, params):

@@ -62,7 +62,7 @@ from ..model import rules
 from ..model import vehicle as vh
 from ..model._compile import compiled, kernel
 from ..model.engine import inline
-from ..model.record import kernel_records, memo, record
+from ..model.record import kernel_records, memo, readonly, record
 from ..model.record import ratios as total_ratios
 from ..result import EnergyBalance, Result, TraceMiss, limits_of
 
@@ -482,15 +482,8 @@ def _subdivided(cycle, max_step: float):
     return memo(
         cycle,
         f"inverse_subdivided_{max_step!r}",
-        lambda cyc: _readonly(subdivide(cyc.time_s, cyc.speed_mps, max_step)),
+        lambda cyc: readonly(subdivide(cyc.time_s, cyc.speed_mps, max_step)),
     )
-
-
-def _readonly(arrays):
-    for x in arrays:
-        if x is not None:
-            x.setflags(write=False)
-    return arrays
 
 
 def run(

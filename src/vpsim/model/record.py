@@ -199,6 +199,15 @@ def memo(obj, key: str, build):
     return hit
 
 
+def readonly(arrays: tuple) -> tuple:
+    """``arrays`` (a tuple; None entries left as they are) made read-only in place and returned: what
+    :func:`memo` keeps on an immutable object is shared by every caller, so nobody may write into it."""
+    for x in arrays:
+        if x is not None:
+            x.setflags(write=False)
+    return arrays
+
+
 def record_array(params) -> np.ndarray:
     """The read-only record array (shape (1,)) of one parameter set, cached per parameter set."""
     return memo(params, "record", lambda p: _record_of(p.vehicle, p.transmission, p.engine, p.simulation))
