@@ -66,11 +66,6 @@ def simulate(
         return _simulate_bev(cycle, method, params, driver, mode, gears, options)
     if params.powertrain.type in HYBRIDS:
         return _simulate_hev(cycle, method, params, driver, mode, gears, options)
-    if params.simulation.stop_start and method != "backward":
-        raise VpsimError(
-            f"simulation.stop_start is modelled on the backward method only; the {method} method would "
-            "idle at rest (set stop_start = false, or use --method backward)"
-        )
     cycle, params, schedule = resolve_inputs(cycle, params, gears)
     if method == "backward":
         if driver is not None:

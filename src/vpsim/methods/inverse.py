@@ -509,6 +509,7 @@ def run(
     coef = gear_coefficients(params)
     extended = mode == "realistic"
     n_s = cycle.time_s.size
+    stop_start = params.simulation.stop_start
 
     def passes(time_s, speed, keep):
         # on a uniform grid the smoothing is a discrete convolution with 2a/dt + 1 taps; past MAX_TAPS (a very
@@ -527,10 +528,13 @@ def run(
         rows = np.empty((N_ROWS, t.size))
         if not invert_points(v, dv, ddv, gear.astype(np.int64, copy=False), ratios, coef, extended, c, rows):
             raise VpsimError(f"gear numbers must be 1..{params.transmission.n_gears}")
+        stopped, starts = _stop_engine_at_rest(t, v, dv, rows) if stop_start else (None, 0)
         acc = np.empty(N_ACC)
         extra = np.empty((3, time_s.size if keep else 0))
         account(v, dv, v_c, rows, left, right, dt, c, extended, BAND_KMH / 3.6, np.empty(t.size), acc, extra)
-        return t, v, dv, ddv, gear_s, v_c, rows, acc, extra
+        if stop_start:
+            acc[_A_FUEL] += starts * params.hybrid.engine_start_fuel
+        return t, v, dv, ddv, gear_s, v_c, rows, acc, extra, stopped, starts
 
     if not compiled(invert_points, account):  # compile (or load) outside the timing
         passes(cycle.time_s[:3], cycle.speed_mps[:3], keep_series)
@@ -539,10 +543,11 @@ def run(
     # trace
     # are subdivided, so the trapezoid follows the smoothed speed and the method drives the trace's distance
     time_s, speed, samples = _subdivided(cycle, params.simulation.inverse_max_step)
-    t, v, dv, ddv, gear_s, v_c, rows, acc, extra = passes(time_s, speed, keep_series)
+    t, v, dv, ddv, gear_s, v_c, rows, acc, extra, stopped, starts = passes(time_s, speed, keep_series)
     cpu = time.process_time() - t_cpu
     if samples is not None:  # series at the cycle's own samples
         gear_s, extra = gear_s[samples], extra[:, samples] if keep_series else extra
+        stopped = stopped[samples] if stop_start else None
         t, v, dv, ddv, v_c, rows = (
             t[samples],
             v[samples],
@@ -596,6 +601,9 @@ def run(
             "torque_shortfall_nm": np.zeros(n_s),
             "clutch_engaged": rows[R_CLUTCH, k] == rules.CLUTCH_ENGAGED,
         }
+        if stop_start:  # the standing engine's samples (as the backward method's)
+            for key in ("intake_pressure_pa", "throttle_area_m2", "throttle_demand_m2"):
+                series[key] = np.where(stopped[k], np.nan, series[key])
     notes = [f"smoothing a = {a:g} s; {t.size} evaluation points (cycle samples and gear changes), trapezoid"]
     if below_s:
         what = "deceleration beyond engine braking (no brakes)" if mode == "paper" else "manifold too slow"
@@ -603,7 +611,9 @@ def run(
     if above_s:
         top = "full boost" if en.is_boosted(record(params)) else "A_max"
         notes.append(f"throttle demand above {top} for {above_s:.1f} s: beyond full load; fuel of the demand")
-    return Result(
+    if stop_start:
+        notes.append(f"stop-start: {starts} engine restarts (where the smoothed car stands)")
+    r = Result(
         method="inverse",
         cycle=cycle.name,
         driver=driver,
@@ -620,3 +630,24 @@ def run(
         notes=tuple(notes),
         limits=limits_of(params),
     )
+    if stop_start:
+        r.solver.update(engine_starts=starts)
+    return r
+
+
+def _stop_engine_at_rest(t, v, dv, rows):
+    """Stop-start (``simulation.stop_start``) on the smoothing driver's trajectory: (the points whose engine
+    stands, the restarts). The engine stops at the points where the smoothed car is at rest (v and dv/dt
+    zero) after it first moved (:func:`vpsim.model.rules.stopped_at_rest`, the points taken as the
+    backward method takes intervals); their rows become the standing engine's (no speed, torque, pressure or
+    fuel, the clutch open), as the backward method's stopped intervals; ``t`` the points' times (in time
+    order, the points make the intervals). The smoothing starts the car moving up to the half-width a
+    before the cycle does, and it comes to rest up to a after, so its stops are up to 2a shorter than the
+    cycle's, and a stop shorter than 2a has none."""
+    order = np.argsort(t, kind="stable")  # (the grid's gear-change points follow the cycle's samples)
+    stopped = np.empty(t.size, dtype=bool)
+    stopped[order], starts = rules.stopped_at_rest(v[order], dv[order])
+    for row in (R_P, R_U, R_WENG, R_DWENG, R_TCR, R_MDOT, R_FIRED, R_BRAKE):
+        rows[row, stopped] = 0.0
+    rows[R_CLUTCH, stopped] = rules.CLUTCH_OPEN
+    return stopped, starts

@@ -481,17 +481,23 @@ def powers_tangent(
     )
 
 
-def stopped_at_rest(v, a):
+def stopped_at_rest(v, a, free=None):
     """Stop-start (``simulation.stop_start``): (the intervals whose engine stands, the restarts) of a cycle's
     intervals (mean speed v, acceleration a). The engine stops in every interval at rest (speed 0 at both
     ends) after the car first moved, and restarts when it moves off; stopped it burns nothing and books no
     engine term. The standstill before the first move keeps idling (the key-on start warms the engine;
     production systems stop only after the car has moved); a stop at the cycle's end needs no restart. Each
-    restart costs ``hybrid.engine_start_fuel`` (the start model the hybrids use)."""
+    restart costs ``hybrid.engine_start_fuel`` (the start model the hybrids use).
+
+    ``free`` (optional, one per interval): where the engine is free of the wheels (its clutch open) over the
+    interval; a method whose car may still roll, or be coupled, where the cycle rests (the forward method's)
+    stops the engine only there. The backward method's car is the cycle's: at rest, it is free."""
     import numpy as np
 
     rest = (np.asarray(v) == 0.0) & (np.asarray(a) == 0.0)
     moving = np.flatnonzero(~rest)
     stopped = rest.copy()
     stopped[: moving[0] if moving.size else rest.size] = False
+    if free is not None:
+        stopped &= np.asarray(free, dtype=bool)
     return stopped, int(np.count_nonzero(stopped[:-1] & ~stopped[1:]))
