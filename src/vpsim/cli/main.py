@@ -37,6 +37,7 @@ COMMAND_MODULES = (
     "vehicle",
     "fleet",
     "machine",
+    "charge",
 )
 
 EXIT_ERROR = 2  # bad input: the user can act on the message
