@@ -62,13 +62,14 @@ def test_mild_hybrid_between_the_engine_car_and_the_full_hybrid(runs):
 
 
 def test_dynamic_programming_bounds_the_causal_managements(runs):
-    """DP (the optimum on its grid) <= ECMS and <= the rule on every cycle; ECMS <= rule on UDDS and US06.
+    """DP (the optimum on its grid) < ECMS and < the rule on every cycle; ECMS <= rule on UDDS and US06.
     On HWFET this ECMS (the P2's equivalence factor, untuned for this car) ends 0.05 above its start charge,
-    within J1711's 1 % that needs no correction, and burns 0.7 % more than the rule: the order does not
-    hold there."""
+    within J1711's 1 % that needs no correction, and burns 0.5 % more than the rule: the order does not
+    hold there. (With 24 torque levels the DP's HWFET read 7.210 against the rule's 7.213 and this test
+    allowed 0.1 %; the preset's 48 converge the DP to 0.1 %, docs/model.md.)"""
     for cycle in CYCLES:
         cs = {m: runs[cycle, m].electric["fuel_l_per_100km_cs"] for m in EMS}
-        assert cs["dp"] <= min(cs["ecms"], cs["rule"]) * 1.001, (cycle, cs)
+        assert cs["dp"] < min(cs["ecms"], cs["rule"]), (cycle, cs)
         e = runs[cycle, "dp"].electric
         assert e["soc_end"] >= e["soc_start"] - 1e-3 and abs(e["net_energy_change_ratio"]) <= 0.01
     for cycle in ("udds", "us06"):
