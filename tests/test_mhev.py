@@ -210,8 +210,31 @@ def test_stop_start_off_by_default_and_refused_where_not_modelled():
         vpsim.simulate("udds", "forward", STOP_START, mode="paper")
     with pytest.raises(VpsimError, match="stop_start"):
         vpsim.simulate("udds", "forward", STOP_START, output_times=[1.0, 2.0])
-    with pytest.raises(VpsimError, match="stop_start"):
-        run_batch("udds", None, "backward", STOP_START)
+    with pytest.raises(VpsimError, match="stop_start is modelled by the backward batch only"):
+        run_batch("udds", None, "forward", STOP_START)
+
+
+@pytest.mark.parametrize("mode", ["realistic", "paper"])
+def test_stop_start_in_the_backward_batch_saves_what_a_single_run_saves(mode):
+    """Variant by variant (the idle flow one of the varied fields), the batch's saving is the single run's."""
+    var = {
+        "vehicle.mass": [1200.0, 1650.0],
+        "simulation.idle_fuel_flow": [1.0e-4, 1.6e-4],
+        "transmission.final_drive": [3.8, 4.6],
+    }
+    plain = run_batch("udds", var, "backward", HOFMAN, mode=mode, gears="per_variant")
+    ss = run_batch("udds", var, "backward", STOP_START, mode=mode, gears="per_variant")
+    assert "engine_starts" not in plain and list(ss["engine_starts"]) == [14, 14]
+    for i in range(2):
+        changes = {
+            "vehicle": {"mass": var["vehicle.mass"][i]},
+            "simulation": {"idle_fuel_flow": var["simulation.idle_fuel_flow"][i]},
+            "transmission": {"final_drive": var["transmission.final_drive"][i]},
+        }
+        one = vpsim.simulate("udds", "backward", HOFMAN.with_changes(**changes), mode=mode)
+        one_ss = vpsim.simulate("udds", "backward", STOP_START.with_changes(**changes), mode=mode)
+        saved = plain["fuel_kg"][i] - ss["fuel_kg"][i]
+        assert saved == pytest.approx(one.fuel_kg - one_ss.fuel_kg, rel=1e-12)
 
 
 def test_stop_start_takes_true_or_false_only(tmp_path):

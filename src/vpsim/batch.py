@@ -94,7 +94,7 @@ def run_batch(
 
     Columns: the variant parameters as given, then ``fuel_l_per_100km``, ``fuel_kg``, ``distance_km``,
     ``trace_miss_s``, ``trace_miss_max_torque_shortfall_nm`` (backward), ``max_speed_error_mps`` and
-    ``steps`` (forward).
+    ``steps`` (forward); ``engine_starts`` where ``simulation.stop_start`` is set (backward only).
     """
     import pandas as pd
 
@@ -109,9 +109,10 @@ def run_batch(
         cycle = load_cycle(cycle)
     if not isinstance(params, Parameters):
         params = load_parameters(params)
-    if params.simulation.stop_start:
+    if params.simulation.stop_start and method != "backward":
         raise VpsimError(
-            "simulation.stop_start is not modelled by the batch runs; run the variants with vpsim.simulate"
+            "simulation.stop_start is modelled by the backward batch only; run the forward variants with "
+            "vpsim.simulate"
         )
     names, values = normalise_variants(variants, params)
     recs = _validate_variants(params, names, values)
@@ -423,6 +424,10 @@ def _backward(cycle, params, names, values, schedules, schedule_of_variant, mode
     out = backward.run_variants(cycle, recs, ratios, schedules, schedule_of_variant, mode)
     distance = cycle.distance_m
     fuel = out[:, backward.B_FUEL]
+    extra = {}
+    if params.simulation.stop_start:  # as backward.run: the stopped intervals' idle fuel, less the restarts'
+        fuel, starts = _stop_start(cycle, params, recs, fuel)
+        extra = {"engine_starts": np.full(n_var, starts)}
     return {
         "fuel_l_per_100km": fuel / recs.fuel_density / (distance / 1e5)
         if distance > 0
@@ -431,7 +436,23 @@ def _backward(cycle, params, names, values, schedules, schedule_of_variant, mode
         "distance_km": np.full(n_var, distance / 1e3),
         "trace_miss_s": out[:, backward.B_MISS_S],
         "trace_miss_max_torque_shortfall_nm": out[:, backward.B_MAX_SHORT],
+        **extra,
     }
+
+
+def _stop_start(cycle, params, recs, fuel):
+    """Stop-start (``simulation.stop_start``) on the backward batch: (fuel, restarts). The stops are the
+    cycle's (:func:`vpsim.model.rules.stopped_at_rest`), the same for every variant; in them the backward
+    method's engine idles declutched at its idle flow, which the stopped engine does not burn, and each
+    restart costs ``hybrid.engine_start_fuel``: :func:`vpsim.methods.backward.run`'s figure (a test holds the
+    two equal variant by variant)."""
+    from .model import rules
+
+    t, v = cycle.time_s, cycle.speed_mps
+    dt = np.diff(t)
+    stopped, starts = rules.stopped_at_rest(0.5 * (v[1:] + v[:-1]), np.diff(v) / dt)
+    seconds = float(dt[stopped].sum())
+    return fuel - recs.idle_fuel_flow * seconds + starts * params.hybrid.engine_start_fuel, starts
 
 
 # --- forward ------------------------------------------------------------------------------------------------
