@@ -34,6 +34,7 @@ from .errors import VpsimError
 # starting charges about the parameter set's own, as J1711's tests start from charges a little apart
 SOC_OFFSETS = (-0.06, -0.03, 0.0, 0.03, 0.06)
 WH_PER_KM = 3.6  # J/m in one Wh/km
+KINDS = {"bev": "a battery-electric", "conventional": "an engine"}
 MAX_EXTRA_RUNS = 6  # runs added to reach zero change
 WINDOW_MARGIN = 1e-3  # a run whose charge came this close to soc_min or soc_max met the window
 MIN_NEC_SPAN = 0.002  # the runs' changes must span this share of the fuel's energy for a slope
@@ -135,7 +136,8 @@ def regression(
         params = load_parameters(params)
     if params.powertrain.type not in HYBRIDS:
         raise VpsimError(
-            f"the charge-balance regression is for hybrids; {params.name} is a {params.powertrain.type} car"
+            f"the charge-balance regression is for hybrids; {params.name} is "
+            f"{KINDS.get(params.powertrain.type, 'a ' + params.powertrain.type)} car"
         )
     if not isinstance(cycle, Cycle):
         cycle = load_cycle(cycle)
@@ -146,6 +148,8 @@ def regression(
             "fuel_l_per_100km_cs is charge-sustaining; the regression is for managements that charge or spend"
         )
     offsets = SOC_OFFSETS if soc_offsets is None else tuple(float(x) for x in soc_offsets)
+    if not all(math.isfinite(x) for x in offsets):
+        raise VpsimError(f"soc_offsets {offsets}: every offset must be a finite number")
     b = params.battery
     socs = sorted({round(b.soc_initial + x, 12) for x in offsets})
     if len(socs) < 3:

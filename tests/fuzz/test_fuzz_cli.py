@@ -180,6 +180,16 @@ CASES = [
     ["sweep", "{d}/s.toml", "--out", "{d}/o", "--chunk-size", "-5"],
     ["sweep", "{d}/s.toml", "--out", "{d}/o", "--scheduler", "x", "--local-cluster", "1"],
     ["sweep", "{d}/s.toml", "--out", "{d}/afile"],
+    ["charge-balance", "--vehicle", "hofman2011"],
+    ["charge-balance", "--vehicle", "bev"],
+    ["charge-balance", "--ems", "dp"],
+    ["charge-balance", "--soc-offsets", ""],
+    ["charge-balance", "--soc-offsets", "nan,0,0.1"],
+    ["charge-balance", "--soc-offsets", "0,0,0"],
+    ["charge-balance", "--soc-offsets", "-2,0,2"],
+    ["charge-balance", "--cycle", "{d}/still.csv"],
+    ["charge-balance", "--plot", "{d}/afile/sub.png"],
+    ["simulate", "--vehicle", "{d}/ss.toml", "--method", "forward", "--mode", "paper"],
 ]
 
 
@@ -187,6 +197,7 @@ CASES = [
 def d(tmp_path):
     (tmp_path / "afile").write_text("x")
     (tmp_path / "still.csv").write_text(STILL)
+    (tmp_path / "ss.toml").write_text('base = "hofman2011"\n[simulation]\nstop_start = true\n')
     (tmp_path / "bad.toml").write_text("[engine]\ncylinders = 0\n")
     (tmp_path / "s.toml").write_text('[parameters]\n"engine.bore" = [0.08, 0.09]\n')
     (tmp_path / "e.json").write_text(
