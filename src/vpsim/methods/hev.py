@@ -158,7 +158,11 @@ def causal_kernel(
         t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
         t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
         battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
-        if ems == hy.EMS_ECMS and walk and hy.pack_covers_no_drive(interval, battery, e, m, tabs):
+        if (
+            ems == hy.EMS_ECMS
+            and walk
+            and hy.pack_covers_no_drive(interval, battery, e, m, tabs[4], tabs[5], tabs[6])
+        ):
             # the exhaustive search's choice by a walk from the last step's share, where the cost is convex
             pt, share = hy.p2_ecms_walk(
                 interval, battery, soc, on, on_time, dt, levels, t_low, t_high, share, c, e, m, tabs, h

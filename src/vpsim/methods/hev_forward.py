@@ -153,7 +153,11 @@ def p2_kernel(
         w = interval[1]  # the engine's speed were it to run
         t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
         t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
-        if ems == hy.EMS_ECMS and walk and hy.pack_covers_no_drive(interval, battery, e, m, tabs):
+        if (
+            ems == hy.EMS_ECMS
+            and walk
+            and hy.pack_covers_no_drive(interval, battery, e, m, tabs[4], tabs[5], tabs[6])
+        ):
             # the exhaustive search's choice by a walk from the last step's share, where the cost is convex
             # (as the backward method); the choice (engine on, its torque) is the point's
             pt, share = hy.p2_ecms_walk(

@@ -146,7 +146,7 @@ def p2_choice(interval, battery, on, t_e, c, e, m, tabs, h):
     t_pass = clutch_passes(t_in, passing)  # the demand the clutch passes to the crank's side
     t_ask = crank_to_belt(t_pass - te + el.rotor_torque(dw, e), h)
     t_mb, i, u_oc, r, p_m, at_m, at_b = el.machine_and_battery_at(
-        t_ask, t_pass < 0.0, vv, h.belt_ratio * w, t_min, t_max, battery, 0.0, e, m, tabs
+        t_ask, t_pass < 0.0, vv, h.belt_ratio * w, t_min, t_max, battery, 0.0, e, m, tabs[4], tabs[5], tabs[6]
     )
     t_m = belt_to_crank(t_mb, h)
     t_net = te + t_m - el.rotor_torque(dw, e)
@@ -378,7 +378,7 @@ def running_cost_convex(c, e):
 
 
 @equation
-def pack_covers_no_drive(interval, battery, e, m, tabs):
+def pack_covers_no_drive(interval, battery, e, m, map_speed, map_torque, map_loss):
     """Whether the pack's discharge limit covers the accessories and what the machine draws at any torque
     from its generating limit to zero at this step's speed (its DC power is convex in the torque, so the
     most is at one end). Where it does not (a pack at its empty end), a generating choice can leave the
@@ -387,8 +387,8 @@ def pack_covers_no_drive(interval, battery, e, m, tabs):
     w, t_min = interval[1], interval[7]
     u_oc, r_d, r_c, i_lo, i_hi = battery
     draw = max(
-        el.machine_power(0.0, w, m, e, tabs[4], tabs[5], tabs[6]),
-        el.machine_power(t_min, w, m, e, tabs[4], tabs[5], tabs[6]),
+        el.machine_power(0.0, w, m, e, map_speed, map_torque, map_loss),
+        el.machine_power(t_min, w, m, e, map_speed, map_torque, map_loss),
     )
     return el.pack_power(i_hi, u_oc, r_d, r_c) > (e.accessory_power + max(draw, 0.0)) * (1.0 + 1e-9) + 1e-6
 

@@ -221,7 +221,9 @@ def split_choice(interval, battery, on, p_e, c, e, m, g, s, tabs, lines, best):
         p_g,
         e,
         m,
-        tabs,
+        tabs[4],
+        tabs[5],
+        tabs[6],
     )
     t_net = t_r + s.mg2_ratio * (t_m - el.rotor_torque(dw_m2, e))
     missing, brake = hy.shortfall_and_brake(f, el.wheel_force_of_shaft(t_net, ratio, c))
