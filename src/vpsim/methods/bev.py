@@ -354,7 +354,8 @@ def _per_sample(rows, ts, vs, soc_end, socs=None):
     """Interval values at the cycle's samples: each interval's at the sample that starts it (the last
     sample repeats the last interval's); speed and state of charge at the samples themselves."""
     idx = np.minimum(np.arange(ts.size), rows.shape[1] - 1)
-    out = {k: rows[j, idx].copy() for k, j in _COLUMNS.items()}
+    picked = rows[:, idx]  # one gather for every column (a copy: the series own their memory)
+    out = {k: picked[j] for k, j in _COLUMNS.items()}
     out["time_s"] = ts.copy()
     out["speed_mps"] = vs.copy()
     soc = rows[P_SOC] if socs is None else socs
