@@ -17,7 +17,9 @@ import sys
 import click
 
 # which kernels a module's compiled functions are, and what their compilation costs on a 2-core machine,
-# quiet to loaded (measured with an empty cache, 2026-12-03: benchmarks/first_run.py). ``pip install .``
+# quiet to loaded (measured with an empty cache, 2026-12-03: benchmarks/first_run.py; the electric and hybrid
+# ones 2026-12-06, a process whose model's kernels were cached: bev 7.6-8.7 s, the P2 and mild hybrid 19-21 s
+# backward and inverse, 21-25 s forward, the power split 15-16 s, each on a quiet machine). ``pip install .``
 # compiles them all into the package (setup.py): these are heard only where that cache does not serve (an
 # editable install, another processor, a $NUMBA_CACHE_DIR of one's own, an edited source).
 KERNELS = {
@@ -28,8 +30,9 @@ KERNELS = {
     "vpsim.methods._fdm_rosenbrock": ("forward integrator", "35-110 s"),
     "vpsim.methods._fdm_dopri5": ("forward method's Dormand-Prince integrator", "20-50 s"),
     "vpsim.methods.inverse": ("inverse kernels", "10-20 s"),
-    "vpsim.methods.bev": ("battery-electric kernels", "3-8 s"),
-    "vpsim.methods.hev": ("hybrid kernels", "5-15 s"),
+    "vpsim.methods.bev": ("battery-electric kernels", "5-12 s"),
+    "vpsim.methods.hev": ("hybrid kernels", "15-30 s"),
+    "vpsim.methods.hev_forward": ("hybrids' forward kernels", "15-35 s"),
     "vpsim.methods.hev_split": ("power-split hybrid kernels", "15-35 s"),
 }
 _MODEL = ("vpsim.model.engine", "vpsim.model.tables", "vpsim.methods.backward")  # maps and gear rule too
