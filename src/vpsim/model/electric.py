@@ -324,7 +324,8 @@ def machine_and_battery_at(
     Inlined, and given the machine's three map arrays rather than the whole tables tuple, for speed only:
     a compiled call passes each array by value (about seven words), so the ten-array tuple was copied onto
     the stack at every torque the energy management tried; this halved the P2 hybrid's ECMS run (UDDS,
-    1.36-1.45 -> 0.67 ms on one machine) for about 8 s more first compilation of the hybrids' kernels."""
+    1.36-1.45 -> 0.67 ms on one machine) for 5-9 s more first compilation of each hybrid's kernels and
+    15 s more of the install's (benchmarks/README.md, 2026-12-06)."""
     t, at_machine = machine_torque_within(t_ask, braking, v, t_min, t_max, e)
     p_machine = machine_power(t, w, m, e, map_speed, map_torque, map_loss)
     return battery_supplies(
