@@ -31,6 +31,8 @@ from ..model import electric as el
 from ..model import vehicle as vh
 from ..model._compile import kernel
 from ..model.engine import equation, inline
+from ..result import ElectricBalance, Result, TraceMiss
+from ..units import METRES_PER_MILE
 
 ELECTRIC_TERMS = el.ELECTRIC_TERMS
 (
@@ -353,8 +355,10 @@ _COLUMNS = {
 def _per_sample(rows, ts, vs, soc_end, socs=None):
     """Interval values at the cycle's samples: each interval's at the sample that starts it (the last
     sample repeats the last interval's); speed and state of charge at the samples themselves."""
-    idx = np.minimum(np.arange(ts.size), rows.shape[1] - 1)
-    picked = rows[:, idx]  # one gather for every column (a copy: the series own their memory)
+    n = min(ts.size, rows.shape[1])
+    picked = np.empty((rows.shape[0], ts.size))  # every column at once (a copy: the series own their memory)
+    picked[:, :n] = rows[:, :n]
+    picked[:, n:] = rows[:, n - 1 : n]  # the samples past the last interval repeat it
     out = {k: picked[j] for k, j in _COLUMNS.items()}
     out["time_s"] = ts.copy()
     out["speed_mps"] = vs.copy()
@@ -364,10 +368,6 @@ def _per_sample(rows, ts, vs, soc_end, socs=None):
 
 
 def _result(cycle, params, method, driver, mode, series, sums, soc_end, steps, cpu):
-    from ..model.electric import KWH_PER_GALLON_EQUIVALENT, wall_energy
-    from ..result import ElectricBalance, Result, TraceMiss
-    from ..units import METRES_PER_MILE
-
     e, _, _ = el.electric_records(params)
     series = dict(series)
     series["reference_speed_mps"] = np.asarray(cycle.speed_mps, float).copy()
@@ -378,12 +378,12 @@ def _result(cycle, params, method, driver, mode, series, sums, soc_end, steps, c
     distance = float(sums[S_DIST])
     chemical = float(sums[T_CHEM])
     terminal = float(sums[S_TERMINAL])
-    wall = wall_energy(chemical, e) if chemical > 0.0 else math.nan
+    wall = el.wall_energy(chemical, e) if chemical > 0.0 else math.nan
     km = distance / 1e3
     electric = {
         "electric_wh_per_km": terminal / 3600.0 / km if km > 1e-3 else math.nan,
         "wall_wh_per_km": wall / 3600.0 / km if km > 1e-3 else math.nan,
-        "mpge": (distance / METRES_PER_MILE) / (wall / 3.6e6 / KWH_PER_GALLON_EQUIVALENT)
+        "mpge": (distance / METRES_PER_MILE) / (wall / 3.6e6 / el.KWH_PER_GALLON_EQUIVALENT)
         if km > 1e-3 and wall > 0.0
         else math.nan,
         "soc_start": float(params.battery.soc_initial),
