@@ -11,6 +11,7 @@ import numpy as np
 from ..model import electric as el
 from ..model import hybrid as hy
 from ..model.engine import equation
+from ..result import ElectricBalance, Result, TraceMiss
 
 N_TERMS = len(hy.HYBRID_TERMS)
 # the running sums after the energy terms, in every layout's kernel (a layout may add its own after them)
@@ -24,8 +25,10 @@ def series(cycle, rows, columns: dict[str, int], soc_row: int, soc_end: float, n
     """The run's series at the cycle's samples: each interval's row (the last repeated at the end), the
     cycle's time and speed, the state of charge at each sample, the flags as booleans."""
     ts = np.asarray(cycle.time_s, float)
-    idx = np.minimum(np.arange(ts.size), n - 1)
-    block = np.take(rows, idx, axis=1)  # one gather for every row (each series a row of it, not of rows)
+    m = min(ts.size, n)
+    block = np.empty((rows.shape[0], ts.size))  # every row at once (each series a row of it, not of rows)
+    block[:, :m] = rows[:, :m]
+    block[:, m:] = rows[:, m - 1 : m]  # the samples past the last interval repeat it
     out = {k: block[j] for k, j in columns.items()}
     out["time_s"] = ts.copy()
     out["speed_mps"] = np.asarray(cycle.speed_mps, float).copy()
@@ -40,8 +43,6 @@ def result(cycle, params, ems, mode, series, sums, soc_start, soc_end, n, cpu, d
     """The backward run's :class:`vpsim.result.Result`: the energy balance of :data:`HYBRID_TERMS`
     (indicated + chemical = the rest), the charge-sustaining figures, the trace miss with the time at the
     machine's and the battery's limits (and a layout's own ``details``)."""
-    from ..result import ElectricBalance, Result, TraceMiss
-
     terms = {name: float(sums[q]) for q, name in enumerate(hy.HYBRID_TERMS)}
     fuel = float(sums[S_FUEL])
     distance = float(sums[S_DIST])
