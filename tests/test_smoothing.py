@@ -363,3 +363,22 @@ def test_inputs_are_copied_and_read_only():
         drv.speed_mps[1] = 5.0
     with pytest.raises(AttributeError):
         drv.a = 2.0
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    t0=st.floats(-100.0, 100.0),
+    steps=st.lists(st.floats(1e-3, 10.0), min_size=0, max_size=40),
+    max_step=st.floats(0.01, 3.0),
+)
+def test_inverse_grid_is_each_interval_split_as_linspace_does(t0, steps, max_step):
+    """The electric and hybrid inverse methods' grid, built in one pass, is np.linspace's split of each
+    interval into the fewest equal parts no longer than max_step, to the bit, and ends at the last sample."""
+    time_s = t0 + np.concatenate([[0.0], np.cumsum(steps)])
+    time_s = time_s[np.concatenate([[True], np.diff(time_s) > 0.0])]  # strictly increasing after rounding
+    grid = smoothing_module.inverse_grid(time_s, max_step)
+    dt = np.diff(time_s)
+    parts = np.maximum(1, np.ceil(dt / max_step - 1e-12).astype(np.int64))
+    expected = [np.linspace(time_s[k], time_s[k + 1], parts[k] + 1)[:-1] for k in range(dt.size)]
+    assert np.array_equal(grid, np.concatenate([*expected, time_s[-1:]]))
+    assert np.all(np.diff(grid) <= max_step * (1.0 + 1e-9))

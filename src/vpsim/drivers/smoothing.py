@@ -456,6 +456,11 @@ def inverse_grid(time_s, max_step: float) -> np.ndarray:
     """The points an inverse method evaluates the smoothed cycle at: the cycle's samples, each interval split
     into equal parts at most ``max_step`` long (the electric and hybrid cars' inverse methods)."""
     time_s = np.asarray(time_s, float)
-    parts = np.maximum(1, np.ceil(np.diff(time_s) / max_step - 1e-12).astype(np.int64))
-    pieces = [np.linspace(time_s[k], time_s[k + 1], parts[k] + 1)[:-1] for k in range(time_s.size - 1)]
-    return np.concatenate([*pieces, time_s[-1:]])
+    dt = np.diff(time_s)
+    parts = np.maximum(1, np.ceil(dt / max_step - 1e-12).astype(np.int64))
+    # interval k's points start + i (dt / parts), i = 0 .. parts - 1, in one pass: what np.linspace(start,
+    # stop, parts + 1)[:-1] gives, to the bit (i * step + start), without a call per interval
+    k_of = np.repeat(np.arange(dt.size), parts)
+    first = np.cumsum(parts) - parts  # each interval's first point's index
+    i = np.arange(k_of.size) - first[k_of]
+    return np.concatenate([i * (dt / parts)[k_of] + time_s[k_of], time_s[-1:]])
