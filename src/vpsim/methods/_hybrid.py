@@ -21,14 +21,23 @@ S_FUEL, S_DIST, S_STARTS, S_MISS_S, S_MAX_MISS, S_MACHINE_S, S_BATTERY_S, S_REGE
 N_COMMON_SUMS = N_TERMS + 9
 
 
+def rows_at_samples(rows, n_samples: int, n: int) -> np.ndarray:
+    """The first ``n`` interval columns of ``rows`` at a cycle's ``n_samples`` samples: each interval's at the
+    sample that starts it, the last interval's repeated at the samples past it (one copy, so each series
+    cut from it owns its memory). The electric and hybrid cars' series (:func:`series`,
+    :func:`vpsim.methods.bev.run`)."""
+    m = min(n_samples, n)
+    block = np.empty((rows.shape[0], n_samples))
+    block[:, :m] = rows[:, :m]
+    block[:, m:] = rows[:, m - 1 : m]
+    return block
+
+
 def series(cycle, rows, columns: dict[str, int], soc_row: int, soc_end: float, n: int) -> dict:
     """The run's series at the cycle's samples: each interval's row (the last repeated at the end), the
     cycle's time and speed, the state of charge at each sample, the flags as booleans."""
     ts = np.asarray(cycle.time_s, float)
-    m = min(ts.size, n)
-    block = np.empty((rows.shape[0], ts.size))  # every row at once (each series a row of it, not of rows)
-    block[:, :m] = rows[:, :m]
-    block[:, m:] = rows[:, m - 1 : m]  # the samples past the last interval repeat it
+    block = rows_at_samples(rows, ts.size, n)  # every row at once (each series a row of it, not of rows)
     out = {k: block[j] for k, j in columns.items()}
     out["time_s"] = ts.copy()
     out["speed_mps"] = np.asarray(cycle.speed_mps, float).copy()

@@ -33,6 +33,7 @@ from ..model._compile import kernel
 from ..model.engine import equation, inline
 from ..result import ElectricBalance, Result, TraceMiss
 from ..units import METRES_PER_MILE
+from ._hybrid import rows_at_samples
 
 ELECTRIC_TERMS = el.ELECTRIC_TERMS
 (
@@ -355,10 +356,7 @@ _COLUMNS = {
 def _per_sample(rows, ts, vs, soc_end, socs=None):
     """Interval values at the cycle's samples: each interval's at the sample that starts it (the last
     sample repeats the last interval's); speed and state of charge at the samples themselves."""
-    n = min(ts.size, rows.shape[1])
-    picked = np.empty((rows.shape[0], ts.size))  # every column at once (a copy: the series own their memory)
-    picked[:, :n] = rows[:, :n]
-    picked[:, n:] = rows[:, n - 1 : n]  # the samples past the last interval repeat it
+    picked = rows_at_samples(rows, ts.size, rows.shape[1])
     out = {k: picked[j] for k, j in _COLUMNS.items()}
     out["time_s"] = ts.copy()
     out["speed_mps"] = vs.copy()
