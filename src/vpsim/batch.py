@@ -17,17 +17,17 @@ name or an implausible value raises :class:`~vpsim.errors.ParameterError` naming
 
 Methods:
 
-* ``backward``: compiled over variants (:func:`vpsim.methods.backward.run_variants`, parallel over the cores).
-  Each variant has its own engine, hence its own fuel map and max-torque line. The fuel flow is the BQM in
-  closed form (:func:`vpsim.model.engine.bqm_fuel_flow`, linear in p_i: nothing to tabulate); this is
-  what :func:`vpsim.methods.backward.run` computes with ``engine_map=generate_engine_map(eng, exact=True)``
-  (the default table lookup differs from it by < 1e-5 relative). The max-torque line (the FQM at A_max,
-  a Newton solve per speed, tabulated at 1 rad/s like :func:`vpsim.model.maps.generate_engine_map` and
-  interpolated) is evaluated lazily: the wide-open-throttle intake pressure p_max(w_e) decreases with w_e,
-  so one Newton solve per variant, at a node above the run's top speed, gives a pressure below which no point
-  of the run can reach the line (allowing for the friction rise over two node intervals). Only points above
-  it evaluate the line, at the two nodes around them, each node solved once per variant. Every point goes
-  through the same model functions as a single run (:func:`vpsim.model.rules.operating_point`,
+* ``backward``: compiled over variants (:func:`vpsim.methods.backward_variants.run_variants`, parallel over
+  the cores). Each variant has its own engine, hence its own fuel map and max-torque line. The fuel flow is
+  the BQM in closed form (:func:`vpsim.model.engine.bqm_fuel_flow`, linear in p_i: nothing to tabulate); this
+  is what :func:`vpsim.methods.backward.run` computes with ``engine_map=generate_engine_map(eng, exact=True)``
+  (the default table lookup differs from it by < 1e-5 relative). The max-torque line (the FQM at A_max, a
+  Newton solve per speed, tabulated at 1 rad/s like :func:`vpsim.model.maps.generate_engine_map` and
+  interpolated) is evaluated lazily: the wide-open-throttle intake pressure p_max(w_e) decreases with w_e, so
+  one Newton solve per variant, at a node above the run's top speed, gives a pressure below which no point of
+  the run can reach the line (allowing for the friction rise over two node intervals). Only points above it
+  evaluate the line, at the two nodes around them, each node solved once per variant. Every point goes through
+  the same model functions as a single run (:func:`vpsim.model.rules.operating_point`,
   :func:`vpsim.model.engine.intake_pressure_for_torque`, :func:`vpsim.model.engine.fuel_flow`).
 * ``forward``: the forward dynamic method's compiled integrator (:mod:`vpsim.methods.forward`) run for each
   variant inside one compiled call, parallel over variants (:func:`vpsim.methods.forward.run_variants`):
@@ -412,7 +412,7 @@ def _schedules(cycle, params, names, values, gears):
 
 
 def _backward(cycle, params, names, values, schedules, schedule_of_variant, mode, recs=None):
-    from .methods import backward
+    from .methods import backward_variants
     from .model.record import records
 
     (veh, tr, eng, sim), ratios = _sections(params, names, values)
@@ -421,9 +421,9 @@ def _backward(cycle, params, names, values, schedules, schedule_of_variant, mode
     n_var = values.shape[0]
     if recs.size != n_var:
         recs = np.ascontiguousarray(np.broadcast_to(recs, (n_var,))).view(np.recarray)
-    out = backward.run_variants(cycle, recs, ratios, schedules, schedule_of_variant, mode)
+    out = backward_variants.run_variants(cycle, recs, ratios, schedules, schedule_of_variant, mode)
     distance = cycle.distance_m
-    fuel = out[:, backward.B_FUEL]
+    fuel = out[:, backward_variants.B_FUEL]
     extra = {}
     if params.simulation.stop_start:  # as backward.run: the stopped intervals' idle fuel, less the restarts'
         fuel, starts = _stop_start(cycle, params, recs, fuel)
@@ -434,8 +434,8 @@ def _backward(cycle, params, names, values, schedules, schedule_of_variant, mode
         else np.full(n_var, np.nan),
         "fuel_kg": fuel,
         "distance_km": np.full(n_var, distance / 1e3),
-        "trace_miss_s": out[:, backward.B_MISS_S],
-        "trace_miss_max_torque_shortfall_nm": out[:, backward.B_MAX_SHORT],
+        "trace_miss_s": out[:, backward_variants.B_MISS_S],
+        "trace_miss_max_torque_shortfall_nm": out[:, backward_variants.B_MAX_SHORT],
         **extra,
     }
 

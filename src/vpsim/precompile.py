@@ -78,6 +78,7 @@ KERNEL_MODULES = (
     "vpsim.model.engine",
     "vpsim.model.tables",
     "vpsim.methods.backward",
+    "vpsim.methods.backward_variants",
     "vpsim.methods._fdm_system",
     "vpsim.methods._fdm_rosenbrock",
     "vpsim.methods._fdm_dopri5",

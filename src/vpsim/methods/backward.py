@@ -12,7 +12,8 @@ idle flow (section 5).
 One compiled pass over the intervals (:func:`run_kernel`): the operating point and its fuel flow, then the
 sums (fuel, distance, the energy balance from :func:`vpsim.model.rules.powers`, trace miss). For a measured
 map the fuel flow comes from the map itself between that pass and the sums (:func:`account`).
-:func:`run_variants` is the same method for many design variants at once (:mod:`vpsim.batch`).
+:func:`vpsim.methods.backward_variants.run_variants` is the same method for many design variants at once
+(:mod:`vpsim.batch`).
 
 Modes:
 * ``paper``: no clutch, no brakes; the engine stays coupled at standstill (w_e = 0, idle fuel).
@@ -25,7 +26,6 @@ import math
 import time
 
 import numpy as np
-from numba import prange
 
 from ..gears import GearSchedule, default_schedule, gearbox_steps, schedule_for
 from ..model import engine as en
@@ -33,7 +33,7 @@ from ..model import rules
 from ..model import tables as tb
 from ..model import vehicle as vh
 from ..model._compile import compiled, kernel
-from ..model.engine import equation, inline
+from ..model.engine import inline
 from ..model.maps import (
     LINE_SPEED_STEP,
     MAX_SPEED_FACTOR,
@@ -96,8 +96,9 @@ def _point(
     t_closed = 0.0
     if extended:
         t_closed = tb.interp_at(vh.engine_speed(v, i, c), line_speed, line_min, inv_line)
+    cm18_wheel = f18 * speed18[k]
     w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(
-        v, a, i, g + 1, t_closed, extended, c
+        v, a, i, g + 1, t_closed, extended, c, cm18_wheel
     )
     t_max = tb.interp_at(w, line_speed, line_max, inv_line)
     short = t_req - t_max if t_req > t_max else 0.0
@@ -105,7 +106,7 @@ def _point(
     t_fired = t_cr if fired >= 1.0 else t_closed  # cylinders cut: the throttle is closed (manifold, fuel)
     # the friction law's power of the speed (5): the gear's factor times the cycle's |v|^1.8 where the engine
     # turns with the wheels, else at its own speed (idle, a converter's pump)
-    cm18 = f18 * speed18[k] if w == w_wheel else en.speed_power(w, c)
+    cm18 = _speed_power_at(w, w_wheel, cm18_wheel, c)
     p = en.intake_pressure_for_torque(t_fired, w, c, cm18)
     if fuel_kind == FUEL_EXACT:
         mdot = en.fuel_flow(p, w, c)
@@ -118,7 +119,19 @@ def _point(
 
 
 @inline
-def _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot, c):
+def _speed_power_at(w, w_wheel, cm18_wheel, c):
+    """c_m^1.8 of (5) at the engine speed w of an operating point: ``cm18_wheel`` where the engine turns with
+    the wheels (w_wheel), the record's at idle, else :func:`vpsim.model.engine.speed_power` (a converter's
+    pump speed)."""
+    if w == w_wheel:
+        return cm18_wheel
+    if w == c.idle_speed:
+        return c.idle_speed_power
+    return en.speed_power(w, c)
+
+
+@inline
+def _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot, thr):
     rows[R_TIME, k] = 0.5 * (time_s[k + 1] + time_s[k])
     rows[R_V, k] = v
     rows[R_A, k] = a
@@ -132,10 +145,14 @@ def _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fi
     rows[R_FIRED, k] = fired
     rows[R_P, k] = p
     rows[R_MDOT, k] = mdot
-    # the FQM's steady throttle (its area: a boosted engine's command beyond A_max is boost)
-    rows[R_THR, k] = en.throttle_upstream(en.command_for_flow(p, en.cylinder_air_flow(p, w, c), w, c), w, c)[
-        0
-    ]
+    rows[R_THR, k] = thr
+
+
+@inline
+def _steady_throttle(p, w, c):
+    """The FQM's steady throttle at (p_i, w_e): its area (a boosted engine's command beyond A_max is
+    boost)."""
+    return en.throttle_upstream(en.command_for_flow(p, en.cylinder_air_flow(p, w, c), w, c), w, c)[0]
 
 
 @inline
@@ -282,6 +299,9 @@ def run_kernel(
     sums = ZERO_SUMS
     g_f18 = -1  # the gear whose factor f18 is at hand (gears change every few seconds, intervals every one)
     f18 = 0.0
+    p_thr = math.nan  # the point whose steady throttle thr is at hand
+    w_thr = math.nan
+    thr = math.nan
     for k in range(gear.size):
         g, j = gear_index(time_s, k, sched_t, sched_gear, j)
         gear[k] = g + 1
@@ -311,7 +331,11 @@ def run_kernel(
             inv_mt,
         )
         if keep:
-            _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot, c)
+            if p != p_thr or w != w_thr:  # (the idling engine's point repeats: its throttle is at hand)
+                thr = _steady_throttle(p, w, c)
+                p_thr = p
+                w_thr = w
+            _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot, thr)
         if book:
             sums = _book(
                 sums,
@@ -542,6 +566,12 @@ def intervals(
 N_SAMPLE_ROWS = 13
 
 
+@inline
+def _pair_mean(rows, r, k):
+    """The mean of row r's two intervals adjacent to sample k (k in 1 .. n-1)."""
+    return 0.5 * (rows[r, k - 1] + rows[r, k])
+
+
 @kernel(_nrt=False)
 def sample_rows(rows, gear, steps, recs, generated, out):
     """The per-interval rows at the cycle's samples (``out``: N_SAMPLE_ROWS x samples); ``steps``: the
@@ -552,32 +582,52 @@ def sample_rows(rows, gear, steps, recs, generated, out):
     gear and clutch state are those engaged from the sample on (right-continuous, as the other methods
     report them); the torque shortfall is the larger of the two intervals'; the intake pressure and the
     steady throttle (the FQM inverted) exist where the clutch is engaged and the map is the model's.
+
+    One loop per column over the inner samples (simple loops the compiler vectorises), then the two ends.
     """
     c = recs[0]
     n = gear.size
-    for k in range(n + 1):
-        lo = k - 1 if k > 0 else 0
-        hi = k if k < n else n - 1
-        own = hi  # the interval that starts at the sample (the last sample: the last interval)
-        w = 0.5 * (rows[R_W, lo] + rows[R_W, hi])
-        t_cr = 0.5 * (rows[R_TCR, lo] + rows[R_TCR, hi])
-        dw = 0.5 * (rows[R_DW, lo] + rows[R_DW, hi])
-        mdot = 0.5 * (rows[R_MDOT, lo] + rows[R_MDOT, hi])
-        fired = 0.5 * (rows[R_FIRED, lo] + rows[R_FIRED, hi])
+    for k in range(1, n):
+        out[S_ACC, k] = _pair_mean(rows, R_A, k)
+    for k in range(1, n):
+        out[S_W, k] = _pair_mean(rows, R_W, k)
+    for k in range(1, n):
+        out[S_TCR, k] = _pair_mean(rows, R_TCR, k)
+    for k in range(1, n):
+        out[S_TE, k] = vh.engine_torque(out[S_TCR, k], _pair_mean(rows, R_DW, k), c)  # (1)
+    for k in range(1, n):
+        out[S_MDOT, k] = _pair_mean(rows, R_MDOT, k)
+    for k in range(1, n):
+        out[S_USED, k] = rules.fuel_used(out[S_MDOT, k], _pair_mean(rows, R_FIRED, k), c)
+    for k in range(1, n):
+        out[S_BRAKE, k] = _pair_mean(rows, R_BRAKE, k)
+    for k in range(1, n):
+        out[S_SHORT, k] = max(rows[R_SHORT, k - 1], rows[R_SHORT, k])
+    for k in range(1, n):
+        out[S_ENGAGED, k] = 1.0 if rows[R_CLUTCH, k] != rules.CLUTCH_OPEN else 0.0
+    for k in range(1, n):
+        out[S_P, k] = _pair_mean(rows, R_P, k) if generated and out[S_ENGAGED, k] != 0.0 else math.nan
+    for k in range(1, n):
+        out[S_THR, k] = _pair_mean(rows, R_THR, k) if generated and out[S_ENGAGED, k] != 0.0 else math.nan
+    for k in range(1, n):
+        out[S_GEAR, k] = gear[k]
+        out[S_RATIO, k] = steps[gear[k] - 1]
+    for k in (0, n):  # the ends: their one interval
+        own = k if k < n else n - 1
         engaged = rows[R_CLUTCH, own] != rules.CLUTCH_OPEN
-        out[S_ACC, k] = 0.5 * (rows[R_A, lo] + rows[R_A, hi])
+        ok = generated and engaged
+        out[S_ACC, k] = rows[R_A, own]
         out[S_GEAR, k] = gear[own]
         out[S_RATIO, k] = steps[gear[own] - 1]
-        out[S_W, k] = w
-        out[S_TCR, k] = t_cr
-        out[S_TE, k] = vh.engine_torque(t_cr, dw, c)  # (1)
-        ok = generated and engaged
-        out[S_P, k] = 0.5 * (rows[R_P, lo] + rows[R_P, hi]) if ok else math.nan
-        out[S_THR, k] = 0.5 * (rows[R_THR, lo] + rows[R_THR, hi]) if ok else math.nan
-        out[S_MDOT, k] = mdot
-        out[S_USED, k] = rules.fuel_used(mdot, fired, c)
-        out[S_BRAKE, k] = 0.5 * (rows[R_BRAKE, lo] + rows[R_BRAKE, hi])
-        out[S_SHORT, k] = max(rows[R_SHORT, lo], rows[R_SHORT, hi])
+        out[S_W, k] = rows[R_W, own]
+        out[S_TCR, k] = rows[R_TCR, own]
+        out[S_TE, k] = vh.engine_torque(rows[R_TCR, own], rows[R_DW, own], c)  # (1)
+        out[S_P, k] = rows[R_P, own] if ok else math.nan
+        out[S_THR, k] = rows[R_THR, own] if ok else math.nan
+        out[S_MDOT, k] = rows[R_MDOT, own]
+        out[S_USED, k] = rules.fuel_used(rows[R_MDOT, own], rows[R_FIRED, own], c)
+        out[S_BRAKE, k] = rows[R_BRAKE, own]
+        out[S_SHORT, k] = rows[R_SHORT, own]
         out[S_ENGAGED, k] = 1.0 if engaged else 0.0
 
 
@@ -630,164 +680,3 @@ def _result(cycle, params, mode, series, fuel_kg, distance, cpu, steps, trace, e
         notes=tuple(notes),
         limits=limits_of(params),
     )
-
-
-# --- many design variants at once ---------------------------------------------------------------------
-
-# columns of run_variants' output
-B_FUEL, B_MISS_S, B_MAX_SHORT, B_DEFICIT = range(4)
-N_BATCH_OUT = 4
-
-
-@equation
-def _line_value(j, full, line_w, cache, c):
-    """The full-load line (``full``) or the closed-throttle line (the FQM at A_min) at its node j (speed
-    ``line_w[j]``), computed on first use and cached in ``cache`` (NaN: not yet computed)."""
-    val = cache[j]
-    if val != val:
-        w = line_w[j]
-        val = en.full_load_torque(w, c) if full else en.steady_torque(c.min_throttle_area, w, c)
-        cache[j] = val
-    return val
-
-
-@equation
-def _lazy_line(w, full, line_w, inv, cache, c):
-    """The generated line at w (tables.interp_at on the line's nodes ``line_w``), evaluating only the nodes
-    the look-up reads."""
-    j, exact = tb.interval_at(w, line_w, inv)
-    _line_value(j, full, line_w, cache, c)
-    if not exact:
-        _line_value(j + 1, full, line_w, cache, c)
-    return tb.interp_at(w, line_w, cache, inv)
-
-
-@equation
-def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, out):
-    """One variant: the operating points of :func:`run_kernel` with the exact BQM, each line of the
-    variant's own engine evaluated lazily (a Newton solve per node actually needed), and only where it can
-    matter (the max-torque line as below; the closed-throttle line: see ``p_hi``).
-
-    The max-torque line matters only where the demanded intake pressure comes near the wide-open-throttle
-    pressure p_max(w_e), which decreases with w_e: below p_max at a node above every speed of the run, less
-    the largest friction rise over two node intervals, no point can reach the (interpolated) line, so it is
-    not evaluated there.
-    """
-    # the lines' nodes as model.maps.generate_engine_map spaces them
-    w_end = MAX_SPEED_FACTOR * c.map_speed_high
-    w_top = c.idle_speed if extended else 0.0
-    for g in range(rat.size):
-        w_top = max(w_top, vh.engine_speed(v_top_gear[g], rat[g], c))
-    n_line = int(round(w_end / LINE_SPEED_STEP)) + 1
-    line_w = np.linspace(0.0, w_end, n_line)
-    inv = tb.inverse_spacing(line_w)
-    step = w_end / (n_line - 1)
-    j_s = min(int(math.ceil(w_top / step)) + 2, n_line - 1)
-    w_s = line_w[j_s]
-    p_floor, _ = en.steady_pressure(c.max_throttle_area, w_s, c)
-    # the rise of the demanded pressure over two node intervals (friction grows with speed)
-    d_p = en.intake_pressure_for_torque(0.0, w_s, c) - en.intake_pressure_for_torque(
-        0.0, max(w_s - 2.0 * step, 0.0), c
-    )
-    p_screen = p_floor - d_p - 1e-7 * c.ambient_pressure
-    if c.boost_pressure > c.ambient_pressure or c.rated_power > 0.0:
-        p_screen = -math.inf  # the full-load pressure is not monotone (spool) or power-capped: no screening
-    cache_max = np.full(n_line, np.nan)
-    cache_min = np.full(n_line if extended else 1, np.nan)
-    # The closed-throttle line matters only where the engaged engine is asked for less than it (engine
-    # braking, fuel cut-off: rules.engine_braking); elsewhere its value changes nothing. It is the FQM at
-    # A_min, T_cr(p_min(w_e), w_e), with p_min falling as w_e rises (the cylinders draw more), T_cr rising
-    # with p_i and T_cr(p, w_e) falling with w_e (friction): on the line's nodes from below the idle speed up
-    # (an engaged engine turns at least that fast) it stays below T_cr(p_min(node below idle), w_e) plus the
-    # friction rise over two node intervals at the run's top speed. A demand above that needs no node.
-    p_hi = math.inf
-    closed_margin = 0.0
-    if extended and c.torque_slope > 0.0:
-        p_hi, _ = en.steady_pressure(
-            c.min_throttle_area, line_w[max(int(math.floor(c.idle_speed / step)) - 1, 0)], c
-        )
-        d_t = en.crank_torque(0.0, max(w_s - 2.0 * step, 0.0), c) - en.crank_torque(0.0, w_s, c)
-        closed_margin = abs(d_t) * (1.0 + 1e-9) + 1e-6
-    fuel = 0.0
-    miss_s = 0.0
-    max_short = 0.0
-    best = 0.0
-    cur = 0.0
-    # c_m^1.8 of the friction law (5) at the wheel-side engine speed, i v / r: a factor per gear times the
-    # cycle's v^1.8 (shared by all variants), not a power per interval
-    gear_cm18 = np.empty(rat.size)
-    for g in range(rat.size):
-        gear_cm18[g] = en.speed_power(vh.engine_speed(1.0, rat[g], c), c)
-    for k in range(gear.size):
-        i = rat[gear[k]]
-        t_closed = -math.inf  # first without the closed-throttle line (p_hi), then with it if needed
-        for with_line in range(2):  # (one call site of the IR-inlined operating point)
-            w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(
-                v[k], a[k], i, gear[k] + 1, t_closed, extended, c
-            )
-            if (
-                with_line
-                or not extended
-                or clutch != rules.CLUTCH_ENGAGED
-                or t_req >= en.crank_torque(p_hi, w_wheel, c, gear_cm18[gear[k]] * v18[k]) + closed_margin
-            ):
-                break
-            t_closed = _lazy_line(w_wheel, False, line_w, inv, cache_min, c)
-        cm18 = gear_cm18[gear[k]] * v18[k] if w == w_wheel else en.speed_power(w, c)
-        p = en.intake_pressure_for_torque(t_req if fired >= 1.0 else t_closed, w, c, cm18)
-        short = 0.0
-        if not (w <= w_end and p <= p_screen):
-            t_max = _lazy_line(w, True, line_w, inv, cache_max, c)
-            if t_req > t_max:
-                short = t_req - t_max
-                p = en.intake_pressure_for_torque(t_max, w, c, cm18)
-        max_short = max(max_short, short)
-        cur = _deficit_after(short, dt[k], i, cur, c)
-        if short > MISS_TOLERANCE_NM:
-            miss_s += dt[k]
-            best = max(best, cur)
-        mdot = rules.engine_fuel_flow(en.fuel_flow(p, w, c), clutch, fired, c)
-        fuel += rules.fuel_used(mdot, fired, c) * dt[k]
-    out[B_FUEL] = fuel
-    out[B_MISS_S] = miss_s
-    out[B_MAX_SHORT] = max_short
-    out[B_DEFICIT] = best
-
-
-@kernel(parallel=True)
-def _variants(recs, ratios, schedule_of_variant, gears, v_top_gear, dt, v, a, v18, extended, out):
-    """:func:`_variant` for each variant, parallel over them. ``v18``: the speed's part of c_m^1.8 (cycle
-    intervals'), shared by all variants."""
-    for m in prange(recs.size):
-        s = schedule_of_variant[m]
-        _variant(recs[m], ratios[m], gears[s], dt, v, a, v18, v_top_gear[s], extended, out[m])
-
-
-def run_variants(cycle, recs, ratios, gears, schedule_of_variant, mode: str) -> np.ndarray:
-    """The backward method for many variants (parallel over them), exact BQM; no series.
-
-    ``recs``: record array (n_var,) (:func:`vpsim.model.record.records`); ``ratios``: (n_var, n_gears) total
-    ratios; ``gears``: (n_schedules, n_samples) 1-based gear per cycle sample; ``schedule_of_variant``: row of
-    ``gears`` each variant follows. Returns (n_var, N_BATCH_OUT): fuel (kg), trace-miss seconds, largest
-    shortfall (N m), largest speed deficit (m/s).
-    """
-    dt, v, a, v18 = cycle_intervals(cycle)
-    gear_idx = np.ascontiguousarray(gears[:, :-1] - 1, dtype=np.int64)
-    v_top_gear = np.zeros((gear_idx.shape[0], ratios.shape[1]))  # fastest interval driven in each gear
-    for s in range(gear_idx.shape[0]):
-        np.maximum.at(v_top_gear[s], gear_idx[s], v)
-    out = np.empty((recs.size, N_BATCH_OUT))
-    _variants(
-        np.asarray(recs).view(np.ndarray),
-        np.ascontiguousarray(ratios, dtype=float),
-        np.asarray(schedule_of_variant, dtype=np.int64),
-        gear_idx,
-        v_top_gear,
-        dt,
-        v,
-        a,
-        v18,
-        rules.canonical_mode(mode) == "realistic",
-        out,
-    )
-    return out

@@ -108,19 +108,19 @@ def cutoff_share_dw(w_e, c):
 
 
 @equation
-def engine_braking(t_demand, t_closed, p_closed, w_e, ratio, c):
+def engine_braking(t_demand, t_closed, p_closed, w_e, ratio, c, cm18=None):
     """The engaged engine asked for less than its closed-throttle torque ``t_closed`` (manifold at
     ``p_closed``). Without fuel cut-off it runs on that line and the brakes take the rest. With it the control
     cuts cylinders progressively: the fired fraction needed falls linearly from 1 at ``t_closed`` to 0 at the
     motoring torque (the unfired engine at that pressure), the cut being allowed as far as
     :func:`cutoff_share` of the engine speed; the brakes take what the engine does not. Returns (T_cr, brake
-    force, fired fraction in [0, 1])."""
+    force, fired fraction in [0, 1]). ``cm18``: :func:`.engine.speed_power` at w_e, if at hand."""
     if t_demand >= t_closed:
         return t_demand, 0.0, 1.0
     share = cutoff_share(w_e, c)
     if share <= 0.0:
         return t_closed, brake_force(t_demand, t_closed, ratio, c), 1.0
-    t_motor = en.motoring_torque(p_closed, w_e, c)
+    t_motor = en.motoring_torque(p_closed, w_e, c, cm18)
     need = (t_demand - t_motor) / (t_closed - t_motor) if t_demand > t_motor else 0.0
     fired = 1.0 - share * (1.0 - need)
     t_eng = t_motor + fired * (t_closed - t_motor)
@@ -257,7 +257,7 @@ def converter_engine(p_i, w_e, w_t, share, fired, c):
 
 
 @inline
-def operating_point(v, a, ratio, gear, t_closed, extended, c):
+def operating_point(v, a, ratio, gear, t_closed, extended, c, cm18_wheel=None):
     """Engine operating point that speed v and acceleration a impose through gear ``gear`` (1-based) of
     total ratio ``ratio``.
 
@@ -268,7 +268,9 @@ def operating_point(v, a, ratio, gear, t_closed, extended, c):
     or below the motoring torque, where the brakes take the rest. With a torque converter whose lock-up
     clutch is open, :func:`converter_point` (traction) or the idling engine (none).
     Returns (w_e, dw_e/dt, w_wheel, T_cr demanded, brake force, clutch state, fired fraction, wheel force);
-    the clutch state is CLUTCH_ENGAGED, CLUTCH_SLIPPING, CLUTCH_CONVERTER or CLUTCH_OPEN.
+    the clutch state is CLUTCH_ENGAGED, CLUTCH_SLIPPING, CLUTCH_CONVERTER or CLUTCH_OPEN. ``cm18_wheel``:
+    :func:`.engine.speed_power` at the wheel-side engine speed, where the caller has it (the backward
+    method: a factor per gear times the cycle's |v|^1.8); computed where needed if left out.
     """
     f_wheel = vh.wheel_force(v, a, c)  # (18)
     w_wheel = vh.engine_speed(v, ratio, c)  # (14),(17)
@@ -292,8 +294,8 @@ def operating_point(v, a, ratio, gear, t_closed, extended, c):
         )
     if clutch_engaged(w_wheel, c):
         t_cr = t_cr + en.accessory_torque(w_wheel, c)
-        p_closed = en.intake_pressure_for_torque(t_closed, w_wheel, c) if t_cr < t_closed else 0.0
-        t_cr, brake, fired = engine_braking(t_cr, t_closed, p_closed, w_wheel, ratio, c)
+        p_closed = en.intake_pressure_for_torque(t_closed, w_wheel, c, cm18_wheel) if t_cr < t_closed else 0.0
+        t_cr, brake, fired = engine_braking(t_cr, t_closed, p_closed, w_wheel, ratio, c, cm18_wheel)
         return w_wheel, dw, w_wheel, t_cr, brake, CLUTCH_ENGAGED, fired, f_wheel
     if f_wheel > 0.0:  # slipping: the engine at idle passes the wheel torque, its inertia decoupled
         t_clutch = vh.wheel_to_engine_torque(f_wheel, ratio, c) + en.accessory_torque(c.idle_speed, c)
