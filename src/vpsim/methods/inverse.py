@@ -217,8 +217,8 @@ def evaluation_grid(cycle, schedule: GearSchedule):
 # --- the inversion, point by point ---------------------------------------------------------------------
 
 # rows of the per-point array
-(R_P, R_U, R_WENG, R_DWENG, R_W, R_TCR, R_MDOT, R_BRAKE, R_CLUTCH, R_MOVING, R_FIRED) = range(11)
-N_ROWS = 11
+(R_P, R_U, R_WENG, R_DWENG, R_W, R_TCR, R_MDOT, R_BRAKE, R_CLUTCH, R_MOVING, R_FIRED, R_CM18) = range(12)
+N_ROWS = 12  # (R_CM18, c_m^1.8 at the engine speed, is the energy terms' and not in invert()'s output)
 _ROW_KEYS = (
     "intake_pressure_pa",
     "throttle_demand_m2",
@@ -235,14 +235,16 @@ _ROW_KEYS = (
 
 
 @inline
-def invert_point(v, dv, ddv, ratio, gear, coef, extended, c):
+def invert_point(v, dv, ddv, ratio, gear, coef, extended, p_closed_max, c):
     """(33), (31), (32), (30) at one point in gear ``gear`` (1-based) of total ratio ``ratio`` (``coef``:
     c1..c4 of (21) and the rolling-resistance part of c4), with the realistic car's rules in ``extended``
     mode. Through an unlocked torque converter the point is the quasi-static one of
     :func:`vpsim.model.rules.converter_point` (the throttle the steady one; no traction: as below idle).
+    ``p_closed_max``: :func:`vpsim.model.engine.closed_throttle_pressure_bound`.
 
-    Returns p_i, u_d, w_e, dw_e/dt, w_wheel, T_cr, brake force, clutch state, moving.
-    The throttle u_d is the one that gives the required dp_i/dt in the manifold equation (9)
+    Returns p_i, u_d, w_e, dw_e/dt, w_wheel, T_cr, brake force, clutch state, moving, the fired fraction and
+    c_m^1.8 of (5) at w_e (:func:`vpsim.model.engine.speed_power`, for the energy terms). The throttle u_d is
+    the one that gives the required dp_i/dt in the manifold equation (9)
     (:func:`vpsim.model.engine.throttle_for_pressure_rate`), which is (30)-(32) without restating (9).
     """
     c1, c2, c3, c4, roll, cb = coef[0], coef[1], coef[2], coef[3], coef[4], coef[5]
@@ -261,24 +263,30 @@ def invert_point(v, dv, ddv, ratio, gear, coef, extended, c):
         force = vh.wheel_force(x1, dv, c)
         if force > 0.0:
             w_p, dw_p, t_p, brake = rules.converter_point(force, w, dw, ratio, c)
-            p = en.intake_pressure_for_torque(t_p, w_p, c)
+            cm18_p = en.speed_power(w_p, c)
+            p = en.intake_pressure_for_torque(t_p, w_p, c, cm18_p)
             u = en.throttle_for_pressure_rate(p, 0.0, w_p, c)
-            return p, u, w_p, dw_p, w, t_p, brake, rules.CLUTCH_CONVERTER, moving, 1.0
+            return p, u, w_p, dw_p, w, t_p, brake, rules.CLUTCH_CONVERTER, moving, 1.0, cm18_p
     if extended and rules.clutch_engaged(w, c) and not unlocked:  # the accessories' torque on top
         tpp = en.torque_per_pressure(w, c)
         x2 += en.accessory_torque(w, c) / tpp
         dx2 += en.accessory_torque_rate(w, dw, c) / tpp
     u = en.throttle_for_pressure_rate(x2, dx2, w, c)  # (30),(32)
-    t_cr = en.crank_torque(x2, w, c)
+    cm18 = en.speed_power(w, c)  # (one power of the speed for the torques below)
+    t_cr = en.crank_torque(x2, w, c, cm18)
     if not extended:
-        return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, 1.0
+        return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, 1.0, cm18
     if rules.clutch_engaged(w, c) and not unlocked:
+        # the closed-throttle torque bounded first (no Newton solve where the demand is above the bound)
+        if t_cr >= en.crank_torque(p_closed_max, w, c, cm18):
+            return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, 1.0, cm18
         p_closed, _ = en.steady_pressure(c.min_throttle_area, w, c)
-        t_closed = en.crank_torque(p_closed, w, c)
+        t_closed = en.crank_torque(p_closed, w, c, cm18)
         if t_cr < t_closed:  # beyond engine braking: the engine on the closed-throttle line, brakes the rest
-            t_eng, brake, fired = rules.engine_braking(t_cr, t_closed, p_closed, w, ratio, c)
-            return p_closed, c.min_throttle_area, w, dw, w, t_eng, brake, rules.CLUTCH_ENGAGED, moving, fired
-        return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, 1.0
+            t_eng, brake, fired = rules.engine_braking(t_cr, t_closed, p_closed, w, ratio, c, cm18)
+            u_closed = c.min_throttle_area
+            return p_closed, u_closed, w, dw, w, t_eng, brake, rules.CLUTCH_ENGAGED, moving, fired, cm18
+        return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, 1.0, cm18
     # below idle speed: the clutch slips (engine at idle passes the wheel torque) or the engine idles (so
     # too behind an unlocked converter without traction)
     force = vh.wheel_force(x1, dv, c)
@@ -287,14 +295,14 @@ def invert_point(v, dv, ddv, ratio, gear, coef, extended, c):
         vh.wheel_to_engine_torque(force, ratio, c) + en.accessory_torque(c.idle_speed, c) if traction else 0.0
     )
     w_idle = c.idle_speed
-    p = en.intake_pressure_for_torque(t_c, w_idle, c)
+    p = en.intake_pressure_for_torque(t_c, w_idle, c, c.idle_speed_power)
     dp = 0.0
     if traction:  # p_i is affine in T_cr at fixed speed: dp_i/dt = dp_i/dT_cr dT_clutch/dt
         dt_c = vh.wheel_to_engine_torque(vh.wheel_force_rate(x1, dv, ddv, c), ratio, c)
         dp = dt_c / en.torque_per_pressure(w_idle, c)
     u_idle = en.throttle_for_pressure_rate(p, dp, w_idle, c)
     brake = -force if force < 0.0 else 0.0
-    return p, u_idle, w_idle, 0.0, w, t_c, brake, rules.CLUTCH_SLIPPING, moving, 1.0
+    return p, u_idle, w_idle, 0.0, w, t_c, brake, rules.CLUTCH_SLIPPING, moving, 1.0, c.idle_speed_power
 
 
 @kernel
@@ -304,10 +312,11 @@ def invert_points(v, dv, ddv, gear, ratios, coef, extended, recs, rows):
     for k in range(v.size):
         if not (1 <= gear[k] <= ratios.size):
             return False
+    p_closed_max = en.closed_throttle_pressure_bound(c)
     for k in range(v.size):
         g = gear[k] - 1
-        p, u, w_e, dw_e, w, t_cr, brake, clutch, moving, fired = invert_point(
-            v[k], dv[k], ddv[k], ratios[g], g + 1, coef[g], extended, c
+        p, u, w_e, dw_e, w, t_cr, brake, clutch, moving, fired, cm18 = invert_point(
+            v[k], dv[k], ddv[k], ratios[g], g + 1, coef[g], extended, p_closed_max, c
         )
         rows[R_P, k] = p
         rows[R_U, k] = u
@@ -320,6 +329,7 @@ def invert_points(v, dv, ddv, gear, ratios, coef, extended, recs, rows):
         rows[R_CLUTCH, k] = clutch
         rows[R_MOVING, k] = 1.0 if moving else 0.0
         rows[R_FIRED, k] = fired
+        rows[R_CM18, k] = cm18
     return True
 
 
@@ -363,7 +373,7 @@ def invert(v, dv, ddv, gear, params, mode: str = "paper") -> dict[str, np.ndarra
     )
     if not ok:
         raise VpsimError(f"gear numbers must be 1..{params.transmission.n_gears}")
-    out = dict(zip(_ROW_KEYS, rows, strict=True))
+    out = dict(zip(_ROW_KEYS, rows[: len(_ROW_KEYS)], strict=True))
     out["clutch_engaged"] = rows[R_CLUTCH] == rules.CLUTCH_ENGAGED
     out["moving"] = rows[R_MOVING] != 0.0
     return out
@@ -427,6 +437,7 @@ def account(v, dv, vc, rows, left, right, dt, recs, realistic, band, weight, acc
             rules.accessories_torque(rows[R_WENG, k], realistic, c),
             1.0,
             c,
+            rows[R_CM18, k],
         )
         acc[0] += wk * pw[0]
         acc[1] += wk * pw[1]
@@ -647,7 +658,7 @@ def _stop_engine_at_rest(t, v, dv, rows):
     order = np.argsort(t, kind="stable")  # (the grid's gear-change points follow the cycle's samples)
     stopped = np.empty(t.size, dtype=bool)
     stopped[order], starts = rules.stopped_at_rest(v[order], dv[order])
-    for row in (R_P, R_U, R_WENG, R_DWENG, R_TCR, R_MDOT, R_FIRED, R_BRAKE):
+    for row in (R_P, R_U, R_WENG, R_DWENG, R_TCR, R_MDOT, R_FIRED, R_BRAKE, R_CM18):
         rows[row, stopped] = 0.0
     rows[R_CLUTCH, stopped] = rules.CLUTCH_OPEN
     return stopped, starts

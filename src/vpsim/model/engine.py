@@ -594,6 +594,20 @@ def steady_pressure(a_eff, w_e, c):
 
 
 @equation
+def closed_throttle_pressure_bound(c):
+    """An upper bound of the closed-throttle intake pressure (the FQM at A_min) at every speed an engaged
+    engine turns at: that pressure at the idle speed, the lowest the clutch engages at (above it the
+    pressure falls: the throttle passes the same flow while the cylinders draw more), made less tight by
+    1e-9 for the Newton solve's tolerance; +inf where the crank torque does not rise with p_i (the bound
+    then proves nothing). A demand at or above :func:`crank_torque` at the bound is above the closed-throttle
+    torque, whose solve it then does not need."""
+    if not c.torque_slope > 0.0:
+        return math.inf
+    p, _ = steady_pressure(c.min_throttle_area, c.idle_speed, c)
+    return p * (1.0 + 1e-9)
+
+
+@equation
 def steady_torque(a_eff, w_e, c):
     """FQM crank torque at (A_eff, w_e): T_cr(p_i steady, w_e)."""
     p, _ = steady_pressure(a_eff, w_e, c)
