@@ -878,3 +878,29 @@ def test_no_method_file_grows_past_800_lines():
     src/vpsim/methods/ stays readable (the forward method is split into its system and its integrators)."""
     long = {f.name: n for f in (SRC / "methods").glob("*.py") if (n := len(f.read_text().splitlines())) > 800}
     assert not long, long
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    name=st.sampled_from(["hofman2011", "geo_metro_1l", "saturn_1_9l", "hev_p2"]),
+    boost=st.sampled_from([None, 1.8e5]),
+    w_over_idle=st.floats(1.0, 12.0),
+)
+def test_closed_throttle_pressure_bound_holds_above_idle(name, boost, w_over_idle):
+    """engine.closed_throttle_pressure_bound (the inverse method skips the closed-throttle solve above it):
+    the closed-throttle pressure at any speed from idle up is below it. Checked against scipy's brentq on
+    the steady manifold (9), not against the model's own Newton solve."""
+    from scipy.optimize import brentq
+
+    from vpsim.params import load_parameters
+
+    p = load_parameters(name)
+    if boost is not None:
+        p = p.with_changes(engine={"boost_pressure": boost})
+    c = record(p)
+    bound = en.closed_throttle_pressure_bound(c)
+    w = c.idle_speed * w_over_idle
+    lo, hi = 1.0, c.ambient_pressure * (1.0 - 1e-12)
+    p_closed = brentq(lambda x: en.manifold_pressure_rate(x, c.min_throttle_area, w, c), lo, hi, xtol=1e-9)
+    assert p_closed <= bound
+    assert en.steady_pressure(c.min_throttle_area, w, c)[0] <= bound
