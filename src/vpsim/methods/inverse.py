@@ -237,7 +237,7 @@ _ROW_KEYS = (
 @inline
 def invert_point(v, dv, ddv, ratio, gear, coef, extended, p_closed_max, c):
     """(33), (31), (32), (30) at one point in gear ``gear`` (1-based) of total ratio ``ratio`` (``coef``:
-    c1..c4 of (21) and the rolling-resistance part of c4), with the realistic car's rules in ``extended``
+    :func:`gear_coefficients`' row of the gear), with the realistic car's rules in ``extended``
     mode. Through an unlocked torque converter the point is the quasi-static one of
     :func:`vpsim.model.rules.converter_point` (the throttle the steady one; no traction: as below idle).
     ``p_closed_max``: :func:`vpsim.model.engine.closed_throttle_pressure_bound`.
@@ -272,7 +272,8 @@ def invert_point(v, dv, ddv, ratio, gear, coef, extended, p_closed_max, c):
         x2 += en.accessory_torque(w, c) / tpp
         dx2 += en.accessory_torque_rate(w, dw, c) / tpp
     u = en.throttle_for_pressure_rate(x2, dx2, w, c)  # (30),(32)
-    cm18 = en.speed_power(w, c)  # (one power of the speed for the torques below)
+    # c_m^1.8 of (5) at w = i x1 / r: the gear's factor (coef[6]) times x1^1.8 = x1 x1^0.8, no further power
+    cm18 = coef[6] * x1 * x108
     t_cr = en.crank_torque(x2, w, c, cm18)
     if not extended:
         return x2, u, w, dw, w, t_cr, 0.0, rules.CLUTCH_ENGAGED, moving, 1.0, cm18
@@ -334,17 +335,19 @@ def invert_points(v, dv, ddv, gear, ratios, coef, extended, recs, rows):
 
 
 def gear_coefficients(params) -> np.ndarray:
-    """Per gear: c1..c4 of (21) (:func:`vpsim.model.vehicle.statespace_coefficients`) and the rolling part of
-    c4, m g c_r / m_eq (removed at standstill); computed once per parameter set."""
+    """Per gear: c1..c4 of (21) (:func:`vpsim.model.vehicle.statespace_coefficients`), the rolling part of
+    c4, m g c_r / m_eq (removed at standstill), the coast-down B's term and c_m^1.8 of (5) per unit of
+    vehicle speed (:func:`vpsim.model.engine.speed_power` at i / r); computed once per parameter set."""
     return memo(params, "inverse_gear_coefficients", _gear_coefficients)
 
 
 def _gear_coefficients(params) -> np.ndarray:
     c = record(params)
     r = total_ratios(params.transmission)
-    coef = np.empty((r.size, 6))
+    coef = np.empty((r.size, 7))
     coef[:, :4] = np.column_stack(np.broadcast_arrays(*vh.statespace_coefficients(r, c)[:4]))
     coef[:, 4], coef[:, 5] = vh.rolling_coefficients(r, c)
+    coef[:, 6] = en.speed_power(vh.engine_speed(1.0, r, c), c)  # c_m^1.8 per unit of vehicle speed
     coef.flags.writeable = False
     return coef
 
