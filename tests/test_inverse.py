@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from vpsim.cycles import Cycle, load_cycle
 from vpsim.drivers.smoothing import SmoothingDriver
@@ -208,3 +210,22 @@ def test_compiled_grid_and_smoothing_match_numpy(name, a):
     np.testing.assert_array_equal(got[9], np.diff(c.time_s))
     np.testing.assert_array_equal(got[10], c.speed_mps[sample])
     assert not inverse._is_uniform_compiled(np.array([0.0, 1.0, 2.5]))
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    speeds=st.lists(st.floats(0.0, 40.0), min_size=2, max_size=40),
+    step=st.sampled_from([0.5, 1.0, 2.0]),
+    a=st.floats(0.3, 12.0),
+)
+def test_compiled_smoothing_matches_the_driver_on_short_cycles(speeds, step, a):
+    """The compiled convolution (four windows at a time inside the cycle, one at a time near its ends and
+    where the window is wider than the cycle) against the smoothing driver's own evaluation."""
+    t = np.arange(len(speeds)) * step
+    v = np.asarray(speeds)
+    taps = inverse._sample_taps(a, step)
+    one_gear = (np.array([0.0]), np.array([1]))
+    F, _ = inverse._grid_and_smoothing(t, v, *one_gear, *taps)
+    ref = SmoothingDriver(t, v, a).evaluate(t)
+    for got, want in zip(F[1:4], ref, strict=True):
+        np.testing.assert_allclose(got[: t.size], want, rtol=1e-9, atol=1e-9)
