@@ -76,7 +76,9 @@ def dp_kernel(
     dsoc = soc_grid[1] - soc_grid[0]
     # the pack's state at each grid charge, once for the whole cycle
     for i in range(n):
-        st = el.battery_state(soc_grid[i], e, tabs[0], tabs[1], tabs[2], tabs[3])
+        st = el.battery_state(
+            soc_grid[i], e, tabs[el.TAB_SOC], tabs[el.TAB_OCV], tabs[el.TAB_R_DIS], tabs[el.TAB_R_CHG]
+        )
         for q in range(5):
             packs[i, q] = st[q]
     for k in range(v.size - 1, -1, -1):
@@ -157,11 +159,21 @@ def causal_kernel(
         w = interval[1]  # the engine's speed were it to run
         t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
         t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
-        battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
+        battery = el.battery_state(
+            soc, e, tabs[el.TAB_SOC], tabs[el.TAB_OCV], tabs[el.TAB_R_DIS], tabs[el.TAB_R_CHG]
+        )
         if (
             ems == hy.EMS_ECMS
             and walk
-            and hy.pack_covers_no_drive(interval, battery, e, m, tabs[4], tabs[5], tabs[6])
+            and hy.pack_covers_no_drive(
+                interval,
+                battery,
+                e,
+                m,
+                tabs[el.TAB_MAP_SPEED],
+                tabs[el.TAB_MAP_TORQUE],
+                tabs[el.TAB_MAP_LOSS],
+            )
         ):
             # the exhaustive search's choice by a walk from the last step's share, where the cost is convex
             pt, share = hy.p2_ecms_walk(

@@ -147,7 +147,9 @@ def p2_kernel(
         a = driven_acceleration(u, v, max(v_ref[k], v_ref[k + 1]), dt)
         g, j = gear_index(grid, k, sched_t, sched_gear, j)
         ratio = ratios[g]
-        battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
+        battery = el.battery_state(
+            soc, e, tabs[el.TAB_SOC], tabs[el.TAB_OCV], tabs[el.TAB_R_DIS], tabs[el.TAB_R_CHG]
+        )
         vm = v + 0.5 * a * dt
         interval = hy.p2_interval(vm, a, ratio, g + 1, c, e, m, tabs, h)
         w = interval[1]  # the engine's speed were it to run
@@ -156,7 +158,15 @@ def p2_kernel(
         if (
             ems == hy.EMS_ECMS
             and walk
-            and hy.pack_covers_no_drive(interval, battery, e, m, tabs[4], tabs[5], tabs[6])
+            and hy.pack_covers_no_drive(
+                interval,
+                battery,
+                e,
+                m,
+                tabs[el.TAB_MAP_SPEED],
+                tabs[el.TAB_MAP_TORQUE],
+                tabs[el.TAB_MAP_LOSS],
+            )
         ):
             # the exhaustive search's choice by a walk from the last step's share, where the cost is convex
             # (as the backward method); the choice (engine on, its torque) is the point's
@@ -233,7 +243,9 @@ def split_kernel(
         ff = (v_ref[k + 1] - v_ref[k]) / dt
         u = driver_command(err, z, ff, drv)
         a = driven_acceleration(u, v, max(v_ref[k], v_ref[k + 1]), dt)
-        battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
+        battery = el.battery_state(
+            soc, e, tabs[el.TAB_SOC], tabs[el.TAB_OCV], tabs[el.TAB_R_DIS], tabs[el.TAB_R_CHG]
+        )
         vm = v + 0.5 * a * dt
         interval = sp.split_interval(vm, a, ratio, c, e, m, g, s, tabs)
         runs = interval[9] <= interval[10]

@@ -81,7 +81,9 @@ def dp_kernel(v, a, dt, ratio, c, e, m, g, s, tabs, h, levels, lines, best, cap,
     soc0 = soc_grid[0]
     dsoc = soc_grid[1] - soc_grid[0]
     for i in range(n):
-        st = el.battery_state(soc_grid[i], e, tabs[0], tabs[1], tabs[2], tabs[3])
+        st = el.battery_state(
+            soc_grid[i], e, tabs[el.TAB_SOC], tabs[el.TAB_OCV], tabs[el.TAB_R_DIS], tabs[el.TAB_R_CHG]
+        )
         for q in range(5):
             packs[i, q] = st[q]
     for k in range(v.size - 1, -1, -1):
@@ -156,7 +158,9 @@ def causal_kernel(
         runs = interval[9] <= interval[10]
         p_high = sp.engine_power_limit(interval[10], cap[0], cap[1], inv_cap) if runs else 0.0
         p_follow = sp.demand_power(interval, e, p_high)
-        battery = el.battery_state(soc, e, tabs[0], tabs[1], tabs[2], tabs[3])
+        battery = el.battery_state(
+            soc, e, tabs[el.TAB_SOC], tabs[el.TAB_OCV], tabs[el.TAB_R_DIS], tabs[el.TAB_R_CHG]
+        )
         choice_on, choice_p, found = sp.split_choose(
             interval,
             battery,

@@ -100,6 +100,7 @@ class Tables:
     env_min: np.ndarray
 
     def astuple(self):
+        """The arrays as the kernels take them, in the order of the ``TAB_*`` indices below."""
         return (
             self.soc,
             self.ocv,
@@ -112,6 +113,21 @@ class Tables:
             self.env_max,
             self.env_min,
         )
+
+
+# positions of the arrays in Tables.astuple(), the tuple a kernel reads as ``tabs``
+(
+    TAB_SOC,
+    TAB_OCV,
+    TAB_R_DIS,
+    TAB_R_CHG,
+    TAB_MAP_SPEED,
+    TAB_MAP_TORQUE,
+    TAB_MAP_LOSS,
+    TAB_ENV_SPEED,
+    TAB_ENV_MAX,
+    TAB_ENV_MIN,
+) = range(10)
 
 
 # --- equations --------------------------------------------------------------------------------------------

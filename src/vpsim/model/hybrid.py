@@ -80,7 +80,7 @@ def p2_point(v, a, ratio, gear, soc, on, t_e, c, e, m, tabs, h):
     Written as its two parts: what the interval fixes (:func:`p2_interval`, and the pack's state at this
     charge, :func:`vpsim.model.electric.battery_state`), and what the management's choice adds
     (:func:`p2_choice`); the management, trying many choices at one interval, evaluates the first once."""
-    soc_grid, ocv, r_dis, r_chg = tabs[0], tabs[1], tabs[2], tabs[3]
+    soc_grid, ocv, r_dis, r_chg = tabs[el.TAB_SOC], tabs[el.TAB_OCV], tabs[el.TAB_R_DIS], tabs[el.TAB_R_CHG]
     battery = el.battery_state(soc, e, soc_grid, ocv, r_dis, r_chg)
     return p2_choice(p2_interval(v, a, ratio, gear, c, e, m, tabs, h), battery, on, t_e, c, e, m, tabs, h)
 
@@ -129,7 +129,9 @@ def p2_interval(v, a, ratio, gear, c, e, m, tabs, h):
         if clutch == CLUTCH_OPEN or clutch == CLUTCH_SLIPPING:
             w = c.idle_speed
             dw = 0.0
-    t_min, t_max = el.envelope(h.belt_ratio * w, m, e, tabs[7], tabs[8], tabs[9])
+    t_min, t_max = el.envelope(
+        h.belt_ratio * w, m, e, tabs[el.TAB_ENV_SPEED], tabs[el.TAB_ENV_MAX], tabs[el.TAB_ENV_MIN]
+    )
     return vv, w, dw, f, t_in, runs, en.speed_power(w, c), t_min, t_max, ratio, clutch, mu
 
 
@@ -146,7 +148,19 @@ def p2_choice(interval, battery, on, t_e, c, e, m, tabs, h):
     t_pass = clutch_passes(t_in, passing)  # the demand the clutch passes to the crank's side
     t_ask = crank_to_belt(t_pass - te + el.rotor_torque(dw, e), h)
     t_mb, i, u_oc, r, p_m, at_m, at_b = el.machine_and_battery_at(
-        t_ask, t_pass < 0.0, vv, h.belt_ratio * w, t_min, t_max, battery, 0.0, e, m, tabs[4], tabs[5], tabs[6]
+        t_ask,
+        t_pass < 0.0,
+        vv,
+        h.belt_ratio * w,
+        t_min,
+        t_max,
+        battery,
+        0.0,
+        e,
+        m,
+        tabs[el.TAB_MAP_SPEED],
+        tabs[el.TAB_MAP_TORQUE],
+        tabs[el.TAB_MAP_LOSS],
     )
     t_m = belt_to_crank(t_mb, h)
     t_net = te + t_m - el.rotor_torque(dw, e)
@@ -686,7 +700,7 @@ def boost_torque(w, soc, e, m, tabs):
     """The most torque the P2 machine adds at the gearbox input speed w: its motoring envelope T_max(w), cut
     to what the pack can give at charge ``soc`` beside the accessories (E3), (B1)-(B3) through
     :func:`vpsim.model.electric.machine_and_battery`. What a full-throttle run adds to the engine's torque."""
-    env_speed, env_max, env_min = tabs[7], tabs[8], tabs[9]
+    env_speed, env_max, env_min = tabs[el.TAB_ENV_SPEED], tabs[el.TAB_ENV_MAX], tabs[el.TAB_ENV_MIN]
     t_min, t_max = el.envelope(w, m, e, env_speed, env_max, env_min)
     return el.machine_and_battery(t_max, False, 0.0, w, soc, e, m, tabs)[0]
 

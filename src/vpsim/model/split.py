@@ -171,7 +171,7 @@ def split_interval(v, a, ratio, c, e, m, g, s, tabs):
     f = vh.wheel_force(vv, a, c)
     w_m2 = s.mg2_ratio * w_r
     dw_m2 = s.mg2_ratio * dw_r
-    t_min, t_max = el.envelope(w_m2, m, e, tabs[7], tabs[8], tabs[9])
+    t_min, t_max = el.envelope(w_m2, m, e, tabs[el.TAB_ENV_SPEED], tabs[el.TAB_ENV_MAX], tabs[el.TAB_ENV_MIN])
     w_lo, w_hi = carrier_speed_range(w_r, c, g, s)
     return vv, w_r, dw_r, f, el.shaft_torque(f, ratio, c), w_m2, dw_m2, t_min, t_max, w_lo, w_hi, ratio
 
@@ -221,9 +221,9 @@ def split_choice(interval, battery, on, p_e, c, e, m, g, s, tabs, lines, best):
         p_g,
         e,
         m,
-        tabs[4],
-        tabs[5],
-        tabs[6],
+        tabs[el.TAB_MAP_SPEED],
+        tabs[el.TAB_MAP_TORQUE],
+        tabs[el.TAB_MAP_LOSS],
     )
     t_net = t_r + s.mg2_ratio * (t_m - el.rotor_torque(dw_m2, e))
     missing, brake = hy.shortfall_and_brake(f, el.wheel_force_of_shaft(t_net, ratio, c))
