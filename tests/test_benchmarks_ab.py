@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src"
@@ -54,3 +55,38 @@ def test_ab_forward_says_which_cycle_it_cannot_run(benchmark_script, tmp_path):
     args = [str(SRC), str(SRC), "--cycles", "no_such_cycle", "--runs", "1", "--scratch", str(tmp_path)]
     with pytest.raises(SystemExit, match="ab_forward: no_such_cycle: .*no_such_cycle"):
         ab.main(args)
+
+
+def test_engine_fuel_matrix_finds_a_moved_fuel_and_a_moved_series(benchmark_script):
+    """benchmarks/engine_fuel_matrix.py's comparison: identical files give nothing; a fuel moved by one part
+    in 1e12 and a series changed in one run are reported, each where it happened."""
+    efm = benchmark_script("engine_fuel_matrix")
+    a = {
+        "x/udds/backward/paper": {"fuel_kg": 0.5, "trace_miss_s": 0.0, "series_sha1": "aa", "sum_abs.v": 3.0},
+        "batch/udds/paper/0": {"fuel_kg": 0.25, "trace_miss_s": 1.0},
+    }
+    assert efm.compare(a, a) == ((0.0, None), (0.0, None), [])
+    b = {
+        "x/udds/backward/paper": {"fuel_kg": 0.5, "trace_miss_s": 0.0, "series_sha1": "ab", "sum_abs.v": 3.0},
+        "batch/udds/paper/0": {"fuel_kg": 0.25 * (1 + 1e-12), "trace_miss_s": 1.0},
+    }
+    (rf, kf), (ra, ka), moved = efm.compare(a, b)
+    assert kf == "batch/udds/paper/0" and rf == pytest.approx(1e-12, rel=1e-3)
+    assert ka == "batch/udds/paper/0 fuel_kg"
+    assert moved == ["x/udds/backward/paper"]
+
+
+def test_engine_fuel_matrix_series_figures_see_one_ulp(benchmark_script):
+    """A series one ulp apart has another digest (the sum of |x| may round it away: it is the magnitude of a
+    larger move, 1e-12 here)."""
+    efm = benchmark_script("engine_fuel_matrix")
+    x = np.linspace(0.0, 1.0, 11)
+    y = x.copy()
+    y[5] = np.nextafter(y[5], 2.0)
+    z = x.copy()
+    z[5] *= 1.0 + 1e-12
+    dx, sx = efm._series_figures({"v": x, "gear": np.ones(11, int)})
+    dy, _ = efm._series_figures({"v": y, "gear": np.ones(11, int)})
+    _, sz = efm._series_figures({"v": z})
+    assert dx != dy and "sum_abs.gear" not in sx
+    assert sz["sum_abs.v"] - sx["sum_abs.v"] == pytest.approx(0.5e-12, rel=1e-3)
