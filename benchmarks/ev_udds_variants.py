@@ -19,7 +19,12 @@ vehicle and test, no peer) with one change made in this process only:
 * ``regen_low``: regeneration down to 0.5 m/s (full share above it; the preset: 1-3 m/s);
 * ``wheel_inertia``: the driven wheels' inertia on the dynamometer (1.2 kg m^2 per wheel and tyre; two
   wheels on a two-wheel-drive roll, four on an all-wheel-drive one) added to the rotor's;
-* ``no_spin_pm+regen_low``: both.
+* ``no_spin_pm+regen_low``: both;
+* ``no_spin_all``: the speed-only terms dropped for every machine, the induction machines too (the argument
+  for a machine without magnets: no flux at zero torque, so no no-load iron loss, and its bearings and
+  windage in the coast-down);
+* ``regen_share_0.8``: the machine takes 80 % of a braking demand (blending that leaves a fifth to the
+  friction brakes; the preset: all of it).
 
 Prints per variant the UDDS and highway n / median / median |error| / p90 |error| (MPGe, out of fold) and the
 per-class UDDS median |error|; CPU seconds per variant.
@@ -48,6 +53,8 @@ VARIANTS = (
     "regen_low",
     "wheel_inertia",
     "no_spin_pm+regen_low",
+    "no_spin_all",
+    "regen_share_0.8",
 )
 
 
@@ -55,6 +62,8 @@ def _coefficients(variant: str) -> dict:
     base = dict(mc.DEFAULT_COEFFICIENTS)
     if "no_spin" in variant:
         base["pm"] = replace(base["pm"], **{k: 0.0 for k in SPIN})
+    if variant == "no_spin_all":
+        base["induction"] = replace(base["induction"], **{k: 0.0 for k in SPIN})
     if variant == "no_spin_magnets_windage":
         base["induction"] = replace(base["induction"], k_mech=0.0)
     return base
@@ -66,6 +75,8 @@ def _parameters(variant: str, shipped):
         if variant in ("no_spin_pm_magnets", "no_spin_magnets_windage") and ev.ev_class(rec) == "bev_eesm":
             # the kinds share one coefficient set: "induction" keeps the EESM's whole loss model
             p = p.with_changes(machine={"kind": "induction"})
+        if variant == "regen_share_0.8":
+            p = p.with_changes(electric={"regen_share": 0.8})
         if variant.endswith("regen_low"):
             p = p.with_changes(electric={"regen_speed_low": 0.0, "regen_speed_high": 0.5})
         if variant == "wheel_inertia":
