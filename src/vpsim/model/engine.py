@@ -59,6 +59,13 @@ def bmep_divisor(c):
 
 
 @equation
+def bmep_per_net_mep(c):
+    """1 / (1 + 0.0215 k_f): BMEP per unit of IMEP - speed friction - PMEP, (2)-(6) solved for BMEP (the
+    record's ``bmep_per_net_mep``; the equations multiply by it)."""
+    return 1.0 / bmep_divisor(c)
+
+
+@equation
 def heat_factor(c):
     """Q = q_hv eta_th / ((A/F)_s lambda R T_i): IMEP (4) per unit of (s_i p_i - y_i) via (7),(8)."""
     return (
@@ -84,6 +91,18 @@ def ambient_rt_sqrt(c):
 def air_fuel_ratio(c):
     """(A/F)_s lambda: air per fuel of the charge (7)."""
     return c.stoich_air_fuel_ratio * c.lambda_
+
+
+@equation
+def fuel_per_air(c):
+    """1 / ((A/F)_s lambda): fuel per air of the charge (7) (the record's ``fuel_per_air``)."""
+    return 1.0 / air_fuel_ratio(c)
+
+
+@equation
+def cycles_per_radian(c):
+    """1 / (2 pi n_r): engine cycles per radian of the crank (the record's ``cycles_per_radian``)."""
+    return 1.0 / (TWO_PI * c.revolutions_per_cycle)
 
 
 @equation
@@ -128,7 +147,7 @@ def air_charge(p_i, c):
 @equation
 def cycles_per_second(w_e, c):
     """Engine cycles per second, w_e / (2 pi n_r)."""
-    return w_e / (TWO_PI * c.revolutions_per_cycle)
+    return w_e * c.cycles_per_radian
 
 
 @equation
@@ -142,7 +161,7 @@ def burned_fuel_flow(p_i, w_e, c):
     """Fuel mass flow that burns, mdot_f = m_f w_e / (2 pi n_r), m_f = m_ac / ((A/F)_s lambda)   (7): what
     IMEP (4) is made of. Negative where p_i < y_i / s_i (no air charge): the caller decides what that
     means."""
-    return cylinder_air_flow(p_i, w_e, c) / c.afr
+    return cylinder_air_flow(p_i, w_e, c) * c.fuel_per_air
 
 
 def enrichment_slope(c):
@@ -230,7 +249,7 @@ def speed_friction_dw(w_e, c, cm18=None):
 @equation
 def bmep_from_pressure(p_i, w_e, c, cm18=None):
     """BMEP from (2)-(6): IMEP - FMEP - PMEP with FMEP = speed part + 0.0215 k_f BMEP."""
-    return (imep(p_i, c) - speed_friction(w_e, c, cm18) - pmep(p_i, c)) / c.one_plus_kf
+    return (imep(p_i, c) - speed_friction(w_e, c, cm18) - pmep(p_i, c)) * c.bmep_per_net_mep
 
 
 @equation
@@ -261,7 +280,7 @@ def crank_torque(p_i, w_e, c, cm18=None):
 def motoring_torque(p_i, w_e, c, cm18=None):
     """Crank torque with the fuel cut (IMEP = 0): the engine turned by the wheels brakes with its friction
     and pumping, (2)-(6) without (4)."""
-    return crank_torque(p_i, w_e, c, cm18) - imep(p_i, c) / c.one_plus_kf * c.mep_to_torque
+    return crank_torque(p_i, w_e, c, cm18) - imep(p_i, c) * c.bmep_per_net_mep * c.mep_to_torque
 
 
 @equation
@@ -288,13 +307,13 @@ def imep_per_pressure(c):
 @equation
 def burned_fuel_flow_dp(w_e, c):
     """d/dp_i of :func:`burned_fuel_flow`, (7),(8) at fixed w_e (the flow is affine in p_i)."""
-    return cycles_per_second(w_e, c) * c.air_per_charge * c.air_charge_slope / c.afr
+    return cycles_per_second(w_e, c) * c.air_per_charge * c.air_charge_slope * c.fuel_per_air
 
 
 @equation
 def burned_fuel_flow_dw(p_i, c):
     """d/dw_e of :func:`burned_fuel_flow`, (7),(8) at fixed p_i (the flow is linear in w_e)."""
-    return cylinder_air_flow(p_i, 1.0, c) / c.afr
+    return cylinder_air_flow(p_i, 1.0, c) * c.fuel_per_air
 
 
 @equation
@@ -324,20 +343,20 @@ def fuel_flow_dw(p_i, c):
 def crank_torque_dw(w_e, c, cm18=None):
     """dT_cr/dw_e at fixed p_i, fired or not (:func:`partly_fired_torque`): FMEP's speed part (5) through
     the BMEP divisor."""
-    return -speed_friction_dw(w_e, c, cm18) / c.one_plus_kf * c.mep_to_torque
+    return -speed_friction_dw(w_e, c, cm18) * c.bmep_per_net_mep * c.mep_to_torque
 
 
 @equation
 def partly_fired_torque_dp(fired, c):
     """d/dp_i of :func:`partly_fired_torque` at fixed w_e and ``fired``: the fired engine's slope less the
     unfired share of IMEP's (4), through the BMEP divisor of (5)."""
-    return c.torque_slope - (1.0 - fired) * imep_per_pressure(c) / c.one_plus_kf * c.mep_to_torque
+    return c.torque_slope - (1.0 - fired) * imep_per_pressure(c) * c.bmep_per_net_mep * c.mep_to_torque
 
 
 @equation
 def partly_fired_torque_dfired(p_i, c):
     """d/d(fired) of :func:`partly_fired_torque`: what the fuel adds, IMEP (4) through the divisor of (5)."""
-    return imep(p_i, c) / c.one_plus_kf * c.mep_to_torque
+    return imep(p_i, c) * c.bmep_per_net_mep * c.mep_to_torque
 
 
 @equation
@@ -361,6 +380,15 @@ def torque_per_pressure(w_e, c):
     return c.torque_slope
 
 
+def pressure_per_torque(c):
+    """1 / (dT_cr/dp_i) (the record's ``pressure_per_torque``; scalars or arrays of variants, evaluated once
+    per parameter set by vpsim.model.record; inf for an engine whose torque does not rise with p_i, which
+    :func:`check` refuses)."""
+    slope = np.asarray(c.torque_slope, dtype=float)
+    out = np.divide(1.0, slope, out=np.full(slope.shape, np.inf), where=slope != 0.0)
+    return out if out.ndim else float(out)
+
+
 @equation
 def intake_pressure_for_torque(t_cr, w_e, c, cm18=None):
     """p_i with delta(p_i) = 0 for imposed (T_cr, w_e): the BQM's inversion of (2)-(8).
@@ -368,7 +396,7 @@ def intake_pressure_for_torque(t_cr, w_e, c, cm18=None):
     delta(p_i) = T_cr(p_i, w_e) - T_cr is linear in p_i, so the root is closed-form (the paper iterates; both
     agree): p_i = (T_cr - T_cr(0, w_e)) / (dT_cr/dp_i). ``cm18``: :func:`speed_power` at w_e, if at hand.
     """
-    return (t_cr - crank_torque(0.0, w_e, c, cm18)) / torque_per_pressure(w_e, c)
+    return (t_cr - crank_torque(0.0, w_e, c, cm18)) * c.pressure_per_torque
 
 
 @equation

@@ -92,6 +92,12 @@ DERIVED_FIELDS = (
     "torque_slope",  # dT_cr/dp_i (engine.torque_slope)
     "enrichment_slope",  # d(enrichment)/dp_i above ambient (engine.enrichment_slope)
     "idle_speed_power",  # c_m^1.8 of (5) at the idle speed (engine.speed_power): the engine held at idle
+    # reciprocals of divisors above, so the equations multiply: a division's latency on the chain from a
+    # demand to its fuel flow is what bounds the backward kernels (each is the model's own equation)
+    "cycles_per_radian",  # 1 / (2 pi n_r) (engine.cycles_per_radian)
+    "fuel_per_air",  # 1 / ((A/F)_s lambda) of (7) (engine.fuel_per_air)
+    "bmep_per_net_mep",  # 1 / one_plus_kf (engine.bmep_per_net_mep)
+    "pressure_per_torque",  # 1 / (dT_cr/dp_i) (engine.pressure_per_torque)
 )
 FIELDS = tuple(f for fs in _PARAMETER_FIELDS.values() for f in fs) + (
     "map_speed_low",
@@ -130,8 +136,11 @@ def _fill(rec, vehicle, transmission, engine, simulation, n: int) -> None:
     r.displacement = eq_engine.displacement(r)
     r.friction_factor = eq_engine.friction_factor(r)
     r.one_plus_kf = eq_engine.bmep_divisor(r)
+    r.bmep_per_net_mep = eq_engine.bmep_per_net_mep(r)
+    r.cycles_per_radian = eq_engine.cycles_per_radian(r)
     r.rt_intake = eq_engine.intake_rt(r)
     r.afr = eq_engine.air_fuel_ratio(r)
+    r.fuel_per_air = eq_engine.fuel_per_air(r)
     r.heat_factor = eq_engine.heat_factor(r)
     r.mep_to_torque = eq_engine.mep_to_torque(1.0, r)
     r.air_per_charge = eq_engine.air_per_charge_pressure(r)
@@ -142,6 +151,7 @@ def _fill(rec, vehicle, transmission, engine, simulation, n: int) -> None:
     r.aero_coefficient = eq_vehicle.aero_coefficient(r)
     r.torque_slope = 1.0  # a placeholder crank_torque does not read; the slope follows from it
     r.torque_slope = eq_engine.torque_slope(r)
+    r.pressure_per_torque = eq_engine.pressure_per_torque(r)
     r.enrichment_slope = eq_engine.enrichment_slope(r)
     r.idle_speed_power = eq_engine.speed_power(r.idle_speed, r)
     values = {name: getattr(r, name) for name in FIELDS}
