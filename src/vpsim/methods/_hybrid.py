@@ -1,13 +1,15 @@
-"""What the hybrid layouts' backward methods share after their kernels: the running sums' places and the
-:class:`vpsim.result.Result` they make of a run (the P2 of :mod:`vpsim.methods.hev`, the power split of
-:mod:`vpsim.methods.hev_split`)."""
+"""What the hybrid layouts' backward and inverse methods share around their kernels: the running sums'
+places, the :class:`vpsim.result.Result` they make of a run, and the inverse method's trajectory and result
+(the P2 of :mod:`vpsim.methods.hev`, the power split of :mod:`vpsim.methods.hev_split`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
+from ..errors import VpsimError
 from ..model import electric as el
 from ..model import hybrid as hy
 from ..model.engine import equation
@@ -19,6 +21,37 @@ S_FUEL, S_DIST, S_STARTS, S_MISS_S, S_MAX_MISS, S_MACHINE_S, S_BATTERY_S, S_REGE
     N_TERMS, N_TERMS + 9
 )
 N_COMMON_SUMS = N_TERMS + 9
+
+
+def inverse_trajectory(cycle, params, driver: str, ems: str) -> tuple:
+    """The inverse method's input for a hybrid: (ts, vs, grid, smooth), the cycle's samples, the grid of
+    :func:`vpsim.drivers.smoothing.inverse_grid` and the smoothing driver's speed (34)-(35) on it (not below
+    zero). The DP management is refused: it needs the backward method's known cycle."""
+    from ..drivers.smoothing import SmoothingDriver, inverse_grid
+
+    if ems == "dp":
+        raise VpsimError(
+            "the dynamic programming management runs on the backward method only (a known cycle)"
+        )
+    a = params.driver(driver).inverse_a
+    ts, vs = np.asarray(cycle.time_s, float), np.asarray(cycle.speed_mps, float)
+    grid = inverse_grid(ts, params.simulation.inverse_max_step)
+    smooth = np.maximum(SmoothingDriver(ts, vs, a).evaluate(grid)[0], 0.0)
+    return ts, vs, grid, smooth
+
+
+def inverse_result(result_of, cycle, trajectory: tuple, rows, driver: str) -> Result:
+    """The inverse run's Result from its grid rows: ``result_of(cycle, rows)`` (the layout's result builder)
+    on the cycle's samples with the rows of the grid intervals that start at them; the speed series is the
+    smoothed trajectory's at the samples (grid points), the method, driver and steps the inverse method's."""
+    from ..cycles import Cycle
+
+    ts, vs, grid, smooth = trajectory
+    starts = np.searchsorted(grid, ts[:-1])  # the grid intervals that start at the cycle's samples
+    r = result_of(Cycle(cycle.name, ts, vs), rows[:, starts])
+    series = dict(r.series)
+    series["speed_mps"] = smooth[np.searchsorted(grid, ts)]  # the samples are grid points
+    return dataclasses.replace(r, method="inverse", driver=driver, series=series, steps=int(grid.size - 1))
 
 
 def rows_at_samples(rows, n_samples: int, n: int) -> np.ndarray:

@@ -364,18 +364,9 @@ def run_inverse(
     the torque fixes through the BQM (19); the manifold's dynamics set the throttle that holds that pressure,
     which this method does not compute (so it does not check the throttle's range, as the engine car's
     inverse method does). Gears follow the cycle's schedule."""
-    from ..cycles import Cycle
-    from ..drivers.smoothing import SmoothingDriver, inverse_grid
-
     ems = ems or params.hybrid.ems
-    if ems == "dp":
-        raise VpsimError(
-            "the dynamic programming management runs on the backward method only (a known cycle)"
-        )
-    a = params.driver(driver).inverse_a
-    ts, vs = np.asarray(cycle.time_s, float), np.asarray(cycle.speed_mps, float)
-    grid = inverse_grid(ts, params.simulation.inverse_max_step)
-    smooth = np.maximum(SmoothingDriver(ts, vs, a).evaluate(grid)[0], 0.0)
+    trajectory = _hybrid.inverse_trajectory(cycle, params, driver, ems)
+    ts, _, grid, smooth = trajectory
     engine_map, schedule, c, e, m, tabs, h, ratios, soc_grid = _inputs(cycle, params)
     t0 = time.process_time()
     n = grid.size - 1
@@ -404,21 +395,9 @@ def run_inverse(
         exhaustive,
     )
     cpu = time.process_time() - t0
-    starts = np.searchsorted(grid, ts[:-1])  # the grid intervals that start at the cycle's samples
-    r = _result(
-        Cycle(cycle.name, ts, vs),
-        params,
-        ems,
-        mode,
-        rows[:, starts],
-        sums,
-        params.battery.soc_initial,
-        soc_end,
-        ts.size - 1,
-        cpu,
-    )
-    series = dict(r.series)
-    series["speed_mps"] = smooth[np.searchsorted(grid, ts)]  # the samples are grid points
-    import dataclasses
 
-    return dataclasses.replace(r, method="inverse", driver=driver, series=series, steps=int(n))
+    def result_of(samples, rows_s):
+        soc_0 = params.battery.soc_initial
+        return _result(samples, params, ems, mode, rows_s, sums, soc_0, soc_end, ts.size - 1, cpu)
+
+    return _hybrid.inverse_result(result_of, cycle, trajectory, rows, driver)

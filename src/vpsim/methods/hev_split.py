@@ -20,7 +20,6 @@ and point. The forward method calls the same per-step choice (:mod:`vpsim.method
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 
@@ -368,35 +367,16 @@ def run_inverse(cycle, params, *, driver: str = "2", ems: str | None = None, mod
     """The power-split hybrid on the inverse method: the smoothing driver's trajectory v_d(t) (34)-(35),
     sampled on :func:`vpsim.drivers.smoothing.inverse_grid`, driven by the same management and operating
     point as the backward method (as the P2's inverse method, :func:`vpsim.methods.hev.run_inverse`)."""
-    from ..cycles import Cycle
-    from ..drivers.smoothing import SmoothingDriver, inverse_grid
-
     ems = _check_ems(ems, params)
-    if ems == "dp":
-        raise VpsimError(
-            "the dynamic programming management runs on the backward method only (a known cycle)"
-        )
-    a = params.driver(driver).inverse_a
-    ts, vs = np.asarray(cycle.time_s, float), np.asarray(cycle.speed_mps, float)
-    grid = inverse_grid(ts, params.simulation.inverse_max_step)
-    smooth = np.maximum(SmoothingDriver(ts, vs, a).evaluate(grid)[0], 0.0)
+    trajectory = _hybrid.inverse_trajectory(cycle, params, driver, ems)
+    ts, _, grid, smooth = trajectory
     x = _inputs(params)
     t0 = time.process_time()
     rows, sums, soc_end = _drive(grid, smooth, params, ems, np.zeros((1, 2, 2)), x)
     cpu = time.process_time() - t0
-    starts = np.searchsorted(grid, ts[:-1])  # the grid intervals that start at the cycle's samples
-    r = _result(
-        Cycle(cycle.name, ts, vs),
-        params,
-        ems,
-        mode,
-        rows[:, starts],
-        sums,
-        params.battery.soc_initial,
-        soc_end,
-        ts.size - 1,
-        cpu,
-    )
-    series = dict(r.series)
-    series["speed_mps"] = smooth[np.searchsorted(grid, ts)]  # the samples are grid points
-    return dataclasses.replace(r, method="inverse", driver=driver, series=series, steps=int(grid.size - 1))
+
+    def result_of(samples, rows_s):
+        soc_0 = params.battery.soc_initial
+        return _result(samples, params, ems, mode, rows_s, sums, soc_0, soc_end, ts.size - 1, cpu)
+
+    return _hybrid.inverse_result(result_of, cycle, trajectory, rows, driver)
