@@ -24,30 +24,35 @@ N_BATCH_OUT = 4
 
 
 @equation
-def _line_value(j, full, line_w, cache, c):
+def _line_value(j, full, line_w, cache, c, node_cm18, node_powers):
     """The full-load line (``full``) or the closed-throttle line (the FQM at A_min) at its node j (speed
-    ``line_w[j]``), computed on first use and cached in ``cache`` (NaN: not yet computed)."""
+    ``line_w[j]``), computed on first use and cached in ``cache`` (NaN: not yet computed). ``node_cm18``:
+    c_m^1.8 of (5) at the first node's speed; node j's is that times ``node_powers[j]`` = j^1.8, the nodes
+    being j times the first one's speed (:func:`vpsim.model.engine.speed_power_scaled`)."""
     val = cache[j]
     if val != val:
         w = line_w[j]
-        val = en.full_load_torque(w, c) if full else en.steady_torque(c.min_throttle_area, w, c)
+        if full:
+            val = en.full_load_torque(w, c)
+        else:
+            val = en.steady_torque(c.min_throttle_area, w, c, node_cm18 * node_powers[j])
         cache[j] = val
     return val
 
 
 @equation
-def _lazy_line(w, full, line_w, inv, cache, c):
+def _lazy_line(w, full, line_w, inv, cache, c, node_cm18, node_powers):
     """The generated line at w (tables.interp_at on the line's nodes ``line_w``), evaluating only the nodes
     the look-up reads."""
     j, exact = tb.interval_at(w, line_w, inv)
-    _line_value(j, full, line_w, cache, c)
+    _line_value(j, full, line_w, cache, c, node_cm18, node_powers)
     if not exact:
-        _line_value(j + 1, full, line_w, cache, c)
+        _line_value(j + 1, full, line_w, cache, c, node_cm18, node_powers)
     return tb.interp_at(w, line_w, cache, inv)
 
 
 @equation
-def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, out):
+def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, node_powers, out):
     """One variant: the operating points of :func:`run_kernel` with the exact BQM, each line of the
     variant's own engine evaluated lazily (a Newton solve per node actually needed), and only where it can
     matter (the max-torque line as below; the closed-throttle line: see ``p_hi``).
@@ -66,6 +71,7 @@ def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, out):
     line_w = np.linspace(0.0, w_end, n_line)
     inv = tb.inverse_spacing(line_w)
     step = w_end / (n_line - 1)
+    node_cm18 = en.speed_power(line_w[1], c)  # (c_m^1.8 is homogeneous in the speed: node j's is j^1.8 this)
     j_s = min(int(math.ceil(w_top / step)) + 2, n_line - 1)
     w_s = line_w[j_s]
     p_floor, _ = en.steady_pressure(c.max_throttle_area, w_s, c)
@@ -117,12 +123,12 @@ def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, out):
                 or t_req >= en.crank_torque(p_hi, w_wheel, c, cm18_wheel) + closed_margin
             ):
                 break
-            t_closed = _lazy_line(w_wheel, False, line_w, inv, cache_min, c)
+            t_closed = _lazy_line(w_wheel, False, line_w, inv, cache_min, c, node_cm18, node_powers)
         cm18 = _speed_power_at(w, w_wheel, cm18_wheel, c)
         p = en.intake_pressure_for_torque(t_req if fired >= 1.0 else t_closed, w, c, cm18)
         short = 0.0
         if not (w <= w_end and p <= p_screen):
-            t_max = _lazy_line(w, True, line_w, inv, cache_max, c)
+            t_max = _lazy_line(w, True, line_w, inv, cache_max, c, node_cm18, node_powers)
             if t_req > t_max:
                 short = t_req - t_max
                 p = en.intake_pressure_for_torque(t_max, w, c, cm18)
@@ -140,12 +146,14 @@ def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, out):
 
 
 @kernel(parallel=True)
-def _variants(recs, ratios, schedule_of_variant, gears, v_top_gear, dt, v, a, v18, extended, out):
+def _variants(
+    recs, ratios, schedule_of_variant, gears, v_top_gear, dt, v, a, v18, extended, node_powers, out
+):
     """:func:`_variant` for each variant, parallel over them. ``v18``: the speed's part of c_m^1.8 (cycle
-    intervals'), shared by all variants."""
+    intervals'), ``node_powers`` the lines' nodes' (j^1.8 of node j), shared by all variants."""
     for m in prange(recs.size):
         s = schedule_of_variant[m]
-        _variant(recs[m], ratios[m], gears[s], dt, v, a, v18, v_top_gear[s], extended, out[m])
+        _variant(recs[m], ratios[m], gears[s], dt, v, a, v18, v_top_gear[s], extended, node_powers, out[m])
 
 
 def run_variants(cycle, recs, ratios, gears, schedule_of_variant, mode: str) -> np.ndarray:
@@ -162,6 +170,7 @@ def run_variants(cycle, recs, ratios, gears, schedule_of_variant, mode: str) -> 
     for s in range(gear_idx.shape[0]):
         np.maximum.at(v_top_gear[s], gear_idx[s], v)
     out = np.empty((recs.size, N_BATCH_OUT))
+    n_nodes = int(np.max(np.round(MAX_SPEED_FACTOR * np.asarray(recs)["map_speed_high"] / LINE_SPEED_STEP))) + 1
     _variants(
         np.asarray(recs).view(np.ndarray),
         np.ascontiguousarray(ratios, dtype=float),
@@ -173,6 +182,7 @@ def run_variants(cycle, recs, ratios, gears, schedule_of_variant, mode: str) -> 
         a,
         v18,
         rules.canonical_mode(mode) == "realistic",
+        en.speed_power_scaled(np.arange(float(max(n_nodes, 2) + 1))),  # (one spare node)
         out,
     )
     return out

@@ -636,10 +636,11 @@ def closed_throttle_pressure_bound(c):
 
 
 @equation
-def steady_torque(a_eff, w_e, c):
-    """FQM crank torque at (A_eff, w_e): T_cr(p_i steady, w_e)."""
+def steady_torque(a_eff, w_e, c, cm18=None):
+    """FQM crank torque at (A_eff, w_e): T_cr(p_i steady, w_e). ``cm18``: :func:`speed_power` at w_e, if
+    at hand."""
     p, _ = steady_pressure(a_eff, w_e, c)
-    return crank_torque(p, w_e, c)
+    return crank_torque(p, w_e, c, cm18)
 
 
 @equation
