@@ -69,7 +69,7 @@ def split_backward(p, cyc, schedule, em):
     """One UDDS run in each mode (``vpsim bench`` times ``simulate``, whose default is the realistic mode),
     split into the compiled pass with and without the rows the series are made from, ``sample_rows`` (the
     series at the samples) and the Python around them."""
-    kind, m_speed, m_torque, table, l_speed, l_max, l_min = backward._map_arrays(em, p)
+    kind, m_speed, m_torque, table, l_speed, l_max, l_min, s_max, s_min = backward._map_arrays(em, p)
     recs = backward.kernel_records(p)
     ratios = backward.total_ratios(p.transmission)
     intervals = backward.cycle_intervals(cyc)
@@ -89,7 +89,7 @@ def split_backward(p, cyc, schedule, em):
         def kernel(r, extended=extended):
             backward.run_kernel(
                 cyc.time_s, *intervals, schedule.time_s, schedule.gear, ratios, recs, extended, kind,
-                m_speed, m_torque, table, l_speed, l_max, l_min, generated, gear, r, acc,
+                m_speed, m_torque, table, l_speed, l_max, l_min, s_max, s_min, generated, gear, r, acc,
             )  # fmt: skip
 
         call = median_us(lambda m=mode: simulate(cyc, "backward", p, gears=schedule, mode=m), 2000)

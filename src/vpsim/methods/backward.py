@@ -80,12 +80,15 @@ def _point(
     line_speed,
     line_max,
     line_min,
+    slope_max,
+    slope_min,
     inv_line,
     inv_ms,
     inv_mt,
 ):
     """The operating point interval k imposes in gear index g, limited by the max-torque line; its intake
     pressure and (``fuel_kind`` exact or table) fuel flow. Returns the values of one row (R_V .. R_MDOT).
+    ``slope_max``, ``slope_min``: the lines' slopes between their nodes (``tables.interval_slopes``).
 
     ``dt_s``, ``speed``, ``accel``, ``speed18``: the cycle's intervals (:func:`cycle_intervals`); ``f18``:
     :func:`vpsim.model.engine.speed_power` of gear g's engine speed per unit of vehicle speed, so that the
@@ -95,12 +98,12 @@ def _point(
     a = accel[k]
     t_closed = 0.0
     if extended:
-        t_closed = tb.interp_at(vh.engine_speed(v, i, c), line_speed, line_min, inv_line)
+        t_closed = tb.interp_sloped_at(vh.engine_speed(v, i, c), line_speed, line_min, slope_min, inv_line)
     cm18_wheel = f18 * speed18[k]
     w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(
         v, a, i, g + 1, t_closed, extended, c, cm18_wheel
     )
-    t_max = tb.interp_at(w, line_speed, line_max, inv_line)
+    t_max = tb.interp_sloped_at(w, line_speed, line_max, slope_max, inv_line)
     short = t_req - t_max if t_req > t_max else 0.0
     t_cr = t_req - short
     t_fired = t_cr if fired >= 1.0 else t_closed  # cylinders cut: the throttle is closed (manifold, fuel)
@@ -279,6 +282,8 @@ def run_kernel(
     line_speed,
     line_max,
     line_min,
+    slope_max,
+    slope_min,
     with_engine,
     gear,
     rows,
@@ -287,7 +292,8 @@ def run_kernel(
     """The BQM over the cycle's intervals: operating points (and their fuel flow, unless ``fuel_kind`` is
     FUEL_GIVEN: then only ``rows`` are filled, for :func:`account` after the map gave the fuel), and the
     sums of :func:`account` in the same pass. ``rows`` may have no columns (no series wanted). ``time_s``:
-    the cycle's samples; ``dt_s``, ``speed``, ``accel``, ``speed18``: its intervals (:func:`cycle_intervals`).
+    the cycle's samples; ``dt_s``, ``speed``, ``accel``, ``speed18``: its intervals (:func:`cycle_intervals`);
+    ``slope_max``, ``slope_min``: the lines' slopes (:func:`_map_arrays`).
     """
     c = recs[0]
     inv_line = tb.inverse_spacing(line_speed)
@@ -326,6 +332,8 @@ def run_kernel(
             line_speed,
             line_max,
             line_min,
+            slope_max,
+            slope_min,
             inv_line,
             inv_ms,
             inv_mt,
@@ -411,31 +419,34 @@ def _intervals(cycle) -> tuple:
 
 
 def _map_arrays(engine_map, params):
-    """(fuel kind, table speed, table torque, table, line speeds, max line, min line) for the kernels."""
+    """(fuel kind, table speed, table torque, table, line speeds, max line, min line, max line's slopes, min
+    line's slopes) for the kernels; a generated map's once per map."""
     if isinstance(engine_map, GeneratedEngineMap):
-        kind = FUEL_EXACT if engine_map.exact else FUEL_TABLE
-        return (
-            kind,
-            engine_map.speed,
-            engine_map.torque,
-            engine_map.table,
-            engine_map.max_torque_speed,
-            engine_map.max_torque_values,
-            engine_map.min_torque_values,
-        )
+        return memo(engine_map, "backward_arrays", _generated_arrays)
     # any other map: its lines tabulated at 1 rad/s over its speed range, its fuel flow asked for directly
     w_top = MAX_SPEED_FACTOR * params.engine.map_speed_range[1]
     w = np.linspace(0.0, w_top, int(round(w_top / LINE_SPEED_STEP)) + 1)
     none = np.zeros(2)
+    l_max = np.asarray(engine_map.max_torque(w), float)
+    l_min = np.asarray(engine_map.min_torque(w), float)
     return (
         FUEL_GIVEN,
         none,
         none,
         np.zeros((2, 2)),
         w,
-        np.asarray(engine_map.max_torque(w), float),
-        np.asarray(engine_map.min_torque(w), float),
+        l_max,
+        l_min,
+        tb.interval_slopes(w, l_max),
+        tb.interval_slopes(w, l_min),
     )
+
+
+def _generated_arrays(engine_map) -> tuple:
+    w, l_max, l_min = engine_map.max_torque_speed, engine_map.max_torque_values, engine_map.min_torque_values
+    s_max, s_min = readonly((tb.interval_slopes(w, l_max), tb.interval_slopes(w, l_min)))  # (as the map's)
+    kind = FUEL_EXACT if engine_map.exact else FUEL_TABLE
+    return (kind, engine_map.speed, engine_map.torque, engine_map.table, w, l_max, l_min, s_max, s_min)
 
 
 def run(
@@ -461,7 +472,7 @@ def run(
     if schedule is None:
         schedule = default_schedule(cycle, params, engine_map)
     extended = mode == "realistic"
-    kind, m_speed, m_torque, table, l_speed, l_max, l_min = _map_arrays(engine_map, params)
+    kind, m_speed, m_torque, table, l_speed, l_max, l_min, s_max, s_min = _map_arrays(engine_map, params)
     generated = isinstance(engine_map, GeneratedEngineMap)
     recs = kernel_records(params)
     ratios = total_ratios(params.transmission)
@@ -491,6 +502,8 @@ def run(
             l_speed,
             l_max,
             l_min,
+            s_max,
+            s_min,
             generated,
             gear,
             rows,

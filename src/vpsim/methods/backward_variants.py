@@ -170,7 +170,8 @@ def run_variants(cycle, recs, ratios, gears, schedule_of_variant, mode: str) -> 
     for s in range(gear_idx.shape[0]):
         np.maximum.at(v_top_gear[s], gear_idx[s], v)
     out = np.empty((recs.size, N_BATCH_OUT))
-    n_nodes = int(np.max(np.round(MAX_SPEED_FACTOR * np.asarray(recs)["map_speed_high"] / LINE_SPEED_STEP))) + 1
+    w_end = MAX_SPEED_FACTOR * np.asarray(recs)["map_speed_high"]  # each variant's last node (as _variant)
+    n_nodes = int(np.max(np.round(w_end / LINE_SPEED_STEP))) + 1
     _variants(
         np.asarray(recs).view(np.ndarray),
         np.ascontiguousarray(ratios, dtype=float),
