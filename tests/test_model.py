@@ -904,3 +904,25 @@ def test_closed_throttle_pressure_bound_holds_above_idle(name, boost, w_over_idl
     p_closed = brentq(lambda x: en.manifold_pressure_rate(x, c.min_throttle_area, w, c), lo, hi, xtol=1e-9)
     assert p_closed <= bound
     assert en.steady_pressure(c.min_throttle_area, w, c)[0] <= bound
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(st.floats(0.01, 10.0), min_size=1, max_size=12),
+    st.lists(st.floats(-100.0, 100.0), min_size=13, max_size=13),
+    st.floats(-5.0, 80.0),
+)
+def test_interp_with_precomputed_slopes_is_numpy_interp(widths, values, x):
+    """tables.interp_sloped_at with tables.interval_slopes (the backward kernel's line look-up) against
+    numpy.interp, an independent implementation, on random increasing grids, inside, on nodes and outside;
+    and bit-equal to tables.interp_at, which divides per look-up."""
+    from vpsim.model import tables as tb
+
+    xp = np.concatenate([[0.0], np.cumsum(widths)])
+    fp = np.asarray(values[: xp.size])
+    slopes = tb.interval_slopes(xp, fp)
+    inv = tb.inverse_spacing(xp)
+    for at in (x, xp[len(xp) // 2]):
+        got = tb.interp_sloped_at(at, xp, fp, slopes, inv)
+        assert got == tb.interp_at(at, xp, fp, inv)
+        assert got == pytest.approx(float(np.interp(at, xp, fp)), rel=1e-12, abs=1e-12)

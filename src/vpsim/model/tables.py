@@ -65,9 +65,11 @@ def _on_interval(x, xp, fp, j, slope):
 
 def interval_slopes(xp, fp) -> np.ndarray:
     """(fp[j+1] - fp[j]) / (xp[j+1] - xp[j]) of every interval: :func:`interp_at`'s slopes, for a caller
-    that reads one table at many points (:func:`interp_sloped_at`)."""
+    that reads one table at many points (:func:`interp_sloped_at`). An interval of zero width (a repeated
+    node, which a look-up never reads inside) gets a non-finite slope, without a warning."""
     xp, fp = np.asarray(xp, dtype=float), np.asarray(fp, dtype=float)
-    return (fp[1:] - fp[:-1]) / (xp[1:] - xp[:-1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (fp[1:] - fp[:-1]) / (xp[1:] - xp[:-1])
 
 
 @equation
