@@ -78,11 +78,11 @@ MODEL_FIELDS = ("idle_speed",)
 DERIVED_FIELDS = (
     "displacement",  # V_d
     "friction_factor",  # k_f of (5)
-    "one_plus_kf",  # the divisor of (5) solved for BMEP (engine.bmep_divisor)
+    "bmep_per_net_mep",  # 1 / (the divisor of (5) solved for BMEP) (engine.bmep_per_net_mep)
     "heat_factor",  # Q = q_hv eta_th / ((A/F)_s lambda R T_i): IMEP per unit (s_i p_i - y_i)
     "mep_to_torque",  # V_d / (2 pi n_r) of (3)
     "air_per_charge",  # V_d / (R T_i): air charge per unit (s_i p_i - y_i) of (8)
-    "afr",  # (A/F)_s lambda of (7)
+    "fuel_per_air",  # 1 / ((A/F)_s lambda) of (7) (engine.fuel_per_air)
     "rt_intake",  # R T_i of (8),(9)
     "sqrt_rt_ambient",  # sqrt(R T_a) of (10)
     "critical_ratio",  # p_r* of (11)
@@ -92,11 +92,9 @@ DERIVED_FIELDS = (
     "torque_slope",  # dT_cr/dp_i (engine.torque_slope)
     "enrichment_slope",  # d(enrichment)/dp_i above ambient (engine.enrichment_slope)
     "idle_speed_power",  # c_m^1.8 of (5) at the idle speed (engine.speed_power): the engine held at idle
-    # reciprocals of divisors above, so the equations multiply: a division's latency on the chain from a
-    # demand to its fuel flow is what bounds the backward kernels (each is the model's own equation)
+    # reciprocals, so the equations multiply (as bmep_per_net_mep and fuel_per_air above): a division's
+    # latency on the chain from a demand to its fuel flow is what bounds the backward kernels
     "cycles_per_radian",  # 1 / (2 pi n_r) (engine.cycles_per_radian)
-    "fuel_per_air",  # 1 / ((A/F)_s lambda) of (7) (engine.fuel_per_air)
-    "bmep_per_net_mep",  # 1 / one_plus_kf (engine.bmep_per_net_mep)
     "pressure_per_torque",  # 1 / (dT_cr/dp_i) (engine.pressure_per_torque)
 )
 FIELDS = tuple(f for fs in _PARAMETER_FIELDS.values() for f in fs) + (
@@ -135,11 +133,9 @@ def _fill(rec, vehicle, transmission, engine, simulation, n: int) -> None:
     # derived values, each computed by the model's own equation (in dependency order)
     r.displacement = eq_engine.displacement(r)
     r.friction_factor = eq_engine.friction_factor(r)
-    r.one_plus_kf = eq_engine.bmep_divisor(r)
     r.bmep_per_net_mep = eq_engine.bmep_per_net_mep(r)
     r.cycles_per_radian = eq_engine.cycles_per_radian(r)
     r.rt_intake = eq_engine.intake_rt(r)
-    r.afr = eq_engine.air_fuel_ratio(r)
     r.fuel_per_air = eq_engine.fuel_per_air(r)
     r.heat_factor = eq_engine.heat_factor(r)
     r.mep_to_torque = eq_engine.mep_to_torque(1.0, r)
