@@ -505,6 +505,27 @@ def test_boost_enrichment_adds_fuel_only_under_boost(params, method):
     assert abs(rich.energy.residual) <= 1e-9 * rich.energy.indicated
 
 
+def test_fuel_flow_slopes_against_central_differences(params):
+    """d mdot_f / dp_i and d mdot_f / dw_e (the forward method's Jacobian) against central differences of
+    fuel_flow itself, for an aspirated engine (no enrichment: fuel_flow and its slopes take (7) alone) and a
+    boosted one with its enrichment, at pressures away from the enrichment's kinks; and the aspirated fuel
+    flow is (7) to the bit, as the enrichment's factor 1 + 0 gives it."""
+    plain = record(params)
+    rich = record(params.with_changes(engine={"boost_pressure": 1.6e5, "boost_enrichment": 0.15}))
+    p_a = plain.ambient_pressure
+    for c in (plain, rich):
+        for p in (0.4 * p_a, 0.8 * p_a, 1.3 * p_a, 1.8 * p_a):
+            for w in (90.0, 300.0, 550.0):
+                h, k = 1e-3 * p, 1e-3 * w
+                dp = (en.fuel_flow(p + h, w, c) - en.fuel_flow(p - h, w, c)) / (2 * h)
+                dw = (en.fuel_flow(p, w + k, c) - en.fuel_flow(p, w - k, c)) / (2 * k)
+                assert en.fuel_flow_dp(p, w, c) == pytest.approx(dp, rel=1e-9)
+                assert en.fuel_flow_dw(p, c) == pytest.approx(dw, rel=1e-9)
+                if c is plain:
+                    assert en.fuel_flow(p, w, c) == en.burned_fuel_flow(p, w, c) * (1.0 + 0.0)
+    assert en.fuel_flow(1.3 * p_a, 300.0, rich) > en.burned_fuel_flow(1.3 * p_a, 300.0, rich)
+
+
 def test_boost_command_round_trip(params):
     """Throttle command <-> flow: the steady manifold of a command (FQM) asks back that command, through the
     area (aspirated range) and through the boost (beyond A_max), at and above the spool speed."""

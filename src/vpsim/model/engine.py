@@ -191,8 +191,14 @@ def enrichment(p_i, c):
 @equation
 def fuel_flow(p_i, w_e, c):
     """Fuel mass flow supplied: (7) with the full-load enrichment of a boosted engine (:func:`enrichment`),
-    the flow every method books. Negative where p_i < y_i / s_i (no air charge)."""
-    return burned_fuel_flow(p_i, w_e, c) * (1.0 + enrichment(p_i, c))
+    the flow every method books. Negative where p_i < y_i / s_i (no air charge).
+
+    Without enrichment (an aspirated engine) (7) alone: the same number (times 1 + 0), without the
+    enrichment's arithmetic on the path from a demand to its fuel, which bounds the backward kernels."""
+    burned = burned_fuel_flow(p_i, w_e, c)
+    if c.boost_enrichment == 0.0:
+        return burned
+    return burned * (1.0 + enrichment(p_i, c))
 
 
 # --- mean effective pressures and torque (2)-(6) -----------------------------------------------------------
@@ -327,7 +333,10 @@ def enrichment_dp(p_i, c):
 
 @equation
 def fuel_flow_dp(p_i, w_e, c):
-    """d/dp_i of :func:`fuel_flow` at fixed w_e: the burned flow's slope and the enrichment's."""
+    """d/dp_i of :func:`fuel_flow` at fixed w_e: the burned flow's slope and the enrichment's (none without
+    enrichment, as in :func:`fuel_flow`)."""
+    if c.boost_enrichment == 0.0:
+        return burned_fuel_flow_dp(w_e, c)
     return burned_fuel_flow_dp(w_e, c) * (1.0 + enrichment(p_i, c)) + burned_fuel_flow(
         p_i, w_e, c
     ) * enrichment_dp(p_i, c)
@@ -336,6 +345,8 @@ def fuel_flow_dp(p_i, w_e, c):
 @equation
 def fuel_flow_dw(p_i, c):
     """d/dw_e of :func:`fuel_flow` at fixed p_i (linear in w_e; the enrichment depends on p_i only)."""
+    if c.boost_enrichment == 0.0:
+        return burned_fuel_flow_dw(p_i, c)
     return burned_fuel_flow_dw(p_i, c) * (1.0 + enrichment(p_i, c))
 
 
