@@ -14,7 +14,7 @@ from ..model import rules
 from ..model import tables as tb
 from ..model import vehicle as vh
 from ..model._compile import kernel
-from ..model.engine import equation
+from ..model.engine import equation, inline
 from ..model.maps import LINE_SPEED_STEP, MAX_SPEED_FACTOR
 from .backward import MISS_TOLERANCE_NM, _deficit_after, _speed_power_at, cycle_intervals
 
@@ -23,24 +23,23 @@ B_FUEL, B_MISS_S, B_MAX_SHORT, B_DEFICIT = range(4)
 N_BATCH_OUT = 4
 
 
-@equation
+@inline
 def _line_value(j, full, line_w, cache, c, node_cm18, node_powers):
     """The full-load line (``full``) or the closed-throttle line (the FQM at A_min) at its node j (speed
     ``line_w[j]``), computed on first use and cached in ``cache`` (NaN: not yet computed). ``node_cm18``:
     c_m^1.8 of (5) at the first node's speed; node j's is that times ``node_powers[j]`` = j^1.8, the nodes
     being j times the first one's speed (:func:`vpsim.model.engine.speed_power_scaled`)."""
-    val = cache[j]
-    if val != val:
-        w = line_w[j]
+    # (IR-inlined per look-up: no call, no reference counts of the arrays; the cache is written in place,
+    # with no variable assigned in a branch, which Numba's inlining warns on)
+    if cache[j] != cache[j]:
         if full:
-            val = en.full_load_torque(w, c)
+            cache[j] = en.full_load_torque(line_w[j], c)
         else:
-            val = en.steady_torque(c.min_throttle_area, w, c, node_cm18 * node_powers[j])
-        cache[j] = val
-    return val
+            cache[j] = en.steady_torque(c.min_throttle_area, line_w[j], c, node_cm18 * node_powers[j])
+    return cache[j]
 
 
-@equation
+@inline
 def _lazy_line(w, full, line_w, inv, cache, c, node_cm18, node_powers):
     """The generated line at w (tables.interp_at on the line's nodes ``line_w``), evaluating only the nodes
     the look-up reads."""
