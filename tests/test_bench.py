@@ -43,6 +43,13 @@ def test_bench_tiny_cli_writes_json_and_prints_one_table(capsys, tmp_path):
         assert report["ratios"]["backward_vs_fastsim_udds"] > 0
         peer = next(r for r in report["rows"] if r["tool"].startswith("fastsim"))
         assert peer["cycle"] == "udds" and peer["steps"] == 1369 and 3 < peer["fuel_l_per_100km"] < 15
+        # the electric cars' ratios: each side at the fastest of its own row and its interleaved blocks
+        for key in ("bev_backward", "bev_forward", "hev_ecms_backward", "hev_ecms_forward"):
+            paired = report["ratios_paired"][f"{key}_vs_fastsim_udds"]
+            fastsim_ms, vpsim_ms = paired["best_ms"]
+            assert paired["ratio"] > 0
+            assert fastsim_ms <= paired["a_median_ms"] and vpsim_ms <= paired["b_median_ms"]
+            assert report["ratios"][f"{key}_vs_fastsim_udds"] == pytest.approx(fastsim_ms / vpsim_ms)
     else:
         assert report["ratios"]["backward_vs_fastsim_udds"] is None
         assert "not measured" in text

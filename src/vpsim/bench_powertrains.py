@@ -17,25 +17,32 @@ def bev_peer_inputs(params) -> tuple:
     return (float(c.mass), float(c.rolling_force), float(c.road_load_b), float(c.aero_coefficient))
 
 
-def bev_peer_ms(settings: Settings, progress) -> dict:
-    """FASTSim 3.1's BEV on the bev preset's car over UDDS: median ms of ``SimDrive.run()`` (the vehicle and
-    cycle built outside the timing), before any vpsim kernel runs in this process."""
-    import warnings
-
+def _bev_peer_maker():
+    """(a fresh SimDrive of FASTSim's BEV on the bev preset's car over UDDS, its run), the vehicle and cycle
+    built once here (:func:`vpsim.fleet.peer_bev.bev_peer_vehicle`)."""
     import fastsim as fsim
 
     from .fleet import peer_bev as pb
     from .params import load_parameters
 
+    p = load_parameters("bev")
+    mass, a, b, cc = bev_peer_inputs(p)
+    veh = fsim.Vehicle.from_dict(pb.bev_peer_vehicle(mass, a, b, cc, p.machine.rated_power))
+    cyc = pb._fastsim_cycle("udds")
+    params = pb._sim_params()
+    return (lambda: fsim.SimDrive(veh, cyc, params)), (lambda sd: sd.run())
+
+
+def bev_peer_ms(settings: Settings, progress) -> dict:
+    """FASTSim 3.1's BEV on the bev preset's car over UDDS: median ms of ``SimDrive.run()`` (the vehicle and
+    cycle built outside the timing), before any vpsim kernel runs in this process."""
+    import warnings
+
     progress("FASTSim BEV on the bev preset, UDDS")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        p = load_parameters("bev")
-        mass, a, b, cc = bev_peer_inputs(p)
-        veh = fsim.Vehicle.from_dict(pb.bev_peer_vehicle(mass, a, b, cc, p.machine.rated_power))
-        cyc = pb._fastsim_cycle("udds")
-        params = pb._sim_params()
-        median, runs = _timed(lambda sd: sd.run(), settings, setup=lambda: fsim.SimDrive(veh, cyc, params))
+        make, call = _bev_peer_maker()
+        median, runs = _timed(call, settings, setup=make)
     return {"median_ms": median * 1e3, "runs": runs}
 
 
@@ -55,27 +62,29 @@ def bev_rows(settings: Settings, progress) -> dict:
     return out
 
 
+def _hev_peer_maker():
+    """(a fresh SimDrive of FASTSim's hybrid :data:`PEER_HEV_VEHICLE` over UDDS, its walk)."""
+    import fastsim as fsim
+
+    veh = fsim.Vehicle.from_resource(PEER_HEV_VEHICLE)
+    cyc = fsim.Cycle.from_resource(PEER_CYCLES["udds"])
+    return (lambda: fsim.SimDrive(veh, cyc)), _walk
+
+
 def hev_peer_ms(settings: Settings, progress) -> dict:
     """FASTSim 3.1's hybrid (:data:`PEER_HEV_VEHICLE`, a different car than hev_p2's: see there) on UDDS:
     median ms of ``walk()`` on a SimDrive built outside the timing, after its warm-up, before any vpsim
     kernel runs in this process (as the other peer rows)."""
     import warnings
 
-    import fastsim as fsim
-
     progress(f"{PEER} hybrid {PEER_HEV_VEHICLE}, UDDS")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        veh = fsim.Vehicle.from_resource(PEER_HEV_VEHICLE)
-        cyc = fsim.Cycle.from_resource(PEER_CYCLES["udds"])
-
-        def make():
-            return fsim.SimDrive(veh, cyc)
-
+        make, call = _hev_peer_maker()
         t_warm = time.perf_counter()
         while time.perf_counter() - t_warm < settings.peer_warm_up_s:
-            _walk(make())
-        median, runs = _timed(_walk, settings, setup=make)
+            call(make())
+        median, runs = _timed(call, settings, setup=make)
     return {"median_ms": median * 1e3, "runs": runs, "vehicle": PEER_HEV_VEHICLE}
 
 
@@ -105,4 +114,43 @@ def hev_rows(settings: Settings, progress) -> dict:
         median, runs = _timed(lambda e=ems: hev_forward.run(cyc, p, ems=e, schedule=schedule), settings)
         whole, _ = _timed(lambda e=ems: simulate(cyc, "forward", p, ems=e), settings)
         out[f"forward_{ems}"] = {"median_ms": median * 1e3, "runs": runs, "simulate_median_ms": whole * 1e3}
+    return out
+
+
+def paired_rows(settings: Settings, progress) -> dict:
+    """The electric cars' ratios against FASTSim from interleaved blocks (:func:`vpsim.bench._paired`, as
+    the engine car's): ``bev_backward``, ``bev_forward`` (the bev preset against FASTSim's BEV) and
+    ``hev_ecms_backward``, ``hev_ecms_forward`` (hev_p2 with ECMS, its schedule prepared as in
+    :func:`hev_rows`, against FASTSim's hybrid); each {"ratio", "a_median_ms" (FASTSim), "b_median_ms"
+    (vpsim), ...}. Run after both tools' own rows, so each side's blocks are one more measurement of it."""
+    import warnings
+
+    from .bench import _paired
+    from .cycles import load_cycle
+    from .gears import default_schedule
+    from .methods import hev
+    from .methods.hev_forward import run as fwd
+    from .model.maps import cached_engine_map
+    from .params import load_parameters
+    from .simulation import simulate
+
+    cyc = load_cycle("udds")
+    bev = load_parameters("bev")
+    p2 = load_parameters("hev_p2")
+    sched = default_schedule(cyc, p2, cached_engine_map(p2.engine))
+    ems = "ecms"
+    out = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        bev_make, bev_call = _bev_peer_maker()
+        hev_make, hev_call = _hev_peer_maker()
+        plan = {
+            "bev_backward": (bev_make, bev_call, lambda: simulate(cyc, "backward", bev)),
+            "bev_forward": (bev_make, bev_call, lambda: simulate(cyc, "forward", bev)),
+            "hev_ecms_backward": (hev_make, hev_call, lambda: hev.run(cyc, p2, ems=ems, schedule=sched)),
+            "hev_ecms_forward": (hev_make, hev_call, lambda: fwd(cyc, p2, ems=ems, schedule=sched)),
+        }
+        for key, (make, call, ours) in plan.items():
+            progress(f"ratio {key}: {settings.pairs} interleaved pairs")
+            out[key] = _paired(call, ours, settings.pairs, setup_a=make)
     return out

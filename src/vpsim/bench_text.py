@@ -128,7 +128,7 @@ def format_report(report: dict) -> str:
     ]
     for k, v in report["ratios_paired"].items():
         lines.append(
-            f"  {k:<28} {v['ratio']:8.2f}  ({v['pairs']} block pairs; block medians {v['a_median_ms']:.3f} / "
+            f"  {k:<34} {v['ratio']:8.2f}  ({v['pairs']} block pairs; block medians {v['a_median_ms']:.3f} / "
             f"{v['b_median_ms']:.3f} ms)"
         )
     more = {k: v for k, v in report["ratios_from_table"].items() if v is not None}
