@@ -55,14 +55,18 @@ def test_intercept_is_the_fuel_of_a_run_that_sustains_its_charge(ems):
     assert 2.0 < cb.price < 5.0
 
 
-def test_managements_ordered_at_zero_net_energy_change():
-    """DP <= ECMS <= rules on the P2, each at zero change (the DP's own run sustains its charge)."""
+@pytest.mark.parametrize("preset", [P2, "mhev"])
+def test_managements_ordered_at_zero_net_energy_change(preset):
+    """DP <= ECMS <= rules on the P2 and the mild hybrid, each at zero change (the DP's own run sustains its
+    charge). The mild hybrid's HWFET is the close case: rule 7.198, ECMS 7.194, DP 7.189 L/100 km, the
+    ECMS below the rules since it tries the demand-following torque beside its levels (before, 7.201)."""
     for name in ("udds", "hwfet", "us06"):
-        dp = vpsim.simulate(name, "backward", P2, ems="dp")
+        dp = vpsim.simulate(name, "backward", preset, ems="dp")
         assert abs(dp.electric["net_energy_change_ratio"]) < 0.01
-        ecms = regression(name, P2, ems="ecms").fuel_l_per_100km
-        rule = regression(name, P2, ems="rule").fuel_l_per_100km
-        assert dp.electric["fuel_l_per_100km_cs"] < ecms < rule, name
+        ecms = regression(name, preset, ems="ecms").fuel_l_per_100km
+        rule = regression(name, preset, ems="rule").fuel_l_per_100km
+        best = dp.electric["fuel_l_per_100km_cs"]
+        assert best < ecms < rule, (name, best, ecms, rule)
 
 
 def test_every_method_and_the_outputs():

@@ -91,11 +91,11 @@ def dp_kernel(
             battery = (packs[i, 0], packs[i, 1], packs[i, 2], packs[i, 3], packs[i, 4])
             best0 = math.inf
             best1 = math.inf
-            for u in range(levels + 1):
+            for u in range(levels + 2):
                 on = 1.0 if u > 0 else 0.0
                 if u > 0 and not runs:
                     break
-                te = hy.engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else t_off
+                te = hy.engine_choice_torque(u, levels, t_low, t_high, t_off, interval)
                 pt = hy.p2_choice(interval, battery, on, te, c, e, m, tabs, h)
                 nxt = soc_grid[i] + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt[k]
                 s_next = 1 if pt[16] > 0.0 else 0  # the engine turning after the interval
@@ -107,7 +107,7 @@ def dp_kernel(
                     best0 = c0
                 if base < best1:
                     best1 = base
-                if u > 0 and hy.higher_torques_dominated(pt, battery):
+                if u > 1 and hy.higher_torques_dominated(pt, battery):  # (the levels rise from u = 2)
                     break
             jcost[k, i, 0] = best0
             jcost[k, i, 1] = best1

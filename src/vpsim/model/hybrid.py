@@ -311,6 +311,28 @@ def higher_torques_dominated(point, battery):
 
 
 @equation
+def follow_torque(interval, t_low, t_high):
+    """The demand-following engine torque: the input demand at the crank (:func:`p2_interval`), within the
+    engine's lines, so that the machine gives or takes nothing beyond what the lines leave (the rule's
+    choice at its target charge; the power split's demand-following power, :func:`.split.demand_power`).
+    The ECMS and the DP try it beside their evenly spaced levels: a step between two levels costs the
+    machine's and the pack's losses both ways where following the demand costs none."""
+    return min(max(interval[4], t_low), t_high)
+
+
+@equation
+def engine_choice_torque(u, levels, t_low, t_high, t_off, interval):
+    """The management's u-th choice of engine torque: ``t_off`` (u = 0: the engine not fired), the
+    demand-following torque (u = 1, :func:`follow_torque`), then ``levels`` torques evenly between its
+    lowest and highest (u = 2 ...)."""
+    if u == 0:
+        return t_off
+    if u == 1:
+        return follow_torque(interval, t_low, t_high)
+    return engine_torque_level(u - 2, levels, t_low, t_high)
+
+
+@equation
 def engine_torque_level(j, levels, t_low, t_high):
     """The j-th (0-based) of ``levels`` engine torques evenly between its lowest and highest torque
     (:func:`engine_lines`)."""
@@ -751,11 +773,11 @@ def p2_choose(
     keep = ems == EMS_ECMS and runs and must_keep_running(on, on_time, h)
     share = start_share(dt, h) if ems == EMS_ECMS else 1.0
     best = math.inf
-    for u in range(levels + 1):
+    for u in range(levels + 2):
         if u > 0 and not runs:
             break
         o = 1.0 if u > 0 else 0.0
-        te = engine_torque_level(u - 1, levels, t_low, t_high) if u > 0 else t_off
+        te = engine_choice_torque(u, levels, t_low, t_high, t_off, interval)
         pt = p2_choice(interval, battery, o, te, c, e, m, tabs, h)
         if keep and pt[16] <= 0.0:
             continue
@@ -777,7 +799,7 @@ def p2_choose(
             best = cost
             choice_on = o
             choice_te = te
-        if u > 0 and higher_torques_dominated(pt, battery):
+        if u > 1 and higher_torques_dominated(pt, battery):  # (the levels rise from u = 2)
             break
     return choice_on, choice_te
 
@@ -808,6 +830,11 @@ def p2_ecms_walk(interval, battery, soc, on, on_time, dt, levels, t_low, t_high,
         if must_keep_running(on, on_time, h):
             best = math.inf
         start = start_share(dt, h) if on == 0.0 else 0.0
+        p_follow = p2_choice(interval, battery, 1.0, follow_torque(interval, t_low, t_high), c, e, m, tabs, h)
+        cost_follow = ecms_cost(p_follow, dt, start, s_factor, c, e, h)
+        if cost_follow < best:  # (p2_choose's order: off, the demand followed, then the levels)
+            best = cost_follow
+            pt = p_follow
         guess = walk_guess(share, interval[4], levels, t_low, t_high)
         cost, level, p_run = ecms_cheapest_level(
             interval, battery, start, s_factor, dt, levels, t_low, t_high, guess, c, e, m, tabs, h
