@@ -55,6 +55,19 @@ def test_bench_tiny_cli_writes_json_and_prints_one_table(capsys, tmp_path):
         assert "not measured" in text
 
 
+def test_electric_ratio_takes_each_side_at_its_fastest():
+    """The BEV's and the hybrid's ratios: each tool at the faster of its own row and its paired blocks (hand
+    values); no figure where a side has none."""
+    from vpsim.bench_powertrains import best_ratio
+
+    peer, own = {"median_ms": 40.0}, {"median_ms": 0.8}
+    assert best_ratio(peer, own, None) == (50.0, [40.0, 0.8])
+    assert best_ratio(peer, own, {"a_median_ms": 36.0, "b_median_ms": 0.9}) == (45.0, [36.0, 0.8])
+    assert best_ratio(peer, own, {"a_median_ms": 44.0, "b_median_ms": 0.5}) == (80.0, [40.0, 0.5])
+    assert best_ratio({}, own, None) == (None, [None, 0.8])  # FASTSim not installed
+    assert best_ratio(peer, None, None) == (None, [40.0, None])  # the row failed
+
+
 def test_missing_peer_is_reported_not_faked(monkeypatch):
     monkeypatch.setitem(sys.modules, "fastsim", None)  # import fastsim -> ImportError
     status = peer_status()

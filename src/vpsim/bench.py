@@ -984,17 +984,11 @@ def run_benchmarks(profile: str = "full", *, peer: bool = True, progress=None) -
         "hev_ecms_forward": (hev_peer, hev.get("forward_ecms")),
     }
     for key, (peer_row, own_row) in electric_sides.items():
-        res = electric_paired.get(key, {}) if isinstance(electric_paired.get(key), dict) else {}
-        peer_ms = min(
-            (v for v in (peer_row.get("median_ms"), res.get("a_median_ms")) if v is not None), default=None
-        )
-        own_ms = min(
-            (v for v in ((own_row or {}).get("median_ms"), res.get("b_median_ms")) if v is not None),
-            default=None,
-        )
-        ratios[f"{key}_vs_fastsim_udds"] = None if peer_ms is None or not own_ms else peer_ms / own_ms
+        res = electric_paired.get(key) if isinstance(electric_paired.get(key), dict) else None
+        ratio, best = bench_powertrains.best_ratio(peer_row, own_row, res)
+        ratios[f"{key}_vs_fastsim_udds"] = ratio
         if res:
-            res["best_ms"] = [peer_ms, own_ms]
+            res["best_ms"] = best
     steps = _forward_steps(settings)
     lin_devs = [v["max_dev"] for v in linearity.values() if "max_dev" in v]
     cold_walls = [

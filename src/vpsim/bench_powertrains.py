@@ -117,6 +117,21 @@ def hev_rows(settings: Settings, progress) -> dict:
     return out
 
 
+def best_ratio(peer_row: dict | None, own_row: dict | None, paired: dict | None) -> tuple:
+    """(FASTSim's ms over vpsim's, [FASTSim's ms, vpsim's ms]) with each side at the faster of its own row's
+    median (``median_ms``) and its median in the paired blocks (``a_median_ms`` FASTSim's, ``b_median_ms``
+    vpsim's); the ratio None where a side has no figure (FASTSim not installed, a row that failed)."""
+    paired = paired or {}
+
+    def fastest(*values):
+        return min((v for v in values if v is not None), default=None)
+
+    peer_ms = fastest((peer_row or {}).get("median_ms"), paired.get("a_median_ms"))
+    own_ms = fastest((own_row or {}).get("median_ms"), paired.get("b_median_ms"))
+    ratio = None if peer_ms is None or not own_ms else peer_ms / own_ms
+    return ratio, [peer_ms, own_ms]
+
+
 def paired_rows(settings: Settings, progress) -> dict:
     """The electric cars' ratios against FASTSim from interleaved blocks (:func:`vpsim.bench._paired`, as
     the engine car's): ``bev_backward``, ``bev_forward`` (the bev preset against FASTSim's BEV) and
