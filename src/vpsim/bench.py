@@ -977,18 +977,7 @@ def run_benchmarks(profile: str = "full", *, peer: bool = True, progress=None) -
         if res:
             res["best_ms"] = [a_ms, b_ms]
     # the electric cars: the same rule, each side at the fastest of its row and its paired blocks
-    electric_sides = {
-        "bev_backward": (bev_peer, bev.get("backward")),
-        "bev_forward": (bev_peer, bev.get("forward")),
-        "hev_ecms_backward": (hev_peer, hev.get("ecms")),
-        "hev_ecms_forward": (hev_peer, hev.get("forward_ecms")),
-    }
-    for key, (peer_row, own_row) in electric_sides.items():
-        res = electric_paired.get(key) if isinstance(electric_paired.get(key), dict) else None
-        ratio, best = bench_powertrains.best_ratio(peer_row, own_row, res)
-        ratios[f"{key}_vs_fastsim_udds"] = ratio
-        if res:
-            res["best_ms"] = best
+    ratios.update(bench_powertrains.electric_ratios(bev_peer, hev_peer, bev, hev, electric_paired))
     steps = _forward_steps(settings)
     lin_devs = [v["max_dev"] for v in linearity.values() if "max_dev" in v]
     cold_walls = [

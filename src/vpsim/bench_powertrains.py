@@ -132,6 +132,25 @@ def best_ratio(peer_row: dict | None, own_row: dict | None, paired: dict | None)
     return ratio, [peer_ms, own_ms]
 
 
+def electric_ratios(bev_peer: dict, hev_peer: dict, bev: dict, hev: dict, paired: dict) -> dict:
+    """The electric cars' ratios against FASTSim held against the targets ({"<key>_vs_fastsim_udds": ratio}),
+    each by :func:`best_ratio` from the peers' rows, vpsim's rows (:func:`bev_rows`, :func:`hev_rows`) and
+    :func:`paired_rows`; each paired entry gets its ``best_ms``."""
+    sides = {
+        "bev_backward": (bev_peer, bev.get("backward")),
+        "bev_forward": (bev_peer, bev.get("forward")),
+        "hev_ecms_backward": (hev_peer, hev.get("ecms")),
+        "hev_ecms_forward": (hev_peer, hev.get("forward_ecms")),
+    }
+    out = {}
+    for key, (peer_row, own_row) in sides.items():
+        res = paired.get(key) if isinstance(paired.get(key), dict) else None
+        out[f"{key}_vs_fastsim_udds"], best = best_ratio(peer_row, own_row, res)
+        if res:
+            res["best_ms"] = best
+    return out
+
+
 def paired_rows(settings: Settings, progress) -> dict:
     """The electric cars' ratios against FASTSim from interleaved blocks (:func:`vpsim.bench._paired`, as
     the engine car's): ``bev_backward``, ``bev_forward`` (the bev preset against FASTSim's BEV) and
