@@ -231,3 +231,37 @@ def test_plot_shows_the_battery(runs, tmp_path):
     labels = [ax.get_ylabel() for ax in fig.axes]
     assert "state of charge (%)" in labels and "battery current (A)" in labels
     assert "MPGe" in fig.axes[0].get_title()
+
+
+@pytest.mark.parametrize(
+    ("vehicle", "module", "name"),
+    [("bev", "bev", "run"), ("hev_p2", "hev", "run"), ("hev_split", "hev_split", "run_inverse")],
+)
+def test_a_first_run_times_the_run_not_the_kernels_loading(monkeypatch, vehicle, module, name):
+    """``simulate`` runs an electric or hybrid car's method once on the cycle's first seconds before the
+    first real run of its kind in a process, so the kernels' loading falls outside the reported
+    ``cpu_time_s``; not again after; and a warm-up that fails leaves the real run to report."""
+    import importlib
+
+    from vpsim import simulation
+
+    mod = importlib.import_module(f"vpsim.methods.{module}")
+    real = getattr(mod, name)
+    seen, failing = [], []
+
+    def spy(cycle, *args, **kwargs):
+        seen.append(cycle.time_s.size)
+        if cycle.time_s.size == 4 and failing:
+            raise RuntimeError("warm-up failed")
+        return real(cycle, *args, **kwargs)
+
+    monkeypatch.setattr(mod, name, spy)
+    method = "inverse" if name == "run_inverse" else "backward"
+    for fail in (False, True):
+        failing[:] = [True] if fail else []
+        monkeypatch.setattr(simulation, "_LOADED", set())
+        seen.clear()
+        r = simulation.simulate("udds", method, vehicle)
+        assert seen == [4, 1370] and r.distance_m > 11_000
+        simulation.simulate("udds", method, vehicle)
+        assert seen == [4, 1370, 1370]
