@@ -47,6 +47,19 @@ def test_simulate_json_backward(capsys):
     assert d["measured_mpg"] is None and d["measured_error_pct"] is None
 
 
+@pytest.mark.parametrize("command", ["simulate", "params"])
+def test_preset_is_another_name_for_vehicle(capsys, command):
+    """The documents call the built-in cars presets, so --preset names the same option as --vehicle."""
+    by_vehicle = run(capsys, command, "--vehicle", "mhev", "--json")
+    by_preset = run(capsys, command, "--preset", "mhev", "--json")
+    assert by_vehicle[0] == by_preset[0] == 0, by_preset[2]
+    a, b = json.loads(by_vehicle[1]), json.loads(by_preset[1])
+    if command == "simulate":
+        a.pop("cpu_time_s"), b.pop("cpu_time_s")
+        assert a["vehicle"] == "mhev"
+    assert a == b
+
+
 def test_simulate_runs_an_ftp_bag_by_name(capsys):
     """The fleet's cycles are cycles of `vpsim simulate` too: bag 2 of FTP-75 is UDDS 505-1369 s (864
     intervals), 3.86 mi (EPA's FTP description: 7.45 mi in all, bag 1 3.59 mi)."""

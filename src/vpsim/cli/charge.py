@@ -19,7 +19,14 @@ def _offsets(text: str) -> tuple[float, ...]:
 
 @cli.command("charge-balance")
 @click.option("--cycle", default="udds", show_default=True, help="Standard cycle or a cycle CSV.")
-@click.option("--vehicle", default="hev_p2", show_default=True, help="A hybrid's preset or TOML file.")
+@click.option(
+    "--vehicle",
+    "--preset",
+    "vehicle",
+    default="hev_p2",
+    show_default=True,
+    help="A hybrid's preset or TOML file.",
+)
 @click.option(
     "--method", type=click.Choice(["backward", "forward", "inverse"]), default="backward", show_default=True
 )

@@ -11,7 +11,12 @@ from .simulate import _out_dir
 @cli.command()
 @click.option("--out", "out", required=True, type=click.Path(file_okay=False), help="Output folder.")
 @click.option(
-    "--vehicle", default="hofman2011", show_default=True, help="Preset name or a TOML parameter file."
+    "--vehicle",
+    "--preset",
+    "vehicle",
+    default="hofman2011",
+    show_default=True,
+    help="Preset name or a TOML parameter file.",
 )
 def maps(out, vehicle):
     """Write the FQM torque lines and the BQM fuel map of an engine (PNG + CSV)."""

@@ -17,7 +17,12 @@ from .simulate import _out_dir
 @cli.command()
 @click.option("--out", "out", required=True, type=click.Path(file_okay=False), help="Output folder.")
 @click.option(
-    "--vehicle", default="hofman2011", show_default=True, help="Preset name or a TOML parameter file."
+    "--vehicle",
+    "--preset",
+    "vehicle",
+    default="hofman2011",
+    show_default=True,
+    help="Preset name or a TOML parameter file.",
 )
 @click.option(
     "--advisor-dir",

@@ -10,7 +10,12 @@ from .main import cli
 
 @cli.command("params")
 @click.option(
-    "--vehicle", default="hofman2011", show_default=True, help="Preset name or a TOML parameter file."
+    "--vehicle",
+    "--preset",
+    "vehicle",
+    default="hofman2011",
+    show_default=True,
+    help="Preset name or a TOML parameter file.",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print {field: {value, provenance}} as JSON.")
 def params_cmd(vehicle, as_json):

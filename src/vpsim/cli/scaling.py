@@ -54,6 +54,8 @@ def _check_cycles(names: list[str], what: str) -> None:
 )
 @click.option(
     "--vehicle",
+    "--preset",
+    "vehicle",
     default="hofman2011",
     show_default=True,
     help="Preset or TOML file giving the vehicle, gears, idle flow and the engine to scale from.",

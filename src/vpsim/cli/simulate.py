@@ -43,7 +43,12 @@ def _out_dir(out: str) -> Path:
     "--method", type=click.Choice(["backward", "forward", "inverse"]), default="backward", show_default=True
 )
 @click.option(
-    "--vehicle", default="hofman2011", show_default=True, help="Preset name or a TOML parameter file."
+    "--vehicle",
+    "--preset",
+    "vehicle",
+    default="hofman2011",
+    show_default=True,
+    help="Preset name or a TOML parameter file.",
 )
 @click.option(
     "--driver",
