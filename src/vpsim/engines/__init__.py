@@ -7,7 +7,8 @@
 Python or MATLAB); :class:`MeasuredEngine` holds a fuel map in SI units and interpolates it.
 """
 
-from .matlab import InlineFunction, MValue, evaluate_m_text, read_m_file
+from ._matlab_base import InlineFunction, MValue
+from .matlab import evaluate_m_text, read_m_file
 from .measured import MeasuredEngine, load_engine
 
 __all__ = ["InlineFunction", "MValue", "MeasuredEngine", "evaluate_m_text", "load_engine", "read_m_file"]

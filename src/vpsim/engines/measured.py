@@ -50,7 +50,8 @@ import numpy as np
 
 from ..errors import EngineFileError
 from ..textio import check_path, read_text
-from .matlab import MAX_FILE_BYTES, read_m_file
+from ._matlab_base import MAX_FILE_BYTES
+from .matlab import read_m_file
 
 __all__ = ["MeasuredEngine", "MeasuredEngineMap", "load_engine"]
 
