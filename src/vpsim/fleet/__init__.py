@@ -6,7 +6,8 @@
 * :mod:`vpsim.fleet.cycles` gives the cycle pieces the tests measure (FTP bags 2 and 3, HWFET, US06).
 * :mod:`vpsim.fleet.calibrate` fits a few global technology parameters by k-fold cross-validation.
 * :mod:`vpsim.fleet.run` runs the fleet (serial or on Dask) and :mod:`vpsim.fleet.report` writes the
-  table, the summary, the report and the figures; :mod:`vpsim.fleet.peer` runs FASTSim on the same records.
+  table, the summary, the report (:mod:`vpsim.fleet.report_md`) and the figures
+  (:mod:`vpsim.fleet.report_figures`); :mod:`vpsim.fleet.peer` runs FASTSim on the same records.
 """
 
 from __future__ import annotations
