@@ -8,6 +8,7 @@
 * :mod:`vpsim.fleet.run` runs the fleet (serial or on Dask) and :mod:`vpsim.fleet.report` writes the
   table, the summary, the report (:mod:`vpsim.fleet.report_md`) and the figures
   (:mod:`vpsim.fleet.report_figures`); :mod:`vpsim.fleet.peer` runs FASTSim on the same records.
+  The run's battery-electric and hybrid parts are in :mod:`vpsim.fleet.run_electrified`.
 """
 
 from __future__ import annotations
