@@ -65,6 +65,11 @@ def test_user_file_overrides_base(tmp_path):
         ),
         ("[transmission]\nconverter_capacity_factor = -3\n", r"converter_capacity_factor = -3"),
         ("[transmission]\nlockup_min_gear = 0\n", r"lockup_min_gear = 0 must be a positive whole number"),
+        # whole numbers below their range's lower end (2026-12-07: only the upper end and 0 were refused,
+        # so a 3-point DP grid ran and reported its coarse optimum as the optimum)
+        ("base = 'hev_p2'\n[hybrid]\ndp_soc_points = 3\n", r"dp_soc_points = 3 is outside .* \[11, 2001\]"),
+        ("base = 'hev_p2'\n[hybrid]\ntorque_levels = 1\n", r"torque_levels = 1 is outside .* \[2, 200\]"),
+        ("base = 'hev_split'\n[split]\nsun_teeth = 5\n", r"sun_teeth = 5 is outside .* \[8, 500\]"),
     ],
 )
 def test_validation_errors_are_one_line_and_specific(tmp_path, text, match):

@@ -656,7 +656,7 @@ def validate(p: Parameters, where: str = "parameters") -> None:
             raise ParameterError(f"{where}: {key} = {_short(v)} is not a whole number")
         if v < 1:
             raise ParameterError(f"{where}: {key} = {v} must be a positive whole number")
-        if v > hi:
+        if not lo <= v <= hi:
             raise ParameterError(f"{where}: {key} = {_short(v)} is outside the plausible range [{lo}, {hi}]")
     for key, (lo, hi, inc) in _RANGES.items():
         v = flat[key]
