@@ -70,6 +70,10 @@ def test_user_file_overrides_base(tmp_path):
         ("base = 'hev_p2'\n[hybrid]\ndp_soc_points = 3\n", r"dp_soc_points = 3 is outside .* \[11, 2001\]"),
         ("base = 'hev_p2'\n[hybrid]\ntorque_levels = 1\n", r"torque_levels = 1 is outside .* \[2, 200\]"),
         ("base = 'hev_split'\n[split]\nsun_teeth = 5\n", r"sun_teeth = 5 is outside .* \[8, 500\]"),
+        (
+            "base = 'hev_p2'\n[hybrid]\nengine_off_power = 20e3\nengine_on_power = 10e3\n",
+            r"hybrid\.engine_off_power = 20000 W is above engine_on_power = 10000 W",
+        ),
     ],
 )
 def test_validation_errors_are_one_line_and_specific(tmp_path, text, match):

@@ -794,6 +794,13 @@ def _check_electric(p: Parameters, where: str) -> None:
         )
     if p.hybrid.ems not in EMS:
         raise ParameterError(f"{where}: hybrid.ems = {p.hybrid.ems!r}; expected one of {', '.join(EMS)}")
+    h = p.hybrid
+    if h.engine_off_power > h.engine_on_power:  # the rule's hysteresis in power
+        raise ParameterError(
+            f"{where}: hybrid.engine_off_power = {h.engine_off_power:g} W is above engine_on_power = "
+            f"{h.engine_on_power:g} W; the rule stops the engine below the first and starts it above the "
+            "second, so the first must not exceed the second"
+        )
     if p.powertrain.type in HYBRIDS and not b.soc_min < p.hybrid.soc_target < b.soc_max:
         raise ParameterError(
             f"{where}: hybrid.soc_target = {p.hybrid.soc_target:g} is outside the battery's window "
