@@ -265,3 +265,20 @@ def test_a_first_run_times_the_run_not_the_kernels_loading(monkeypatch, vehicle,
         assert seen == [4, 1370] and r.distance_m > 11_000
         simulation.simulate("udds", method, vehicle)
         assert seen == [4, 1370, 1370]
+
+
+def test_options_a_method_does_not_take_are_one_line_errors():
+    """A driver for the battery-electric car's forward method (its gains are electric.forward_kp/ki), as for
+    the hybrid's; an option the engine car's method does not take (the hybrid's ems, the forward method's
+    rtol on the backward one) names what it takes, not a TypeError from inside the method."""
+    with pytest.raises(VpsimError, match="battery-electric car's forward driver .* takes no --driver"):
+        vpsim.simulate("udds", "forward", "bev", driver="1")
+    with pytest.raises(
+        VpsimError,
+        match=r"option 'ems' \(a hybrid's energy management\) does not apply .* "
+        r"backward method; it takes engine_map, keep_series",
+    ):
+        vpsim.simulate("udds", "backward", "hofman2011", ems="dp")
+    with pytest.raises(VpsimError, match=r"option 'rtol' does not apply .* inverse method; it takes a, "):
+        vpsim.simulate("udds", "inverse", "hofman2011", rtol=1e-6)
+    assert vpsim.simulate("nedc", "inverse", "hofman2011", a=0.5).fuel_kg > 0

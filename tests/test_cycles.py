@@ -457,3 +457,11 @@ def test_a_shipped_cycle_is_read_once_and_shared():
     np.testing.assert_array_equal(a.time_s, direct.time_s)
     with pytest.raises(ValueError):
         a.speed_mps[3] = 1.0
+
+
+def test_a_cycle_of_another_type_is_a_type_error_that_says_what_to_pass():
+    """A DataFrame (or anything not a name, a path or a Cycle) is refused with what to pass instead."""
+    with pytest.raises(
+        TypeError, match=r"not dict; a trace held in arrays is Cycle\(name, time_s, speed_mps\)"
+    ):
+        load_cycle({"time_s": [0, 1], "speed_mps": [0, 1]})

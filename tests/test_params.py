@@ -117,3 +117,10 @@ def test_fuel_cutoff_below_idle_is_refused_in_one_line():
     assert "\n" not in str(e.value)
     assert p.with_changes(simulation={"fuel_cutoff_speed": 0.0}).simulation.fuel_cutoff_speed == 0.0
     assert p.with_changes(simulation={"fuel_cutoff_speed": 80.0}).simulation.fuel_cutoff_speed == 80.0
+
+
+def test_a_parameter_set_of_another_type_is_a_type_error_that_says_what_to_pass():
+    """A dict (or anything not a name, a path or Parameters) is refused with what to pass instead, not with
+    a TypeError from deep inside the path handling."""
+    with pytest.raises(TypeError, match=r"not dict; to change values: load_parameters\('hofman2011'\)"):
+        load_parameters({"vehicle": {"mass": 1200.0}})

@@ -30,6 +30,7 @@ import functools
 import json
 import math
 import numbers
+import os
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from importlib import resources
@@ -1110,6 +1111,12 @@ def load_parameters(source: str | Path = "hofman2011") -> Parameters:
     subset of the sections ``[vehicle]``, ``[transmission]``, ``[engine]``, ``[simulation]``,
     ``[drivers.N]``. Values are plain numbers or tables ``{ value = ..., confidence = "..." }``.
     """
+    if not isinstance(source, str | os.PathLike):
+        raise TypeError(
+            f"a parameter set is a preset's name, a TOML file's path or a vpsim.params.Parameters, not "
+            f"{type(source).__name__}; to change values: "
+            "load_parameters('hofman2011').with_changes(vehicle={'mass': 1200.0})"
+        )
     if isinstance(source, str) and source in PRESETS:
         return _preset(source)
     if not str(source).strip():

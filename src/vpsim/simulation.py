@@ -67,6 +67,8 @@ def simulate(
     if params.powertrain.type in HYBRIDS:
         return _simulate_hev(cycle, method, params, driver, mode, gears, options)
     cycle, params, schedule = resolve_inputs(cycle, params, gears)
+    if options:
+        _check_options(method, options)
     if method == "backward":
         if driver is not None:
             raise VpsimError("the backward method tracks the cycle exactly and takes no driver")
@@ -82,6 +84,24 @@ def simulate(
     from .methods import inverse
 
     return inverse.run(cycle, params, driver=driver, schedule=schedule, mode=mode, **options)
+
+
+def _check_options(method: str, options: dict) -> None:
+    """The engine car's method takes ``options`` (its ``run``'s keywords beyond those simulate sets), or one
+    line saying which it takes: not a TypeError from inside the method."""
+    import importlib
+    import inspect
+
+    run = importlib.import_module(f"vpsim.methods.{method}").run
+    own = ("cycle", "params", "driver", "schedule", "mode")
+    takes = [k for k in inspect.signature(run).parameters if k not in own and not k.startswith("_")]
+    for name in options:
+        if name not in takes:
+            what = " (a hybrid's energy management)" if name == "ems" else ""
+            raise VpsimError(
+                f"option {name!r}{what} does not apply to the engine car's {method} method; it takes "
+                f"{', '.join(takes)}"
+            )
 
 
 # (powertrain, method, management) already run in this process: their compiled kernels are loaded
@@ -118,7 +138,11 @@ def _simulate_bev(cycle, method, params, driver, mode, gears, options):
         driver = "2" if driver is None else str(driver)
         params.driver(driver)  # validates
     elif method == "forward":
-        driver = None  # the electric PI driver's gains are electric.forward_kp / forward_ki
+        if driver is not None:  # as the hybrid's forward method
+            raise VpsimError(
+                "the battery-electric car's forward driver takes its gains from electric.forward_kp and "
+                "forward_ki; it takes no --driver"
+            )
     if not isinstance(cycle, Cycle):
         cycle = load_cycle(cycle)
     from .methods import bev

@@ -16,6 +16,7 @@ import csv
 import functools
 import io
 import math
+import os
 import re
 from array import array
 from dataclasses import dataclass, field
@@ -192,6 +193,11 @@ def load_cycle(name_or_path: str | Path, *, speed_unit: str | None = None) -> Cy
     (``speed_mps``, ``speed_kmh``, ``speed_mph``), or a plain ``speed`` column with ``speed_unit`` given
     (``"m/s"``, ``"km/h"``, ``"mph"``). Lines starting with ``#`` are comments. Errors name the line.
     """
+    if not isinstance(name_or_path, str | os.PathLike):
+        raise TypeError(
+            f"a cycle is a standard cycle's name, a CSV file's path or a vpsim.cycles.Cycle, not "
+            f"{type(name_or_path).__name__}; a trace held in arrays is Cycle(name, time_s, speed_mps)"
+        )
     if isinstance(name_or_path, str) and _normalise(name_or_path) in STANDARD_CYCLES + tuple(PHASES):
         return _shipped(_normalise(name_or_path))
     names = ", ".join(STANDARD_CYCLES + tuple(PHASES))
