@@ -6,7 +6,7 @@ import click
 
 from ..errors import VpsimError
 from ._output import dumps
-from .main import cli
+from .main import cli, vehicle_option
 
 
 def _offsets(text: str) -> tuple[float, ...]:
@@ -19,14 +19,7 @@ def _offsets(text: str) -> tuple[float, ...]:
 
 @cli.command("charge-balance")
 @click.option("--cycle", default="udds", show_default=True, help="Standard cycle or a cycle CSV.")
-@click.option(
-    "--vehicle",
-    "--preset",
-    "vehicle",
-    default="hev_p2",
-    show_default=True,
-    help="A hybrid's preset or TOML file.",
-)
+@vehicle_option(default="hev_p2", help="A hybrid's preset or TOML file.")
 @click.option(
     "--method", type=click.Choice(["backward", "forward", "inverse"]), default="backward", show_default=True
 )

@@ -52,6 +52,12 @@ def cli():
     """Drive-cycle simulation of vehicle propulsion systems: one physical model, three methods."""
 
 
+def vehicle_option(default: str = "hofman2011", help: str = "Preset name or a TOML parameter file."):
+    """The option that names the car: ``--vehicle`` or, as the documents call the built-in cars presets,
+    ``--preset``."""
+    return click.option("--vehicle", "--preset", "vehicle", default=default, show_default=True, help=help)
+
+
 def _load_commands() -> None:
     for name in COMMAND_MODULES:
         if importlib.util.find_spec(f"{__package__}.{name}") is not None:

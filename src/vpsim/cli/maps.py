@@ -4,20 +4,13 @@ from __future__ import annotations
 
 import click
 
-from .main import cli
+from .main import cli, vehicle_option
 from .simulate import _out_dir
 
 
 @cli.command()
 @click.option("--out", "out", required=True, type=click.Path(file_okay=False), help="Output folder.")
-@click.option(
-    "--vehicle",
-    "--preset",
-    "vehicle",
-    default="hofman2011",
-    show_default=True,
-    help="Preset name or a TOML parameter file.",
-)
+@vehicle_option()
 def maps(out, vehicle):
     """Write the FQM torque lines and the BQM fuel map of an engine (PNG + CSV)."""
     import matplotlib

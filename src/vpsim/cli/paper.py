@@ -10,20 +10,13 @@ import click
 
 from ..errors import VpsimError
 from ._output import number
-from .main import cli
+from .main import cli, vehicle_option
 from .simulate import _out_dir
 
 
 @cli.command()
 @click.option("--out", "out", required=True, type=click.Path(file_okay=False), help="Output folder.")
-@click.option(
-    "--vehicle",
-    "--preset",
-    "vehicle",
-    default="hofman2011",
-    show_default=True,
-    help="Preset name or a TOML parameter file.",
-)
+@vehicle_option()
 @click.option(
     "--advisor-dir",
     "advisor_dir",

@@ -5,18 +5,11 @@ from __future__ import annotations
 import click
 
 from ._output import dumps
-from .main import cli
+from .main import cli, vehicle_option
 
 
 @cli.command("params")
-@click.option(
-    "--vehicle",
-    "--preset",
-    "vehicle",
-    default="hofman2011",
-    show_default=True,
-    help="Preset name or a TOML parameter file.",
-)
+@vehicle_option()
 @click.option("--json", "as_json", is_flag=True, help="Print {field: {value, provenance}} as JSON.")
 def params_cmd(vehicle, as_json):
     """Show every parameter value (SI) and where it comes from (paper / derived / reconstructed / user)."""

@@ -8,7 +8,7 @@ import click
 
 from ..errors import VpsimError
 from ._output import dumps, number
-from .main import cli
+from .main import cli, vehicle_option
 from .simulate import _out_dir
 
 # a scaled engine whose displacement differs more than this from the measured file's fc_disp is flagged
@@ -52,14 +52,7 @@ def _check_cycles(names: list[str], what: str) -> None:
     type=float,
     help="Engine inertia J_e (kg m^2); default: the measured file's fc_inertia.",
 )
-@click.option(
-    "--vehicle",
-    "--preset",
-    "vehicle",
-    default="hofman2011",
-    show_default=True,
-    help="Preset or TOML file giving the vehicle, gears, idle flow and the engine to scale from.",
-)
+@vehicle_option(help="Preset or TOML file giving the vehicle, gears, idle flow and the engine to scale from.")
 @click.option(
     "--cycles",
     default="nedc,ftp75",

@@ -8,7 +8,7 @@ import click
 
 from ..errors import VpsimError
 from ._output import dumps, number
-from .main import cli
+from .main import cli, vehicle_option
 
 
 def _ok(text: str) -> bool:
@@ -42,14 +42,7 @@ def _out_dir(out: str) -> Path:
 @click.option(
     "--method", type=click.Choice(["backward", "forward", "inverse"]), default="backward", show_default=True
 )
-@click.option(
-    "--vehicle",
-    "--preset",
-    "vehicle",
-    default="hofman2011",
-    show_default=True,
-    help="Preset name or a TOML parameter file.",
-)
+@vehicle_option()
 @click.option(
     "--driver",
     type=click.Choice(["1", "2"]),
