@@ -11,6 +11,7 @@ import vpsim
 from vpsim.batch import run_batch
 from vpsim.cycles import load_cycle
 from vpsim.errors import ParameterError, VpsimError
+from vpsim.model import electric as el
 from vpsim.model import hybrid as hy
 from vpsim.params import load_parameters
 
@@ -45,6 +46,27 @@ def test_energy_balance_closes_with_the_belt_and_the_dragged_engine(runs):
         assert abs(r.energy.relative_residual) < 1e-12, (key, r.energy)
     inv = vpsim.simulate("udds", "inverse", MHEV, ems="ecms")
     assert abs(inv.energy.relative_residual) < 1e-12
+
+
+@pytest.mark.parametrize("method", ["backward", "inverse", "forward"])
+def test_a_system_without_assist_never_motors_and_burns_more(method):
+    """``mild.assist_share`` 0 (a system that recuperates, starts and stops the engine and gives no torque):
+    the machine never drives on any method, the balance still closes, the ECMS burns more than with the
+    whole envelope as assist and less than the engine car (recuperation and stops stay); share 1 is the
+    preset to the bit."""
+    none = MHEV.with_changes(mild={"assist_share": 0.0})
+    half = MHEV.with_changes(mild={"assist_share": 0.5})
+    r0, r5, r1 = (vpsim.simulate("udds", method, p, ems="ecms") for p in (none, half, MHEV))
+    assert np.nanmax(r0.series["machine_torque_nm"]) <= 0.0
+    assert np.nanmax(r1.series["machine_torque_nm"]) > 1.0  # (the preset assists)
+    # the envelope's top (below base speed) through the belt: the series is the machine's torque at the crank
+    rated = el.electric_records(MHEV)[1].rated_torque * MHEV.mild.belt_ratio * MHEV.mild.belt_efficiency
+    assert 0.0 < np.nanmax(r5.series["machine_torque_nm"]) <= 0.5 * rated * (1 + 1e-12)
+    assert abs(r0.energy.relative_residual) < 1e-12
+    cs = [r.electric["fuel_l_per_100km_cs"] for r in (r0, r1)]
+    assert cs[1] < cs[0] < vpsim.simulate("udds", method, CONVENTIONAL).fuel_l_per_100km
+    same = vpsim.simulate("udds", method, MHEV.with_changes(mild={"assist_share": 1.0}), ems="ecms")
+    assert same.fuel_kg == r1.fuel_kg
 
 
 def test_mild_hybrid_between_the_engine_car_and_the_full_hybrid(runs):

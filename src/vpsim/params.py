@@ -294,6 +294,10 @@ class Mild:
 
     belt_ratio: float = 2.7
     belt_efficiency: float = 0.95
+    # the share of the machine's motoring torque the system gives the crank as assist (1: its whole envelope;
+    # 0: a system that recuperates, starts and stops the engine and gives no torque, as Audi's 48 V V6/V8
+    # system; vpsim.fleet.mhev.SYSTEMS): the motoring envelope times it, the generating one whole
+    assist_share: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -479,6 +483,7 @@ _RANGES: dict[str, tuple[float, float, bool]] = {
     "split.generator_max_speed": (1.0, 5000.0, True),
     "split.generator_inertia": (0.0, 10.0, True),
     "mild.belt_ratio": (0.2, 10.0, True),  # 1: on the crank; belt starter-generators 2.5-3
+    "mild.assist_share": (0.0, 1.0, True),
 }
 # Whole numbers: (low, high). Production piston engines have 1 to 16 cylinders and are two-stroke (1
 # revolution per cycle) or four-stroke (2); Newton converges in a handful of iterations or not at all.

@@ -221,6 +221,7 @@ FIELD_DIMENSIONS: dict[str, str] = {
     "split.generator_inertia": "inertia",
     "mild.belt_ratio": "dimensionless",
     "mild.belt_efficiency": "fraction",
+    "mild.assist_share": "fraction",
     "drivers.forward_kp": "gain_p",
     "drivers.forward_ki": "gain_i",
     "drivers.inverse_a": "time",

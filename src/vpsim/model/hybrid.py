@@ -132,6 +132,7 @@ def p2_interval(v, a, ratio, gear, c, e, m, tabs, h):
     t_min, t_max = el.envelope(
         h.belt_ratio * w, m, e, tabs[el.TAB_ENV_SPEED], tabs[el.TAB_ENV_MAX], tabs[el.TAB_ENV_MIN]
     )
+    t_max *= h.assist_share  # the mild hybrid's assist: a share of the motoring envelope (1: all of it)
     return vv, w, dw, f, t_in, runs, en.speed_power(w, c), t_min, t_max, ratio, clutch, mu
 
 
@@ -569,7 +570,8 @@ H_FIELDS = (
 )
 # the layout's numbers the same record carries: the mild hybrid's (1) or not (0), the belt between its machine
 # and the crank (params.mild; ratio and efficiency 1 for the P2's machine on the gearbox's shaft)
-H_LAYOUT_FIELDS = ("mild", "belt_ratio", "belt_efficiency")
+# and the share of its motoring envelope the mild hybrid's system uses as assist (params.mild; 1 for the P2)
+H_LAYOUT_FIELDS = ("mild", "belt_ratio", "belt_efficiency", "assist_share")
 
 
 def rotor_at_crank(params):
@@ -594,7 +596,8 @@ def hybrid_record(params):
     names = H_FIELDS + H_LAYOUT_FIELDS
     h = np.zeros(1, np.dtype([(n, np.float64) for n in names], align=True)).view(np.recarray)
     mild = params.powertrain.type == "mhev"
-    layout = (1.0, params.mild.belt_ratio, params.mild.belt_efficiency) if mild else (0.0, 1.0, 1.0)
+    ml = params.mild
+    layout = (1.0, ml.belt_ratio, ml.belt_efficiency, ml.assist_share) if mild else (0.0, 1.0, 1.0, 1.0)
     h[0] = tuple(float(getattr(params.hybrid, n)) for n in H_FIELDS) + tuple(float(x) for x in layout)
     h.flags.writeable = False
     return h[0]
