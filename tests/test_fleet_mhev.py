@@ -22,7 +22,7 @@ def test_system_rules():
     assert mhev.system_of("Mercedes-Benz", "E 450 4MATIC", 2.999)[0] == "mercedes"
     assert mhev.system_of("BMW", "M340i", 3.0)[0] == "bmw"
     assert mhev.system_of("AUDI", "S8", 3.996)[0] == "audi48"
-    assert mhev.system_of("Audi", "A3 quattro", 1.984)[0] == "audi48"
+    assert mhev.system_of("Audi", "A3 quattro", 1.984)[0] == "audi_a3"
     assert mhev.system_of("Audi", "Q5", 1.984)[0] == "audi12"
     assert mhev.system_of("Volvo", "XC60 B5 AWD", 1.969)[0] == "volvo"
     assert mhev.system_of("RAM", "1500 4X4", 5.7)[0] == "etorque"
@@ -31,6 +31,13 @@ def test_system_rules():
     assert key is None and why.startswith("mild hybrid, no known system: Dodge Charger")
     assert mhev.SYSTEMS["mercedes"].layout == "mhev_p1"
     assert {s.layout for k, s in mhev.SYSTEMS.items() if k != "mercedes"} == {"mhev_p0"}
+    # the assist each maker publishes: none for Audi's 6- and 8-cylinder 48 V system, 9 of the A3's 12 kW,
+    # 1 of the 12 V system's 5 kW, the machine's whole envelope for the others
+    share = {k: s.assist_share for k, s in mhev.SYSTEMS.items()}
+    assert share == {
+        "mercedes": 1.0, "bmw": 1.0, "audi48": 0.0, "audi_a3": 0.75, "audi12": 0.2, "volvo": 1.0,
+        "etorque": 1.0, "jlr": 1.0,
+    }  # fmt: skip
 
 
 def _ftp(b1, b2, b3, b4, fe):
@@ -72,7 +79,8 @@ def test_real_mild_hybrids_are_read(shared_dir):
     assert e450.mild.belt_ratio == 1.0 and e450.mild.belt_efficiency == 1.0
     assert e450.machine.rated_power == pytest.approx(16e3)
     q5 = mhev.mhev_parameters(recs["NA7E-Q5-278#1"], "hwy")
-    assert q5.battery.cells_in_series == 4 and q5.machine.rated_power == pytest.approx(3e3)
+    assert q5.battery.cells_in_series == 4 and q5.machine.rated_power == pytest.approx(5e3)
+    assert q5.mild.assist_share == 0.2
 
 
 def test_from_epa_writes_a_mild_hybrid_that_simulates_against_its_record(shared_dir, tmp_path, capsys):

@@ -9,11 +9,17 @@ that applies:
   16 kW / 250 Nm (the M256 straight six; the S 580's V8 has a 48 V ISG too), a 48 V pack of about 1 kWh;
 * BMW: ``mhev_p0``, 8 kW. A 48 V starter-generator on the belt, "up to 8 kW (11 PS)" (BMW, 2019-2020: the
   5 Series, then the B58 engines);
-* Audi 2.9-4.0 L, and the A3: ``mhev_p0``, 12 kW. A 48 V belt alternator starter, "recuperation of up to
-  12 kW", a 10 Ah lithium-ion pack (A8, 2017; the A3's: 12 kW recuperation, 9 kW / 50 Nm assist);
-* Audi's other 2.0 L (A4, A5, A6, Q5, allroad): ``mhev_p0`` on 12 V, 3 kW. The 12 V MHEV: a belt
-  starter-generator on a 12 V lithium-ion battery (11 Ah); no power is published, a 12 V machine is held by
-  its current (200-250 A at 14 V: 3-3.5 kW);
+* Audi 2.9-4.0 L: ``mhev_p0``, 12 kW, no assist (``mild.assist_share`` 0). A 48 V belt alternator starter
+  with "a high recuperation power of up to 12 kW plus start-stop operation from 22 km/h" and engine-off
+  coasting at 55-160 km/h, a 10 Ah lithium-ion pack (Audi Technology Portal, "Audi A8 - MHEV components",
+  2017; the Volkswagen Group's description of the 6- and 8-cylinder system: "a recuperation power of up to
+  12 kW and 60 Nm"); neither names an assist, where the A3's does;
+* the A3: ``mhev_p0``, 12 kW, assist 0.75 of it: "the BAS can recuperate up to 12 kW ... it assists the
+  TFSI with up to 9 kW and 50 Nm" (Audi Technology Portal, "Audi A3 Sportback 48 V mild-hybrid system");
+* Audi's other 2.0 L (A4, A5, A6, Q5, allroad): ``mhev_p0`` on 12 V, 5 kW, assist 0.2 of it. The 12 V
+  MHEV: a belt starter-generator on a 12 V lithium-ion battery (11 Ah), "recuperation of at most 5 kW; the
+  generator can also assist the engine with up to 1 kW" (elektroniknet.de on Audi's 12 V mild hybrid,
+  2015; until 2026-12-07 the fleet took 3 kW, a 12 V machine's current, and the whole envelope as assist);
 * Volvo (B5, B6): ``mhev_p0``, 10 kW. A 48 V integrated starter-generator module on the belt, 10 kW;
 * RAM, Jeep (eTorque): ``mhev_p0``, 12 kW. A 48 V belt motor-generator in place of the alternator, a 430 Wh
   lithium-ion pack, 90 lb-ft (V6) / 130 lb-ft (V8) at the crank; no power published: the preset's 12 kW;
@@ -75,15 +81,43 @@ class System:
     machine_kw: float
     cells_in_series: int
     source: str
+    # the share of the machine's motoring torque the system gives as assist (params.mild.assist_share): 1
+    # where the maker publishes a boost of the machine's size, less where it publishes a smaller one, 0 where
+    # it publishes recuperation, starts and coasting only
+    assist_share: float = 1.0
 
 
 V48, V12 = 13, 4  # cells in series of the nmc_hev cell: 48 V and 12 V nominal
+# The published assist where it is less than the machine's motoring envelope, as a share of it, and the 12 V
+# system's published recuperation power: looked up after the 2026-12-07 run had Audi's 6- and 8-cylinder
+# cars 10-14 % too frugal in town and on US06 (until then every system assisted with its whole machine and
+# the 12 V machine was 3 kW, a 12 V machine's current); fleet/tuned.py declares both, docs/fleet.md has
+# the figures
+ASSIST_SHARE = {"audi48": 0.0, "audi_a3": 0.75, "audi12": 0.2}
+AUDI_12V_MACHINE_KW = 5.0
 SYSTEMS = {
     "mercedes": System("mhev_p1", 16.0, V48, "Mercedes-Benz EQ Boost ISG (P1), 16 kW / 250 Nm"),
     "bmw": System("mhev_p0", 8.0, V48, "BMW 48 V starter-generator (P0), 8 kW"),
-    "audi48": System("mhev_p0", 12.0, V48, "Audi 48 V belt alternator starter (P0), 12 kW"),
+    "audi48": System(
+        "mhev_p0",
+        12.0,
+        V48,
+        "Audi 48 V belt alternator starter (P0), 12 kW recuperation, no assist published",
+        ASSIST_SHARE["audi48"],
+    ),
+    "audi_a3": System(
+        "mhev_p0",
+        12.0,
+        V48,
+        "Audi A3 48 V belt alternator starter (P0), 12 kW, 9 kW assist",
+        ASSIST_SHARE["audi_a3"],
+    ),
     "audi12": System(
-        "mhev_p0", 3.0, V12, "Audi 12 V MHEV belt starter-generator (P0), 3 kW (a 12 V machine)"
+        "mhev_p0",
+        AUDI_12V_MACHINE_KW,
+        V12,
+        "Audi 12 V MHEV belt starter-generator (P0), 5 kW, 1 kW assist",
+        ASSIST_SHARE["audi12"],
     ),
     "volvo": System("mhev_p0", 10.0, V48, "Volvo 48 V ISGM on the belt (P0), 10 kW"),
     "etorque": System("mhev_p0", 12.0, V48, "RAM/Jeep eTorque belt motor-generator (P0), the preset's 12 kW"),
@@ -175,7 +209,7 @@ def system_of(make: str, model: str, displacement_l: float) -> tuple[str | None,
         if math.isfinite(displacement_l) and displacement_l >= 2.5:
             return "audi48", "Audi 2.9-4.0 L: 48 V MHEV"
         if re.search(r"\bA3\b", model, re.IGNORECASE):
-            return "audi48", "Audi A3: 48 V MHEV"
+            return "audi_a3", "Audi A3: 48 V MHEV"
         if AUDI_12V.search(model):
             return "audi12", "Audi 2.0 L (A4, A6, Q5): 12 V MHEV"
     if mk == "VOLVO":
@@ -283,10 +317,10 @@ def mhev_parameters(rec: MHEVRecord, cycle_name: str | None = None, technology: 
     sys_ = SYSTEMS[rec.system]
     machine_w = sys_.machine_kw * 1e3
     machine = scaled_machine(base.machine, machine_w)
-    mild = {}
+    mild = {"assist_share": sys_.assist_share}
     if sys_.layout == "mhev_p1":
         machine.update(base_speed=P1_BASE_SPEED, max_speed=P1_MAX_SPEED, inertia=P1_INERTIA)
-        mild = {"belt_ratio": 1.0, "belt_efficiency": 1.0}
+        mild.update(belt_ratio=1.0, belt_efficiency=1.0)
     battery_base = base.with_changes(battery={"cells_in_series": sys_.cells_in_series})
     strings = pack_strings(battery_base, machine_w)
     flat = conv.flat()
@@ -302,8 +336,7 @@ def mhev_parameters(rec: MHEVRecord, cycle_name: str | None = None, technology: 
         "battery": {"cells_in_series": sys_.cells_in_series, "cells_in_parallel": strings},
         "electric": {},
     }
-    if mild:
-        sections["mild"] = mild
+    sections["mild"] = mild
     for key, value in (technology or {}).items():
         sec, _, fld = key.partition(".")
         if sec not in sections:
@@ -400,7 +433,7 @@ TOML_FIELDS = (
     ("electric", ("accessory_power",)),
     ("simulation", _SIMULATION),
     ("hybrid", ("ems", "soc_target")),
-    ("mild", ("belt_ratio", "belt_efficiency")),
+    ("mild", ("belt_ratio", "belt_efficiency", "assist_share")),
 )
 
 
