@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -113,6 +114,11 @@ def main() -> None:
     ap.add_argument("variants", nargs="*", default=list(VARIANTS), choices=VARIANTS)
     ap.add_argument("--csv", help="write each variant's rows to this folder")
     a = ap.parse_args()
+    if a.csv:  # made (or refused) now, not after minutes of runs
+        try:
+            Path(a.csv).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            ap.error(f"--csv {a.csv}: cannot make that folder ({exc.strerror})")
     cars = read_test_car_list(a.list)
     for variant in a.variants:
         t0 = time.process_time()

@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -144,6 +145,11 @@ def main() -> None:
         help="the torque-converter automatics with their converter (mhev.CONVERTER; the fleet: off)",
     )
     a = ap.parse_args()
+    if a.csv:  # made (or refused) now, not after minutes of runs
+        try:
+            Path(a.csv).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            ap.error(f"--csv {a.csv}: cannot make that folder ({exc.strerror})")
     mm.CONVERTER = a.converter or mm.CONVERTER
     changes = {k: float(v) for k, _, v in (x.partition("=") for x in a.set)}
     cars = read_test_car_list(a.list)
