@@ -84,7 +84,7 @@ def dp_kernel(
     for k in range(v.size - 1, -1, -1):
         interval = hy.p2_interval(v[k], a[k], ratio[k], gear[k], c, e, m, tabs, h)
         w = interval[1]  # the engine's speed were it to run
-        t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
+        t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line, c)
         runs = interval[5]
         t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
         for i in range(n):
@@ -157,7 +157,7 @@ def causal_kernel(
         # what the interval and the charge fix, once for all the choices
         interval = hy.p2_interval(v, a, ratio, g + 1, c, e, m, tabs, h)
         w = interval[1]  # the engine's speed were it to run
-        t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
+        t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line, c)
         t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
         battery = el.battery_state(
             soc, e, tabs[el.TAB_SOC], tabs[el.TAB_OCV], tabs[el.TAB_R_DIS], tabs[el.TAB_R_CHG]

@@ -153,7 +153,7 @@ def p2_kernel(
         vm = v + 0.5 * a * dt
         interval = hy.p2_interval(vm, a, ratio, g + 1, c, e, m, tabs, h)
         w = interval[1]  # the engine's speed were it to run
-        t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line)
+        t_low, t_high = hy.engine_lines(w, line_speed, line_max, line_min, inv_line, c)
         t_off = hy.closed_line(w, line_speed, line_min, inv_line) if h.mild > 0.0 else 0.0
         if (
             ems == hy.EMS_ECMS

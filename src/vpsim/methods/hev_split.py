@@ -240,7 +240,7 @@ def _build_inputs(params):
     _, _, cap_speed, cap_power = sp.best_efficiency_line(exact, w_lo, w_hi)
     g, s = sp.generator_record(params), sp.split_record(params)
     powers, ring, speeds = sp.system_line(exact, w_lo, w_hi, m, g, s)
-    lines = (engine_map.max_torque_speed, engine_map.max_torque_values)
+    lines, cap = sp.shaft_lines(engine_map, cap_speed, cap_power, c)
     return dict(
         c=c,
         e=e,
@@ -252,7 +252,7 @@ def _build_inputs(params):
         ratio=float(total_ratios(params.transmission)[0]),
         lines=lines,
         best=(powers, ring, speeds),
-        cap=(cap_speed, cap_power),
+        cap=cap,
     )
 
 

@@ -55,12 +55,13 @@ EMS_CODES = {"rule": EMS_RULE, "ecms": EMS_ECMS, "dp": EMS_DP}
 
 
 @equation
-def engine_lines(w, line_speed, line_max, line_min, inv_line):
-    """(lowest, highest) torque the management may ask of the running engine at speed w: from zero (below it
-    a real engine would cut its fuel, and a hybrid opens its clutch instead: the engine off) or its
-    closed-throttle line if that is higher, to its full-load line (the generated map's lines)."""
+def engine_lines(w, line_speed, line_max, line_min, inv_line, c):
+    """(lowest, highest) torque the management may ask of the running engine at speed w, at its shaft: from
+    zero (below it a real engine would cut its fuel, and a hybrid opens its clutch instead: the engine off)
+    or its closed-throttle line if that is higher, to its full-load line (the generated map's lines) less
+    what its own accessories take (:func:`vpsim.model.engine.accessory_torque`; 0 by default)."""
     t_closed = tb.interp_at(w, line_speed, line_min, inv_line)
-    return max(t_closed, 0.0), tb.interp_at(w, line_speed, line_max, inv_line)
+    return max(t_closed, 0.0), tb.interp_at(w, line_speed, line_max, inv_line) - en.accessory_torque(w, c)
 
 
 @equation
@@ -246,15 +247,15 @@ def mild_engine_choice(on, clutch, t_e, w, dw, cm18, c):
     """(T_e, T_cr, p_i, mdot_f, turning) of the mild hybrid's engine: fired (``on`` > 0) with torque ``t_e``
     as :func:`engine_choice`; not fired with the clutch closed, dragged by the wheels with its fuel cut (crank
     torque the motoring torque (2)-(6) without (4) at the closed-throttle line's pressure, ``t_e`` then that
-    line's crank torque at w, :func:`closed_line`; turning, no fuel); not fired with the clutch open or
-    slipping, stopped."""
+    line's crank torque at w, :func:`closed_line`; turning, no fuel; the wheels drive its accessories too);
+    not fired with the clutch open or slipping, stopped."""
     if on > 0.0:
         return engine_choice(on, True, t_e, w, dw, cm18, c)
     if clutch != CLUTCH_CLOSED:
         return 0.0, 0.0, 0.0, 0.0, 0.0
     p = en.intake_pressure_for_torque(t_e, w, c, cm18)
     t_cr = en.motoring_torque(p, w, c, cm18)
-    return t_cr - vh.inertia_torque(dw, c), t_cr, p, 0.0, 1.0
+    return t_cr - vh.inertia_torque(dw, c) - en.accessory_torque(w, c), t_cr, p, 0.0, 1.0
 
 
 @equation
@@ -281,11 +282,13 @@ def crank_to_belt(t_crank, h):
 @equation
 def engine_choice(on, runs, t_e, w, dw, cm18, c):
     """(T_e, T_cr, p_i, mdot_f, 1.0) of the engine asked to run (``on`` > 0, and it ``runs`` at w: its
-    idle speed) with torque ``t_e`` at speed w (``cm18`` its c_m^1.8): its crank torque (1), the BQM's
-    intake pressure and fuel (19); all zero if it stands."""
+    idle speed) with torque ``t_e`` at speed w (``cm18`` its c_m^1.8): its crank torque (1) with what the
+    engine's own accessories take (``engine.accessory_power``: belt-driven pumps and compressor, turning
+    with the engine only; the hybrids' electric loads are ``electric.accessory_power``), the BQM's intake
+    pressure and fuel (19); all zero if it stands."""
     if not (on > 0.0 and runs):
         return 0.0, 0.0, 0.0, 0.0, 0.0
-    t_cr = t_e + vh.inertia_torque(dw, c)
+    t_cr = t_e + vh.inertia_torque(dw, c) + en.accessory_torque(w, c)
     p = en.intake_pressure_for_torque(t_cr, w, c, cm18)
     return t_e, t_cr, p, en.fuel_flow(p, w, c), 1.0
 
@@ -523,9 +526,11 @@ def hybrid_powers(point, v, a, c, e):
     vv = v if v > 0.0 else 0.0
     indicated, friction, pumping = 0.0, 0.0, 0.0
     engine_kinetic = 0.0
+    engine_accessories = 0.0
     if running > 0.0:  # fired, or (a mild hybrid's) dragged with its fuel cut: no fuel, no indicated work
         indicated, friction, pumping = rules.engine_powers(p, w, t_cr, 1.0 if mdot != 0.0 else 0.0, c, cm18)
         engine_kinetic = vh.inertia_torque(dw, c) * w
+        engine_accessories = en.accessory_torque(w, c) * w
     rotor = el.rotor_torque(dw, e) * w
     f_net = vh.wheel_force(vv, a, c) + brake - missing
     t_net = te + t_m - el.rotor_torque(dw, e)
@@ -537,7 +542,7 @@ def hybrid_powers(point, v, a, c, e):
         engine_kinetic,
         bt.chemical_power(u_oc, i, e.coulombic_efficiency),
         bt.battery_loss(u_oc, r, i, e.coulombic_efficiency),
-        e.accessory_power,
+        e.accessory_power + engine_accessories,
         p_m - t_m * w,
         rotor,
         t_net * w - f_net * vv,

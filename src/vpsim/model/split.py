@@ -299,9 +299,10 @@ def split_powers(point, v, a, c, e, s):
     i, u_oc, r, p_m, brake, missing = point[8], point[9], point[10], point[11], point[12], point[13]
     w_c, w_s, t_g, p_g, dw_s, t_net = point[18], point[19], point[20], point[21], point[22], point[23]
     vv = v if v > 0.0 else 0.0
-    indicated, friction, pumping = 0.0, 0.0, 0.0
+    indicated, friction, pumping, engine_accessories = 0.0, 0.0, 0.0, 0.0
     if running > 0.0:
         indicated, friction, pumping = rules.engine_powers(p, w_c, t_cr, 1.0, c, cm18)
+        engine_accessories = en.accessory_torque(w_c, c) * w_c
     w_r = w_m2 / s.mg2_ratio
     f_net = vh.wheel_force(vv, a, c) + brake - missing
     return (
@@ -311,7 +312,7 @@ def split_powers(point, v, a, c, e, s):
         0.0,
         bt.chemical_power(u_oc, i, e.coulombic_efficiency),
         bt.battery_loss(u_oc, r, i, e.coulombic_efficiency),
-        e.accessory_power,
+        e.accessory_power + engine_accessories,
         (p_g - t_g * w_s) + (p_m - t_m * w_m2),
         s.generator_inertia * dw_s * w_s + el.rotor_torque(dw_m2, e) * w_m2,
         t_net * w_r - f_net * vv,
@@ -377,6 +378,17 @@ def best_efficiency_line(engine_map, w_lo, w_hi):
         fuel = np.where(ok, np.asarray(engine_map.fuel_flow(np.where(ok, t, 0.0), speeds), float), np.inf)
         best[j] = speeds[int(np.argmin(fuel))]
     return powers, best, speeds, np.maximum.accumulate(p_full)
+
+
+def shaft_lines(engine_map, cap_speed, cap_power, c):
+    """The full-load line (speeds, torques) and its power's running maximum (speeds, powers) at the engine's
+    shaft, as :func:`split_choice` and :func:`engine_power_limit` read them: the crank's
+    (:func:`best_efficiency_line`) less what the engine's own accessories take
+    (:func:`vpsim.model.engine.accessory_torque`; none by default: the crank's lines unchanged)."""
+    speeds = engine_map.max_torque_speed
+    t_acc = np.array([en.accessory_torque(float(w), c) for w in speeds])
+    p_acc = np.array([en.accessory_torque(float(w), c) * w for w in cap_speed])
+    return (speeds, engine_map.max_torque_values - t_acc), (cap_speed, np.maximum(cap_power - p_acc, 0.0))
 
 
 # --- the management's choice at one step (every method's power split calls it) ---------------------------
