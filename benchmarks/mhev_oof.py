@@ -4,6 +4,7 @@
     python benchmarks/mhev_oof.py LIST --csv DIR     # also the per-vehicle rows: DIR/mhev.csv, DIR/conv.csv
     python benchmarks/mhev_oof.py LIST --no-conventional
     python benchmarks/mhev_oof.py LIST --converter   # the automatics' torque converter in the mild hybrids
+    python benchmarks/mhev_oof.py LIST --crank-accessories   # the fitted load on the crank (not kept)
 
 Runs exactly the fleet run's mild-hybrid part (``vpsim.fleet.run._run_mhevs``: the mild hybrids' family
 folds, the classes ``mhev_p0`` / ``mhev_p1``, the technology grid and fit, one backward ECMS run per
@@ -144,7 +145,14 @@ def main() -> None:
         action="store_true",
         help="the torque-converter automatics with their converter (mhev.CONVERTER; the fleet: off)",
     )
+    ap.add_argument(
+        "--crank-accessories",
+        action="store_true",
+        help="fit the accessory load on the crank (engine.accessory_power) instead of the electric network",
+    )
     a = ap.parse_args()
+    if a.crank_accessories:
+        mm.fit_accessories_on("engine")
     if a.csv:  # made (or refused) now, not after minutes of runs
         try:
             Path(a.csv).mkdir(parents=True, exist_ok=True)

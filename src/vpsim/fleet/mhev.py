@@ -152,6 +152,8 @@ BOUND_REASONS = {
     ("engine.thermal_efficiency", "high"): "0.54 indicated efficiency is beyond the best production engines",
     ("electric.accessory_power", "low"): "no accessory load is the physical lower end",
     ("electric.accessory_power", "high"): "3 kW is the conventional classes' bound (vpsim.fleet.calibrate)",
+    ("engine.accessory_power", "low"): "no accessory load is the physical lower end",
+    ("engine.accessory_power", "high"): "3 kW is the conventional classes' bound (vpsim.fleet.calibrate)",
     ("engine.friction_coefficient", "low"): cal.BOUND_REASONS[("engine.friction_coefficient", "low")],
     ("engine.friction_coefficient", "high"): "2.9 is the conventional classes' bound (vpsim.fleet.calibrate)",
 }
@@ -393,11 +395,23 @@ def grid_chunk(items: list[tuple[MHEVRecord, tuple[str, ...]]]) -> list[dict]:
 # (efficiency, accessories) at one friction, the friction its third axis: at each friction of FRICTION_FINE,
 # ln fuel is interpolated linearly in the friction between its nodes (the friction mean effective pressure is
 # linear in the coefficient, as the conventional grid takes it)
-GRID = TechGrid(
-    TECH_PARAMS[:2], EFFICIENCY_AXIS, EFFICIENCY_FINE, ACCESSORY_NODES_W, ACCESSORY_AXIS, "mild hybrid"
-)
-TECH = ThirdAxis(TECH_PARAMS[2], FRICTION_AXIS, FRICTION_FINE, GRID)
-fit, search_bounds, on_bounds = TECH.fit, TECH.search_bounds, TECH.on_bounds
+def fit_accessories_on(where: str) -> None:
+    """Where the fitted accessory load sits: ``"electric"`` (the electric network, as the fleet runs) or
+    ``"engine"`` (the crank, ``engine.accessory_power``, while the engine turns; the electric network then
+    keeps the preset's load). Tried out of fold on 2026-12-07 and not kept (docs/fleet.md, "Mild hybrids";
+    ``benchmarks/mhev_oof.py --crank-accessories``). Sets :data:`TECH_PARAMS` and the grid in this process."""
+    global TECH_PARAMS, GRID, TECH, fit, search_bounds, on_bounds
+    if where not in ("electric", "engine"):
+        raise ValueError(f"accessories on {where!r}: expected 'electric' or 'engine'")
+    TECH_PARAMS = (TECH_PARAMS[0], f"{where}.accessory_power", TECH_PARAMS[2])
+    GRID = TechGrid(
+        TECH_PARAMS[:2], EFFICIENCY_AXIS, EFFICIENCY_FINE, ACCESSORY_NODES_W, ACCESSORY_AXIS, "mild hybrid"
+    )
+    TECH = ThirdAxis(TECH_PARAMS[2], FRICTION_AXIS, FRICTION_FINE, GRID)
+    fit, search_bounds, on_bounds = TECH.fit, TECH.search_bounds, TECH.on_bounds
+
+
+fit_accessories_on("electric")
 
 
 def predict_chunk(items: list[tuple[MHEVRecord, str, dict]]) -> list[dict]:
