@@ -143,10 +143,14 @@ def test_energy_balance_closes_with_the_engine_both_machines_and_the_battery(run
 
 def test_dynamic_programming_bounds_ecms_and_the_rules(runs):
     """Charge-sustaining fuel: DP (the optimum on its grid) <= ECMS and DP <= rules on every cycle where the
-    rules follow the trace as well as the DP. ECMS <= rules holds on UDDS (-7.0 %); on HWFET and US06 the ECMS
-    (its equivalence factor the P2's, its engine kept on 5 s once started) ends 1.1 % and 2.2 % above the
-    demand-following rules (2.7 % and 3.3 % without the minimum on time; the gap is reported, not hidden:
-    docs/model.md), bounded here at 1.5 % and 2.5 %."""
+    rules follow the trace as well as the DP (on all three since the rules' choice falls shortest where it
+    falls short). ECMS <= rules holds on UDDS (-7.0 %); on HWFET and US06 the ECMS (its equivalence factor
+    the P2's, its engine kept on 5 s once started) ends 1.1 % and 1.7 % above the demand-following rules (the
+    gap is reported, not hidden: docs/model.md), bounded here at 1.5 % and 2.5 %."""
+    assert all(
+        runs[c, "rule"].trace_miss.seconds <= runs[c, "dp"].trace_miss.seconds
+        for c in ("udds", "hwfet", "us06")
+    )
     for cycle in ("udds", "hwfet", "us06"):
         cs = {m: runs[cycle, m].electric["fuel_l_per_100km_cs"] for m in EMS}
         assert cs["dp"] <= cs["ecms"], (cycle, cs)
@@ -253,6 +257,44 @@ def test_the_hybrid_saves_fuel_against_the_same_engine_alone(runs):
     )
     c = vpsim.simulate("udds", "backward", conv)
     assert runs["udds", "ecms"].electric["fuel_l_per_100km_cs"] < 0.75 * c.fuel_l_per_100km
+
+
+def test_the_rule_falls_short_of_the_trace_no_more_than_any_engine_power_would():
+    """At US06-like demands beyond what MG1 and the pack let the engine and MG2 give, the rule's choice (its
+    demand plus charging, a fifth less while the gear set cannot take it) falls short by at most what the
+    best of the ECMS's engine powers does: the rule may not miss what another choice delivers. (Before
+    2026-12-07 it fell short by 5-72 % more at four of these five points.)"""
+    from vpsim.methods import hev_split as hs
+    from vpsim.model import electric as el
+    from vpsim.model import hybrid as hy
+
+    x = hs._inputs(SPLIT)
+    c, e, m, g, s, tabs, h = x["c"], x["e"], x["m"], x["g"], x["s"], x["tabs"], x["h"]
+    eng, opt, inv_cap = sp.line_tables(x["lines"], x["best"], x["cap"])
+    soc = 0.55
+    battery = el.battery_state(
+        soc, e, tabs[el.TAB_SOC], tabs[el.TAB_OCV], tabs[el.TAB_R_DIS], tabs[el.TAB_R_CHG]
+    )
+    levels = SPLIT.hybrid.torque_levels
+    for v, a in ((10.0, 3.0), (15.0, 2.5), (20.0, 2.0), (25.0, 1.5), (30.0, 1.2)):
+        iv = sp.split_interval(v, a, x["ratio"], c, e, m, g, s, tabs)
+        assert iv[9] <= iv[10]  # the engine may run
+        p_high = sp.engine_power_limit(iv[10], x["cap"][0], x["cap"][1], inv_cap)
+        p_follow = sp.demand_power(iv, e, p_high)
+        on, p_e, found = sp.split_choose(
+            iv, battery, soc, 1.0, 10.0, 1.0, hy.EMS_RULE, levels, True, p_follow, p_high,
+            c, e, m, g, s, tabs, h, eng, opt, hy.dp_grid(SPLIT), np.zeros((2, 2, 2)), 1,
+        )  # fmt: skip
+        assert found and on == 1.0
+        short = sp.split_choice(iv, battery, on, p_e, c, e, m, g, s, tabs, eng, opt)[13]
+        others = []
+        for u in range(1, levels + 2):
+            p_u = sp.engine_power_choice(u, levels, p_follow, p_high)
+            q = sp.split_choice(iv, battery, 1.0, p_u, c, e, m, g, s, tabs, eng, opt)
+            if q[sp.P_FEASIBLE] > 0.0:
+                others.append(q[13])
+        assert short > 100.0  # the demand is beyond the powertrain here
+        assert short <= min(others) * (1.0 + 1e-9), (v, a, short, min(others))
 
 
 def test_trace_misses_are_counted(runs):

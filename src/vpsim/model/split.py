@@ -444,6 +444,16 @@ def split_choose(
                 p_try *= 0.8
         if not found:
             found = split_choice(interval, battery, 0.0, 0.0, c, e, m, g, s, tabs, eng, opt)[24] > 0.0
+        if runs:  # the trace first: where the rule's choice falls short, the engine power that misses least
+            pt = split_choice(interval, battery, choice_on, choice_p, c, e, m, g, s, tabs, eng, opt)
+            short = pt[13] if pt[P_FEASIBLE] > 0.0 else math.inf
+            if short > hy.MISS_TOLERANCE_N:
+                for u in range(1, levels + 2):
+                    p_e = engine_power_choice(u, levels, p_follow, p_high)
+                    q = split_choice(interval, battery, 1.0, p_e, c, e, m, g, s, tabs, eng, opt)
+                    if q[P_FEASIBLE] > 0.0 and q[13] < short * (1.0 - 1e-9) - hy.MISS_TOLERANCE_N:
+                        short = q[13]
+                        choice_on, choice_p, found = 1.0, p_e, True
     else:
         s_factor = hy.equivalence_factor(soc, h)
         keep = ems == hy.EMS_ECMS and runs and hy.must_keep_running(on, on_time, h)
