@@ -24,7 +24,10 @@ vehicle and test, no peer) with one change made in this process only:
   for a machine without magnets: no flux at zero torque, so no no-load iron loss, and its bearings and
   windage in the coast-down);
 * ``regen_share_0.8``: the machine takes 80 % of a braking demand (blending that leaves a fifth to the
-  friction brakes; the preset: all of it).
+  friction brakes; the preset: all of it);
+* ``drive_eff_0.93``, ``drive_eff_0.90``: the drive's efficiency (``transmission.efficiency``: the
+  reduction's, and the loss proportional to the power passed that the loss model does not carry) at that
+  value for every car (the preset: 0.97).
 
 Prints per variant the UDDS and highway n / median / median |error| / p90 |error| (MPGe, out of fold) and the
 per-class UDDS median |error|; CPU seconds per variant.
@@ -56,6 +59,8 @@ VARIANTS = (
     "no_spin_pm+regen_low",
     "no_spin_all",
     "regen_share_0.8",
+    "drive_eff_0.93",
+    "drive_eff_0.90",
 )
 
 
@@ -78,6 +83,8 @@ def _parameters(variant: str, shipped):
             p = p.with_changes(machine={"kind": "induction"})
         if variant == "regen_share_0.8":
             p = p.with_changes(electric={"regen_share": 0.8})
+        if variant.startswith("drive_eff_"):
+            p = p.with_changes(transmission={"efficiency": float(variant.rsplit("_", 1)[1])})
         if variant.endswith("regen_low"):
             p = p.with_changes(electric={"regen_speed_low": 0.0, "regen_speed_high": 0.5})
         if variant == "wheel_inertia":
