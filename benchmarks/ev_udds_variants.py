@@ -27,7 +27,13 @@ vehicle and test, no peer) with one change made in this process only:
   friction brakes; the preset: all of it);
 * ``drive_eff_0.93``, ``drive_eff_0.90``: the drive's efficiency (``transmission.efficiency``: the
   reduction's, and the loss proportional to the power passed that the loss model does not carry) at that
-  value for every car (the preset: 0.97).
+  value for every car (the preset: 0.97), with the two-parameter fit;
+* ``two_parameter``: the fit before the drive efficiency became its third parameter (2026-12-07): the loss
+  scale and the accessories, the drive at the preset's 0.97.
+
+``base`` is the shipped three-parameter fit; every other variant changes one thing on it, except the
+``drive_eff_*`` and ``two_parameter`` variants, which run the two-parameter fit (as every variant did
+before 2026-12-07, when docs/fleet.md's table of them was measured).
 
 Prints per variant the UDDS and highway n / median / median |error| / p90 |error| (MPGe, out of fold) and the
 per-class UDDS median |error|; CPU seconds per variant.
@@ -61,6 +67,7 @@ VARIANTS = (
     "regen_share_0.8",
     "drive_eff_0.93",
     "drive_eff_0.90",
+    "two_parameter",
 )
 
 
@@ -98,15 +105,27 @@ def _parameters(variant: str, shipped):
 
 def run_variant(cars, variant: str) -> list[dict]:
     shipped_params, shipped_coeff = ev.ev_parameters, dict(mc.DEFAULT_COEFFICIENTS)
+    shipped_fit = (ev.TECH_PARAMS, ev.grid_chunk, ev.fit, ev.on_bounds)
     try:
         mc.DEFAULT_COEFFICIENTS.update(_coefficients(variant))
         ev.ev_parameters = _parameters(variant, shipped_params)
+        if variant.startswith("drive_eff_") or variant.startswith("two_parameter"):
+            # the fit as it was before the drive efficiency became its third parameter: the loss scale and
+            # the accessories only (the drive efficiency the variant's, or the preset's)
+            ev.TECH_PARAMS = ev.TECH_PARAMS[:2]
+            ev.grid_chunk = _two_parameter_grid_chunk
+            ev.fit, ev.on_bounds = ev.GRID.fit, ev.GRID.on_bounds
         out = fleet_run._run_evs(cars.ev_vehicles, 5, "family", fleet_run._Serial(), {}, False, {})
     finally:
         ev.ev_parameters = shipped_params
         mc.DEFAULT_COEFFICIENTS.update(shipped_coeff)
+        ev.TECH_PARAMS, ev.grid_chunk, ev.fit, ev.on_bounds = shipped_fit
     by_key = {(v.vehicle_id, v.configuration): ev.ev_class(v) for v in cars.ev_vehicles}
     return [{**r, "class": by_key[(r["vehicle_id"], r["configuration"])]} for r in out["rows"]]
+
+
+def _two_parameter_grid_chunk(items):
+    return ev.GRID.grid_chunk(items, lambda rec, _: ev.ev_parameters(rec), ev._wall_of, "log_wall", "energy")
 
 
 def _stats(errors) -> str:

@@ -89,6 +89,8 @@ def test_the_fleet_fits_the_bev_class_out_of_fold(tmp_path):
         assert fit["n_train"] == n_other  # the rows of the other folds, none of its own
         assert r.machine_loss_scale == fit["machine.loss_scale"]
         assert r.accessory_power_w == fit["electric.accessory_power"]
+        assert r.drive_efficiency == fit["transmission.efficiency"]
+        assert ev.DRIVE_EFFICIENCY_AXIS[0] <= r.drive_efficiency <= ev.DRIVE_EFFICIENCY_AXIS[-1]
     # the fit reproduces on the same rows: the folds are deterministic
     again = cal.assign_folds(list(fold_of), 3, groups=group_of)
     assert again == fold_of
@@ -165,6 +167,7 @@ def test_the_fleet_summary_has_the_powertrains_and_the_bev_peers(tmp_path, capsy
     fit = tech["bev"]["all_vehicles"]["bev"]
     assert p.machine.loss_scale == pytest.approx(fit["machine.loss_scale"])
     assert p.electric.accessory_power == pytest.approx(fit["electric.accessory_power"])
+    assert p.transmission.efficiency == pytest.approx(fit["transmission.efficiency"])
     assert math.isfinite(p.battery.cells_in_parallel)
 
 

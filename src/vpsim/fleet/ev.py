@@ -59,7 +59,7 @@ from .epa import (
     MPH_TO_MPS,
     CertificationRecord,
 )
-from .techgrid import TechGrid
+from .techgrid import TechGrid, ThirdAxis
 
 BASE_PRESET = "bev"
 EV_FUEL = "Electricity"
@@ -81,7 +81,11 @@ ACCESSORY_POWER_W = 300.0  # before calibration: the bev preset's 12 V loads, pu
 MPGE_KWH = 33.705
 
 # --- technology (the class "bev"): two parameters, search bounds set before any vpsim EV result ---------
-TECH_PARAMS = ("machine.loss_scale", "electric.accessory_power")
+# the third, the drive's efficiency (transmission.efficiency: the reduction's, and the part of the inverter's
+# and machine's loss proportional to the power they pass, which the loss model's current- and speed-shaped
+# terms do not carry), fitted since 2026-12-07 (fleet/tuned.py declares it); FASTSim's calibrated BEV peer
+# fits its drivetrain efficiency too (vpsim.fleet.peer_bev)
+TECH_PARAMS = ("machine.loss_scale", "electric.accessory_power", "transmission.efficiency")
 # the classes (:func:`ev_class`); the split by the record's gears and driven axles, and the induction
 # models, were added after the single class's errors were seen (fleet/tuned.py declares them)
 CLASSES = ("bev", "bev_awd", "bev_two_speed", "bev_induction", "bev_eesm")
@@ -112,6 +116,11 @@ LOSS_SCALE_AXIS = np.array([0.01, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3, 0.4, 0.55, 0.
 LOSS_SCALE_FINE = np.round(np.arange(0.01, 1.5001, 0.01), 4)
 ACCESSORY_NODES_W = (0.0, 1000.0)  # run at both; the energy between (and beyond) is linear in the power
 ACCESSORY_AXIS = np.arange(0.0, 2000.1, 25.0)  # W: 0 to 2 kW (12 V loads, pumps, fans; no climate control)
+# the drive efficiency's run nodes (ln energy interpolated linearly between them) and the values searched: 1
+# (no proportional loss) down to 0.86 (14 % of the power lost in passing, beyond a 2022 drive unit's);
+# set before the axis was first run
+DRIVE_EFFICIENCY_AXIS = np.array([0.86, 0.91, 0.96, 1.0])
+DRIVE_EFFICIENCY_FINE = np.round(np.arange(0.86, 1.00001, 0.005), 4)
 BOUND_REASONS = {
     ("machine.loss_scale", "low"): "a hundredth of the fitted loss model is all but a lossless machine and "
     "inverter",
@@ -119,6 +128,9 @@ BOUND_REASONS = {
     ("electric.accessory_power", "low"): "no accessory load is the physical lower end",
     ("electric.accessory_power", "high"): "2 kW on a test with climate control off is beyond a car's 12 V "
     "loads, pumps and fans",
+    ("transmission.efficiency", "low"): "a drive losing 14 % of the power it passes is beyond a 2022 drive "
+    "unit",
+    ("transmission.efficiency", "high"): "1 is a drive with no loss proportional to its power",
 }
 
 
@@ -398,6 +410,7 @@ def ev_vehicle_toml(rec: EVRecord, params, source: str = "", technology_note: st
         "vehicle.wheel_radius": rec.ratio_rule,
         "transmission.final_drive": rec.ratio_rule,
         "transmission.gearbox_ratios": "single reduction",
+        "transmission.efficiency": technology_note or "default: the bev preset's",
         "machine.rated_power": "record: rated power (W)",
         "machine.max_speed": f"default: the speed at {TOP_SPEED_MPH:g} mph (rad/s)",
         "machine.base_speed": f"default: max speed / {SPEED_RATIO:g} (rad/s)",
@@ -486,15 +499,17 @@ def _wall_of(rec: EVRecord, name: str):
 
 
 def grid_chunk(items: list[tuple[EVRecord, tuple[str, ...]]]) -> list[dict]:
-    """Backward runs of each (record, cycles) at every loss-scale node and both accessory nodes:
-    ``log_wall`` (len(LOSS_SCALE_AXIS), 2) of ln wall Wh/km, or ``error``."""
-    return GRID.grid_chunk(items, lambda rec, _: ev_parameters(rec), _wall_of, "log_wall", "energy")
+    """Backward runs of each (record, cycles) at every loss-scale node, drive-efficiency node and both
+    accessory nodes: ``log_wall`` (len(LOSS_SCALE_AXIS), len(DRIVE_EFFICIENCY_AXIS), 2) of ln wall Wh/km,
+    or ``error``."""
+    return TECH.grid_chunk(items, lambda rec, _: ev_parameters(rec), _wall_of, "log_wall", "energy")
 
 
 GRID = TechGrid(
-    TECH_PARAMS, LOSS_SCALE_AXIS, LOSS_SCALE_FINE, ACCESSORY_NODES_W, ACCESSORY_AXIS, "electric vehicle"
+    TECH_PARAMS[:2], LOSS_SCALE_AXIS, LOSS_SCALE_FINE, ACCESSORY_NODES_W, ACCESSORY_AXIS, "electric vehicle"
 )
-surrogate, fit, search_bounds, on_bounds = GRID.surrogate, GRID.fit, GRID.search_bounds, GRID.on_bounds
+TECH = ThirdAxis(TECH_PARAMS[2], DRIVE_EFFICIENCY_AXIS, DRIVE_EFFICIENCY_FINE, GRID)
+fit, search_bounds, on_bounds = TECH.fit, TECH.search_bounds, TECH.on_bounds
 
 
 def predict_chunk(items: list[tuple[EVRecord, str, dict]]) -> list[dict]:
@@ -515,6 +530,7 @@ def predict_chunk(items: list[tuple[EVRecord, str, dict]]) -> list[dict]:
                 row["wall_wh_per_km"] = float(s["wall_wh_per_km"])
                 row["trace_miss_s"] = float(r.deviations.demand_not_deliverable_s or 0.0)
                 row["battery_strings"] = p.battery.cells_in_parallel
+                row["drive_efficiency"] = p.transmission.efficiency
             except Exception as exc:
                 row["error"] = _one_line(exc)
             out.append(row)

@@ -133,8 +133,9 @@ def _powertrain_md(run, s) -> list[str]:
             + ", ".join(f"`{k}` {lo:g}-{hi:g}" for k, (lo, hi) in ev.search_bounds().items())
             + "):",
             "",
-            "| fold.class | machine loss scale | accessories, W | training rows | on a bound |",
-            "|---|---|---|---|---|",
+            "| fold.class | machine loss scale | accessories, W | drive efficiency | training rows "
+            "| on a bound |",
+            "|---|---|---|---|---|---|",
         ]
         for k, t in {
             **run.ev["technology"],
@@ -142,7 +143,8 @@ def _powertrain_md(run, s) -> list[str]:
         }.items():
             hits = ev.on_bounds(t)
             L.append(
-                f"| {k} | {t[ev.TECH_PARAMS[0]]:.2f} | {t[ev.TECH_PARAMS[1]]:.0f} | {t['n_train']} | "
+                f"| {k} | {t[ev.TECH_PARAMS[0]]:.2f} | {t[ev.TECH_PARAMS[1]]:.0f} | "
+                f"{t[ev.TECH_PARAMS[2]]:.3f} | {t['n_train']} | "
                 + (", ".join(f"{p.split('.')[1]} {side}" for p, side in hits.items()) or "–")
                 + " |"
             )

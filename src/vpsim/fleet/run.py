@@ -64,6 +64,7 @@ EV_COLUMNS = (
     "battery_strings",
     "machine_loss_scale",
     "accessory_power_w",
+    "drive_efficiency",
     "trace_miss_s",
     "fastsim_mpge",
     "fastsim_error_pct",

@@ -181,6 +181,7 @@ def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings) -> d
                 "battery_strings": evm.pack_strings(v.rated_power_kw * 1e3),
                 "machine_loss_scale": t[evm.TECH_PARAMS[0]],
                 "accessory_power_w": t[evm.TECH_PARAMS[1]],
+                "drive_efficiency": math.nan,
                 "trace_miss_s": math.nan,
                 "fastsim_mpge": math.nan,
                 "fastsim_error_pct": math.nan,
@@ -197,6 +198,7 @@ def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings) -> d
                 row["predicted_mpge"] = round(pred["mpge"], 4)
                 row["error_pct"] = round(100.0 * (pred["mpge"] / meas_c - 1.0), 4)
                 row["trace_miss_s"] = pred["trace_miss_s"]
+                row["drive_efficiency"] = pred["drive_efficiency"]  # the run's (the fit's third parameter)
                 if pred["trace_miss_s"] > 0:
                     row["status"] = "trace_miss"
                     row["detail"] = (
