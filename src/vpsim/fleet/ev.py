@@ -34,8 +34,9 @@ What is read (one vehicle per ``Test Vehicle ID`` + ``Test Veh Configuration #``
   ``bev_two_speed`` for a two-speed gearbox, ``bev_induction`` for the induction-machine models,
   ``bev_eesm`` for the electrically excited machines' models;
   :data:`TECH_PARAMS`, fitted out of fold by :func:`fit` per class as the conventional classes are):
-  ``machine.loss_scale`` (the drive's efficiency level: the machine's and inverter's losses times it) and
-  ``electric.accessory_power``; the charger's efficiency stays the preset's :data:`CHARGER_EFFICIENCY`.
+  ``machine.loss_scale`` (the machine's and inverter's losses times it), ``electric.accessory_power`` and
+  ``transmission.efficiency`` (the drive's loss proportional to the power it passes; since 2026-12-07);
+  the charger's efficiency stays the preset's :data:`CHARGER_EFFICIENCY`.
 
 Exclusions (one reason per vehicle, ``electric, <what>: <detail>``): no charge-depleting UDDS or highway
 test; the tests in two units; a missing or implausible field; a rated power below
@@ -80,7 +81,7 @@ CHARGER_EFFICIENCY = 0.88  # the bev preset's wall-to-battery efficiency (level 
 ACCESSORY_POWER_W = 300.0  # before calibration: the bev preset's 12 V loads, pumps and fans
 MPGE_KWH = 33.705
 
-# --- technology (the class "bev"): two parameters, search bounds set before any vpsim EV result ---------
+# --- technology (the class "bev"): three parameters, search bounds set before any vpsim EV result -------
 # the third, the drive's efficiency (transmission.efficiency: the reduction's, and the part of the inverter's
 # and machine's loss proportional to the power they pass, which the loss model's current- and speed-shaped
 # terms do not carry), fitted since 2026-12-07 (fleet/tuned.py declares it); FASTSim's calibrated BEV peer
