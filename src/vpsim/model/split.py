@@ -443,9 +443,9 @@ def split_choose(
                     break
                 p_try *= 0.8
         if not found:
-            found = split_choice(interval, battery, 0.0, 0.0, c, e, m, g, s, tabs, eng, opt)[24] > 0.0
-        if runs:  # the trace first: where the rule's choice falls short, the engine power that misses least
-            pt = split_choice(interval, battery, choice_on, choice_p, c, e, m, g, s, tabs, eng, opt)
+            pt = split_choice(interval, battery, 0.0, 0.0, c, e, m, g, s, tabs, eng, opt)
+            found = pt[P_FEASIBLE] > 0.0
+        if runs:  # the trace first: where the rule's choice (pt) falls short, the power that misses least
             short = pt[13] if pt[P_FEASIBLE] > 0.0 else math.inf
             if short > hy.MISS_TOLERANCE_N:
                 for u in range(1, levels + 2):
