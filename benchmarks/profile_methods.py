@@ -78,6 +78,7 @@ def split_backward(p, cyc, schedule, em):
     rows = np.empty((backward.N_ROWS, n))
     acc = np.empty(backward.N_ACC)
     out = np.empty((backward.N_SAMPLE_ROWS, n + 1))
+    gear_out, engaged_out = np.empty(n + 1, dtype=np.int64), np.empty(n + 1, dtype=np.bool_)
     steps = backward.gearbox_steps(p.transmission)
     generated = True
     peer = _peer_udds_us()
@@ -96,7 +97,9 @@ def split_backward(p, cyc, schedule, em):
         with_rows = median_us(lambda: kernel(rows), 2000)
         sums_only = median_us(lambda: kernel(np.empty((backward.N_ROWS, 0))), 2000)
         kernel(rows)
-        sample = median_us(lambda: backward.sample_rows(rows, gear, steps, recs, generated, out), 2000)
+        sample = median_us(
+            lambda: backward.sample_rows(rows, gear, steps, recs, generated, out, gear_out, engaged_out), 2000
+        )
         print(
             f"backward udds, {mode} mode: simulate {call:.1f} us = the pass {with_rows:.1f} us "
             f"({sums_only:.1f} us without the series' rows) + sample_rows {sample:.1f} us + "

@@ -418,6 +418,19 @@ def _intervals(cycle) -> tuple:
     return readonly((dt, v, a, en.speed_power_scaled(v)))
 
 
+def _prepared(params) -> tuple:
+    """(engine map, its kernel arrays, kernel records, total ratios, gearbox steps) of a parameter set run on
+    the model's own map: the look-ups every run of it makes, done once and kept on the (frozen) set."""
+    engine_map = cached_engine_map(params.engine)
+    return (
+        engine_map,
+        _map_arrays(engine_map, params),
+        kernel_records(params),
+        total_ratios(params.transmission),
+        gearbox_steps(params.transmission),
+    )
+
+
 def _map_arrays(engine_map, params):
     """(fuel kind, table speed, table torque, table, line speeds, max line, min line, max line's slopes, min
     line's slopes) for the kernels; a generated map's once per map."""
@@ -461,21 +474,22 @@ def run(
 ) -> Result:
     """Run the BQM on ``cycle``. ``engine_map`` defaults to the map generated from ``params.engine``."""
     mode = rules.canonical_mode(mode)
-    if engine_map is None:
-        engine_map = cached_engine_map(params.engine)
+    if engine_map is None:  # the model's own map: what the run takes from the parameter set, prepared once
+        engine_map, arrays, recs, ratios, steps = memo(params, "backward_prepared", _prepared)
         if schedule is None:
             schedule = schedule_for(cycle, params)
-    elif not isinstance(engine_map, GeneratedEngineMap) and not isinstance(engine_map, EngineMap):
-        raise TypeError(
-            f"engine_map must implement vpsim.model.maps.EngineMap, got {type(engine_map).__name__}"
-        )
+    else:
+        if not isinstance(engine_map, GeneratedEngineMap) and not isinstance(engine_map, EngineMap):
+            raise TypeError(
+                f"engine_map must implement vpsim.model.maps.EngineMap, got {type(engine_map).__name__}"
+            )
+        arrays = _map_arrays(engine_map, params)
+        recs, ratios, steps = kernel_records(params), total_ratios(params.transmission), None
     if schedule is None:
         schedule = default_schedule(cycle, params, engine_map)
     extended = mode == "realistic"
-    kind, m_speed, m_torque, table, l_speed, l_max, l_min, s_max, s_min = _map_arrays(engine_map, params)
+    kind, m_speed, m_torque, table, l_speed, l_max, l_min, s_max, s_min = arrays
     generated = isinstance(engine_map, GeneratedEngineMap)
-    recs = kernel_records(params)
-    ratios = total_ratios(params.transmission)
     n = cycle.time_s.size - 1
 
     def passes(time_s, intervals, keep):
@@ -542,7 +556,7 @@ def run(
     # positional: rules.ENERGY_TERMS is EnergyBalance's field order (tests/test_result.py holds them
     # equal); the keyword form cost 2 us of a 100 us run
     energy = EnergyBalance(*sums[: rules.N_TERMS]) if generated else None
-    series = _sample_series(cycle, params, rows, gear, generated) if keep_series else {}
+    series = _sample_series(cycle, params, rows, gear, generated, steps, recs) if keep_series else {}
     trace.details["torque_beyond_full_load_s"] = trace.seconds
     r = _result(cycle, params, mode, series, sums[A_FUEL], sums[A_DIST], cpu, n, trace, energy)
     if stop_start:
@@ -572,11 +586,10 @@ def intervals(
     }
 
 
-# columns of the per-sample series (the core columns of vpsim.result, at the cycle's samples)
-(S_ACC, S_GEAR, S_RATIO, S_W, S_TCR, S_TE, S_P, S_THR, S_MDOT, S_USED, S_BRAKE, S_SHORT, S_ENGAGED) = range(
-    13
-)
-N_SAMPLE_ROWS = 13
+# columns of the per-sample series (the core columns of vpsim.result, at the cycle's samples) of float type;
+# the gear and the clutch's state have arrays of their own types (integer, boolean)
+(S_ACC, S_RATIO, S_W, S_TCR, S_TE, S_P, S_THR, S_MDOT, S_USED, S_BRAKE, S_SHORT) = range(11)
+N_SAMPLE_ROWS = 11
 
 
 @inline
@@ -586,8 +599,9 @@ def _pair_mean(rows, r, k):
 
 
 @kernel(_nrt=False)
-def sample_rows(rows, gear, steps, recs, generated, out):
-    """The per-interval rows at the cycle's samples (``out``: N_SAMPLE_ROWS x samples); ``steps``: the
+def sample_rows(rows, gear, steps, recs, generated, out, gear_out, engaged_out):
+    """The per-interval rows at the cycle's samples (``out``: N_SAMPLE_ROWS x samples; ``gear_out`` the gear,
+    ``engaged_out`` whether the clutch is engaged, one per sample); ``steps``: the
     gearbox ratio of each gear (:func:`vpsim.gears.gearbox_ratio_series` for the gears the method engaged,
     which are within 1..len(steps)).
 
@@ -617,20 +631,20 @@ def sample_rows(rows, gear, steps, recs, generated, out):
     for k in range(1, n):
         out[S_SHORT, k] = max(rows[R_SHORT, k - 1], rows[R_SHORT, k])
     for k in range(1, n):
-        out[S_ENGAGED, k] = 1.0 if rows[R_CLUTCH, k] != rules.CLUTCH_OPEN else 0.0
+        engaged_out[k] = rows[R_CLUTCH, k] != rules.CLUTCH_OPEN
     for k in range(1, n):
-        out[S_P, k] = _pair_mean(rows, R_P, k) if generated and out[S_ENGAGED, k] != 0.0 else math.nan
+        out[S_P, k] = _pair_mean(rows, R_P, k) if generated and engaged_out[k] else math.nan
     for k in range(1, n):
-        out[S_THR, k] = _pair_mean(rows, R_THR, k) if generated and out[S_ENGAGED, k] != 0.0 else math.nan
+        out[S_THR, k] = _pair_mean(rows, R_THR, k) if generated and engaged_out[k] else math.nan
     for k in range(1, n):
-        out[S_GEAR, k] = gear[k]
+        gear_out[k] = gear[k]
         out[S_RATIO, k] = steps[gear[k] - 1]
     for k in (0, n):  # the ends: their one interval
         own = k if k < n else n - 1
         engaged = rows[R_CLUTCH, own] != rules.CLUTCH_OPEN
         ok = generated and engaged
         out[S_ACC, k] = rows[R_A, own]
-        out[S_GEAR, k] = gear[own]
+        gear_out[k] = gear[own]
         out[S_RATIO, k] = steps[gear[own] - 1]
         out[S_W, k] = rows[R_W, own]
         out[S_TCR, k] = rows[R_TCR, own]
@@ -641,20 +655,25 @@ def sample_rows(rows, gear, steps, recs, generated, out):
         out[S_USED, k] = rules.fuel_used(rows[R_MDOT, own], rows[R_FIRED, own], c)
         out[S_BRAKE, k] = rows[R_BRAKE, own]
         out[S_SHORT, k] = rows[R_SHORT, own]
-        out[S_ENGAGED, k] = 1.0 if engaged else 0.0
+        engaged_out[k] = engaged
 
 
-def _sample_series(cycle, params, rows, gear, generated) -> dict:
-    """The series at the cycle's samples, the time base of every method (:func:`sample_rows`)."""
+def _sample_series(cycle, params, rows, gear, generated, steps=None, recs=None) -> dict:
+    """The series at the cycle's samples, the time base of every method (:func:`sample_rows`); ``steps`` and
+    ``recs`` the parameter set's gearbox steps and kernel records where the caller has them at hand."""
     out = np.empty((N_SAMPLE_ROWS, gear.size + 1))
-    sample_rows(rows, gear, gearbox_steps(params.transmission), kernel_records(params), generated, out)
-    acc, gear_s, ratio, w, t_cr, t_e, p, thr, mdot, used, brake, short, engaged = out  # (one view each)
+    gear_s = np.empty(gear.size + 1, dtype=np.int64)
+    engaged = np.empty(gear.size + 1, dtype=np.bool_)
+    if steps is None:
+        steps, recs = gearbox_steps(params.transmission), kernel_records(params)
+    sample_rows(rows, gear, steps, recs, generated, out, gear_s, engaged)
+    acc, ratio, w, t_cr, t_e, p, thr, mdot, used, brake, short = out  # (one view each)
     return {
         "time_s": cycle.time_s,
         "reference_speed_mps": cycle.speed_mps,
         "speed_mps": cycle.speed_mps,
         "accel_mps2": acc,
-        "gear": gear_s.astype(np.int64),
+        "gear": gear_s,
         "gearbox_ratio": ratio,
         "engine_speed_radps": w,
         "crank_torque_nm": t_cr,
@@ -665,7 +684,7 @@ def _sample_series(cycle, params, rows, gear, generated) -> dict:
         "fuel_flow_used_kgps": used,
         "brake_force_n": brake,
         "torque_shortfall_nm": short,
-        "clutch_engaged": engaged != 0.0,
+        "clutch_engaged": engaged,
     }
 
 
