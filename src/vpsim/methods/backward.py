@@ -305,9 +305,6 @@ def run_kernel(
     sums = ZERO_SUMS
     g_f18 = -1  # the gear whose factor f18 is at hand (gears change every few seconds, intervals every one)
     f18 = 0.0
-    p_thr = math.nan  # the point whose steady throttle thr is at hand
-    w_thr = math.nan
-    thr = math.nan
     for k in range(gear.size):
         g, j = gear_index(time_s, k, sched_t, sched_gear, j)
         gear[k] = g + 1
@@ -339,11 +336,7 @@ def run_kernel(
             inv_mt,
         )
         if keep:
-            if p != p_thr or w != w_thr:  # (the idling engine's point repeats: its throttle is at hand)
-                thr = _steady_throttle(p, w, c)
-                p_thr = p
-                w_thr = w
-            _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot, thr)
+            _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot, 0.0)
         if book:
             sums = _book(
                 sums,
@@ -367,6 +360,26 @@ def run_kernel(
                 cm18,
             )
     _store_sums(acc, sums)
+    if keep:
+        _steady_throttles(rows, c)
+
+
+@inline
+def _steady_throttles(rows, c):
+    """The steady throttle of every interval's (p_i, w_e) into ``rows``: a loop of its own after the pass,
+    whose iterations do not wait on each other (in the pass each waited on the operating point's long chain:
+    10 us of a 66 us UDDS pass there)."""
+    p_thr = math.nan  # the point whose steady throttle thr is at hand
+    w_thr = math.nan
+    thr = math.nan
+    for k in range(rows.shape[1]):
+        p = rows[R_P, k]
+        w = rows[R_W, k]
+        if p != p_thr or w != w_thr:  # (the idling engine's point repeats: its throttle is at hand)
+            thr = _steady_throttle(p, w, c)
+            p_thr = p
+            w_thr = w
+        rows[R_THR, k] = thr
 
 
 @kernel(_nrt=False)
