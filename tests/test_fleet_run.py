@@ -147,7 +147,16 @@ def _check_outputs(out, cycles):
         "fastsim_calibrated",
         "fastsim_calibrated_by_powertrain",
         "fastsim_by_powertrain",
+        "vpsim_minus_fastsim_calibrated_by_powertrain",
     }
+    diff = s["peer"]["vpsim_minus_fastsim_calibrated_by_powertrain"]
+    if fs.get("measured") is False:
+        assert diff == {"measured": False, "reason": fs["reason"]}
+    else:
+        assert set(diff) == {"conventional", "bev", "hev", "mhev"}
+        for c, d in diff["conventional"].items():  # the same rows as the peer's statistics
+            peer_c = s["peer"]["fastsim_calibrated"][c]
+            assert d["n"] == peer_c["n"] and d["peer_median_abs_error_pct"] == peer_c["median_abs_error_pct"]
     for key, conventional in (
         ("fastsim_calibrated_by_powertrain", "fastsim_calibrated"),
         ("fastsim_by_powertrain", "fastsim"),
@@ -168,6 +177,13 @@ def _check_outputs(out, cycles):
     df = pd.read_csv(out / "vehicles.csv")
     assert tuple(df.columns[: len(CSV_COLUMNS)]) == CSV_COLUMNS
     assert info["n_rows"] == len(df)
+    # every row names its family, and a family sits in one fold (what the bootstrap draws together)
+    for name in ("vehicles.csv", "vehicles_ev.csv", "vehicles_hev.csv", "vehicles_mhev.csv"):
+        if (out / name).exists():
+            rows = pd.read_csv(out / name)
+            if len(rows):
+                assert rows["family"].notna().all()
+                assert rows.groupby("family")["fold"].nunique().max() == 1, name
     for f in (*FIGURES, "report.md", "technology.json"):
         assert (out / f).stat().st_size > 100
     assert pd.read_csv(out / "excluded.csv").columns[-1] == "reason"

@@ -64,6 +64,83 @@ def error_stats(errors) -> dict:
     }
 
 
+BOOTSTRAP_RESAMPLES = 2000
+BOOTSTRAP_SEED = 0
+
+
+def weighted_medians(sorted_values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """The median of ``sorted_values`` (ascending) repeated ``weights[b, i]`` times, for each row b of the
+    integer ``weights``: what ``np.median(np.repeat(sorted_values, weights[b]))`` gives, without the
+    repetition (the middle one or two of the repeated values, their mean)."""
+    cum = np.cumsum(weights, axis=1)
+    total = cum[:, -1:]
+    lo = np.argmax(cum > (total - 1) // 2, axis=1)  # the value at position (T - 1) // 2 of the repetition
+    hi = np.argmax(cum > total // 2, axis=1)  # and at T // 2
+    return 0.5 * (sorted_values[lo] + sorted_values[hi])
+
+
+def paired_difference(
+    errors, peer_errors, families, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED
+) -> dict:
+    """vpsim's median |error| minus the peer's on the same rows (points), and how sure that difference is:
+    a paired bootstrap over whole families (the groups cross-validation holds out together, so that a
+    family's records, alike in both tools' errors, are drawn together), ``resamples`` draws of as many
+    families as there are, with replacement. Rows where either error is missing are left out. Keys: ``n``,
+    ``families``, ``median_abs_error_pct`` (vpsim), ``peer_median_abs_error_pct``, ``difference_pts``,
+    ``ci95_pts`` (the 2.5th and 97.5th percentiles of the resampled differences), ``share_vpsim_lower``
+    (of the resamples), ``resamples``."""
+    e = np.abs(np.asarray(errors, float))
+    q = np.abs(np.asarray(peer_errors, float))
+    fam = np.asarray(families, dtype=object)
+    ok = np.isfinite(e) & np.isfinite(q)
+    e, q, fam = e[ok], q[ok], fam[ok]
+    if e.size == 0:
+        return {"n": 0, "measured": False, "reason": "no row with both predictions"}
+    _, code = np.unique(fam.astype(str), return_inverse=True)
+    n_fam = int(code.max()) + 1
+    counts = np.random.default_rng(seed).multinomial(n_fam, np.full(n_fam, 1.0 / n_fam), size=resamples)
+    diffs = np.zeros(resamples)
+    for x, sign in ((e, 1.0), (q, -1.0)):
+        order = np.argsort(x, kind="stable")
+        diffs += sign * weighted_medians(x[order], counts[:, code[order]])
+    point = float(np.median(e) - np.median(q))
+    lo, hi = np.percentile(diffs, [2.5, 97.5])
+    return {
+        "n": int(e.size),
+        "families": n_fam,
+        "median_abs_error_pct": round(float(np.median(e)), 3),
+        "peer_median_abs_error_pct": round(float(np.median(q)), 3),
+        "difference_pts": round(point, 3),
+        "ci95_pts": [round(float(lo), 3), round(float(hi), 3)],
+        "share_vpsim_lower": round(float(np.mean(diffs < 0.0)), 3),
+        "resamples": int(resamples),
+    }
+
+
+def peer_differences(run) -> dict:
+    """``peer.vpsim_minus_fastsim_calibrated_by_powertrain``: per powertrain and test,
+    :func:`paired_difference` of vpsim's out-of-fold errors against the calibrated FASTSim's on the same
+    rows, resampled by family (by vehicle where a frame has no ``family`` column: rows written before it);
+    ``{"measured": false, "reason": ...}`` where FASTSim was not calibrated on a powertrain's records."""
+    col = "fastsim_calibrated_error_pct"
+    out = {}
+    for name, df, cycles in (
+        ("conventional", run.frame(), run.cycles),
+        ("bev", run.ev_frame(), EV_CYCLES),
+        ("hev", run.hev_frame(), HEV_CYCLES),
+        ("mhev", run.mhev_frame(), MHEV_CYCLES),
+    ):
+        if not len(df) or col not in df or not np.isfinite(df[col].to_numpy(float)).any():
+            out[name] = {"measured": False, "reason": "FASTSim not calibrated on these records"}
+            continue
+        group = "family" if "family" in df else "vehicle_id"
+        out[name] = {}
+        for c in cycles:
+            rows = df[df["cycle"] == c]
+            out[name][c] = paired_difference(rows["error_pct"], rows[col], rows[group])
+    return out
+
+
 def summary(run) -> dict:
     """The summary with exactly the keys of :data:`SUMMARY_KEYS` (the run's settings: :func:`run_info`)."""
     df = run.frame()
@@ -137,6 +214,11 @@ def summary(run) -> dict:
             out["peer"][key]["bev"] = {"measured": False, "reason": why or "no electric vehicle predicted"}
     _powertrain_block(
         out, run, "mhev", run.mhev_frame(), run.mhev, MHEV_CYCLES, "mild hybrid", MHEV_PEER_NOTE
+    )
+    out["peer"]["vpsim_minus_fastsim_calibrated_by_powertrain"] = (
+        peer_differences(run)
+        if run.peer.get("available")
+        else {"measured": False, "reason": run.peer.get("reason", "not run")}
     )
     return out
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from . import calibrate as cal
 from .report import (
+    BOOTSTRAP_RESAMPLES,
     GROUPS,
     MHEV_PEER_NOTE,
     POWERTRAINS,
@@ -109,7 +110,8 @@ def _powertrain_md(run, s) -> list[str]:
         "battery-electric cars (`vpsim.fleet.ev`): unadjusted MPGe of the charge-depleting UDDS and highway "
         "tests, five classes (`bev`, `bev_awd`, `bev_two_speed`, `bev_induction`, `bev_eesm`: "
         "`vpsim.fleet.ev.ev_class`) "
-        "each with its own technology (`machine.loss_scale`, `electric.accessory_power`) fitted on the same "
+        "each with its own technology (`machine.loss_scale`, `electric.accessory_power`, "
+        "`transmission.efficiency`) fitted on the same "
         "kind of folds (EV families held out together). FASTSim: its BEV (`vpsim.fleet.peer_bev`) on the "
         "same records, calibrated per the same classes.",
         "",
@@ -123,6 +125,7 @@ def _powertrain_md(run, s) -> list[str]:
                 f"| {pt} | {c} | {v['n']} | {trio(v)} | {trio(fc.get(pt, {}).get(c, fc.get(pt)))} | "
                 f"{trio(fs.get(pt, {}).get(c, fs.get(pt)))} |"
             )
+    L += _differences_md(s["peer"]["vpsim_minus_fastsim_calibrated_by_powertrain"])
     bev = s["by_powertrain"]["bev"]
     L += ["", f"Battery-electric vehicles predicted: {bev['n_vehicles']} ({bev['status']})."]
     if run.ev.get("technology"):
@@ -152,6 +155,41 @@ def _powertrain_md(run, s) -> list[str]:
         for p, side in sorted(reasons):
             L.append(f"\n`{p}` on its {side} bound: the bound stays: {ev.BOUND_REASONS.get((p, side), '')}.")
     return L + _hev_md(run, s)
+
+
+def _differences_md(d: dict) -> list[str]:
+    """vpsim's median |error| against the calibrated FASTSim's, with a family bootstrap's interval
+    (``peer.vpsim_minus_fastsim_calibrated_by_powertrain``)."""
+    if d.get("measured") is False:
+        return ["", f"vpsim against the calibrated FASTSim: not measured ({d.get('reason')})."]
+    L = [
+        "",
+        "### vpsim against the calibrated FASTSim, with its uncertainty",
+        "",
+        "Median |error| of vpsim minus that of the calibrated FASTSim on the same rows (points; negative: "
+        "vpsim closer to the measurement), and a 95 % interval from a paired bootstrap that draws whole "
+        f"families (the groups the folds hold out together), {BOOTSTRAP_RESAMPLES} draws. "
+        "An interval that straddles 0 does not tell the two apart on this list.",
+        "",
+        "| powertrain | test | n | families | vpsim | FASTSim calibrated | difference | 95 % interval "
+        "| share of draws with vpsim lower |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for pt, tests in d.items():
+        if tests.get("measured") is False:
+            L.append(f"| {pt} | – | – | – | – | not measured ({tests.get('reason')}) | – | – | – |")
+            continue
+        for c, v in tests.items():
+            if v.get("measured") is False:
+                L.append(f"| {pt} | {c} | 0 | – | – | – | – | – | – |")
+                continue
+            lo, hi = v["ci95_pts"]
+            L.append(
+                f"| {pt} | {c} | {v['n']} | {v['families']} | {v['median_abs_error_pct']:.2f} % | "
+                f"{v['peer_median_abs_error_pct']:.2f} % | {v['difference_pts']:+.2f} | "
+                f"{lo:+.2f} to {hi:+.2f} | {v['share_vpsim_lower']:.2f} |"
+            )
+    return L
 
 
 def _hev_md(run, s) -> list[str]:

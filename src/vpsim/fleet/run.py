@@ -55,6 +55,7 @@ EV_COLUMNS = (
     "error_pct",
     "fold",
     "status",
+    "family",
     "rated_power_kw",
     "test_mass_kg",
     "power_to_mass_w_per_kg",
@@ -86,6 +87,7 @@ HEV_COLUMNS = (
     "error_pct",
     "fold",
     "status",
+    "family",
     "rated_power_kw",
     "test_mass_kg",
     "displacement_l",
@@ -518,7 +520,9 @@ def run_fleet(
     rows = []
     for v, cs in work:
         for c in cs:
-            row = _row(v, c, fold_of[v.key], tech, preds.get((v.key, c)), failed_grid.get((v.key, c)))
+            row = _row(
+                v, c, fold_of[v.key], groups[v.key], tech, preds.get((v.key, c)), failed_grid.get((v.key, c))
+            )
             if peer_state["available"]:
                 pr = peer_rows.get((v.key, c), {})
                 mpg = pr.get("peer_mpg", math.nan)
@@ -567,7 +571,13 @@ def _log_l100(mpg: float) -> float:
 
 
 def _row(
-    v: VehicleRecord, cycle: str, fold: int, tech: dict, pred: dict | None, grid_error: str | None
+    v: VehicleRecord,
+    cycle: str,
+    fold: int,
+    family: str,
+    tech: dict,
+    pred: dict | None,
+    grid_error: str | None,
 ) -> dict:
     t = tech[(fold, _vehicle_class(v))]
     row = {
@@ -582,6 +592,7 @@ def _row(
         "error_pct": math.nan,
         "fold": fold,
         "status": "ok",
+        "family": family,
         "transmission": v.transmission_kind,
         "n_gears": v.n_gears,
         "boosted": v.boosted,
