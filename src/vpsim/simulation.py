@@ -89,17 +89,17 @@ def _method_run(method: str):
     if module is None:
         import importlib
 
-        module = _MODULES[method] = importlib.import_module(f"vpsim.methods.{method}")
+        # (relative: the package imports itself by its own name, as a renamed copy does)
+        module = _MODULES[method] = importlib.import_module(f".methods.{method}", __package__)
     return module.run
 
 
 def _check_options(method: str, options: dict) -> None:
     """The engine car's method takes ``options`` (its ``run``'s keywords beyond those simulate sets), or one
     line saying which it takes: not a TypeError from inside the method."""
-    import importlib
     import inspect
 
-    run = importlib.import_module(f"vpsim.methods.{method}").run
+    run = _method_run(method)
     own = ("cycle", "params", "driver", "schedule", "mode")
     takes = [k for k in inspect.signature(run).parameters if k not in own and not k.startswith("_")]
     for name in options:
