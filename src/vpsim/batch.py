@@ -52,7 +52,7 @@ import numpy as np
 
 from .cycles import Cycle, load_cycle
 from .errors import ParameterError, VpsimError
-from .gears import GearSchedule, default_schedule, load_schedule
+from .gears import GearSchedule, default_schedule, load_schedule, schedule_for
 from .params import Parameters, load_parameters
 
 METHODS = ("backward", "forward")
@@ -120,7 +120,7 @@ def run_batch(
     if method == "backward":
         out = _backward(cycle, params, names, values, schedules, schedule_of_variant, mode, recs)
     else:
-        out = _forward(cycle, params, names, values, schedules, schedule_of_variant, mode, driver, rtol)
+        out = _forward(cycle, params, names, values, schedules, schedule_of_variant, mode, driver, rtol, recs)
     # one construction (a column inserted at a time costs a copy of the frame's block each)
     df = pd.DataFrame({**{name: values[:, j] for j, name in enumerate(names)}, **out})
     df.index.name = "variant"
@@ -394,9 +394,7 @@ def _schedules(cycle, params, names, values, gears):
             rows.append(default_schedule(cycle, p, em).on_cycle(cycle))
         return np.array(rows), np.arange(n)
     if isinstance(gears, str) and gears == "baseline":
-        from .model.maps import cached_engine_map
-
-        schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
+        schedule = schedule_for(cycle, params)  # the rule on the base map, kept per parameter set and cycle
     elif isinstance(gears, GearSchedule):
         schedule = gears
     elif isinstance(gears, str | Path):
@@ -458,7 +456,7 @@ def _stop_start(cycle, params, recs, fuel):
 # --- forward ------------------------------------------------------------------------------------------------
 
 
-def _forward(cycle, params, names, values, schedules, schedule_of_variant, mode, driver, rtol):
+def _forward(cycle, params, names, values, schedules, schedule_of_variant, mode, driver, rtol, recs=None):
     """The forward dynamic method for every variant in one compiled call, parallel over the variants.
 
     Each row is what :func:`vpsim.methods.forward.run` gives that variant without series (same start, same
@@ -473,7 +471,8 @@ def _forward(cycle, params, names, values, schedules, schedule_of_variant, mode,
     pi = PIDriver.from_params(params, driver, mode)  # also validates the driver's name
     (veh, tr, eng, sim), ratios = _sections(params, names, values)
     n = values.shape[0]
-    recs = records(veh, tr, eng, sim)
+    if recs is None:  # (built by the engine check where an engine field varies)
+        recs = records(veh, tr, eng, sim)
     if recs.size != n:
         recs = np.ascontiguousarray(np.broadcast_to(recs, (n,))).view(np.recarray)
     if rtol is None:
