@@ -211,6 +211,11 @@ def test_fleet_cli_on_a_made_up_list(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "13 vehicles" in text
     s, df = _check_outputs(out, ("ftp_bag2", "ftp_bag3", "hwy", "us06"))
+    diff = s["peer"]["vpsim_minus_fastsim_calibrated_by_powertrain"]
+    if diff.get("measured") is not False:  # printed as the summary holds it
+        d = diff["conventional"]["hwy"]
+        lo, hi = d["ci95_pts"]
+        assert f"hwy {d['difference_pts']:+.1f} [{lo:+.1f}, {hi:+.1f}]" in text
     assert s["n_vehicles"] == 13
     assert s["excluded"]["diesel"] == 1
     assert s["excluded"]["electric, no charge-depleting UDDS or highway test"] == 1

@@ -137,6 +137,19 @@ def fleet(
             if "measured" not in peer and c in peer:
                 line += f"   {trio(peer_cal[c]) if c in peer_cal else _NOT_RUN}   {trio(peer[c])}"
             click.echo(line)
+    diffs = s["peer"].get("vpsim_minus_fastsim_calibrated_by_powertrain", {})
+    if diffs.get("measured") is not False and diffs:
+        click.echo(
+            "vpsim minus the calibrated FASTSim, median |error| in points [95 % interval, families drawn]:"
+        )
+        for pt, tests in diffs.items():
+            shown = [
+                f"{c} {d['difference_pts']:+.1f} [{d['ci95_pts'][0]:+.1f}, {d['ci95_pts'][1]:+.1f}]"
+                for c, d in tests.items()
+                if isinstance(d, dict) and d.get("n")
+            ]
+            if shown:
+                click.echo(f"  {pt}: " + "; ".join(shown))
     rep = {c: r for c, r in info.get("record_repeatability", {}).items() if r.get("rows")}
     if rep:
         beyond = "rows_beyond_12_pct_whatever_the_model"
