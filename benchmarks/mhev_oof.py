@@ -5,6 +5,7 @@
     python benchmarks/mhev_oof.py LIST --no-conventional
     python benchmarks/mhev_oof.py LIST --converter   # the automatics' torque converter in the mild hybrids
     python benchmarks/mhev_oof.py LIST --crank-accessories   # the fitted load on the crank (not kept)
+    python benchmarks/mhev_oof.py LIST --aspiration-classes  # the belt class split by aspiration (not kept)
 
 Runs exactly the fleet run's mild-hybrid part (``vpsim.fleet.run._run_mhevs``: the mild hybrids' family
 folds, the classes ``mhev_p0`` / ``mhev_p1``, the technology grid and fit, one backward ECMS run per
@@ -35,6 +36,8 @@ from vpsim.fleet import mhev as mm
 from vpsim.fleet import run as fleet_run
 from vpsim.fleet.cycles import fleet_cycle
 from vpsim.fleet.epa import mpg_from_l_per_100km, read_test_car_list
+
+ASPIRATED = "mhev_p0_aspirated"  # --aspiration-classes
 
 
 def run_mhev(cars, folds: int = 5, group_by: str = "family", changes: dict | None = None) -> dict:
@@ -146,11 +149,22 @@ def main() -> None:
         help="the torque-converter automatics with their converter (mhev.CONVERTER; the fleet: off)",
     )
     ap.add_argument(
+        "--aspiration-classes",
+        action="store_true",
+        help="a class of its own for the aspirated belt-machine cars (mhev_p0_aspirated: the eTorque trucks)",
+    )
+    ap.add_argument(
         "--crank-accessories",
         action="store_true",
         help="fit the accessory load on the crank (engine.accessory_power) instead of the electric network",
     )
     a = ap.parse_args()
+    if a.aspiration_classes:  # in this process only: the fleet's classes are the layouts
+        layout_class = mm.mhev_class
+        mm.CLASSES = (*mm.CLASSES, ASPIRATED)
+        mm.mhev_class = lambda r: (
+            ASPIRATED if layout_class(r) == "mhev_p0" and not r.boosted else layout_class(r)
+        )
     if a.crank_accessories:
         mm.fit_accessories_on("engine")
     if a.csv:  # made (or refused) now, not after minutes of runs
