@@ -91,12 +91,14 @@ def dp_kernel(
             battery = (packs[i, 0], packs[i, 1], packs[i, 2], packs[i, 3], packs[i, 4])
             best0 = math.inf
             best1 = math.inf
+            least_miss = math.inf  # the least trace miss's price among the choices
             for u in range(levels + 2):
                 on = 1.0 if u > 0 else 0.0
                 if u > 0 and not runs:
                     break
                 te = hy.engine_choice_torque(u, levels, t_low, t_high, t_off, interval)
                 pt = hy.p2_choice(interval, battery, on, te, c, e, m, tabs, h)
+                least_miss = min(least_miss, hy.miss_cost(pt, dt[k], c))
                 nxt = soc_grid[i] + bt.soc_rate(pt[8], e.capacity_as, e.coulombic_efficiency) * dt[k]
                 s_next = 1 if pt[16] > 0.0 else 0  # the engine turning after the interval
                 base = hy.ecms_cost(pt, dt[k], False, 0.0, c, e, h) + hy.cost_to_go(
@@ -109,8 +111,8 @@ def dp_kernel(
                     best1 = base
                 if u > 1 and hy.higher_torques_dominated(pt, battery):  # (the levels rise from u = 2)
                     break
-            jcost[k, i, 0] = best0
-            jcost[k, i, 1] = best1
+            jcost[k, i, 0] = hy.less_unavoidable_miss(best0, least_miss)
+            jcost[k, i, 1] = hy.less_unavoidable_miss(best1, least_miss)
 
 
 @kernel(_nrt=False)

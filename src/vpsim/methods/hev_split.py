@@ -95,6 +95,8 @@ def dp_kernel(v, a, dt, ratio, c, e, m, g, s, tabs, h, levels, lines, best, cap,
             best0 = math.inf
             best1 = math.inf
             fallback = math.inf
+            fallback_miss = 0.0
+            least_miss = math.inf  # the least trace miss's price among the feasible choices
             for u in range(levels + 2):
                 if u > 0 and not runs:
                     break
@@ -108,16 +110,22 @@ def dp_kernel(v, a, dt, ratio, c, e, m, g, s, tabs, h, levels, lines, best, cap,
                 if pt[sp.P_FEASIBLE] <= 0.0:
                     if u == 0:
                         fallback = base  # what the causal kernel drives if nothing is feasible
+                        fallback_miss = hy.miss_cost(pt, dt[k], c)
                     if u > 1:  # levels rise: MG1 holds, and the pack takes, no more of a larger power either
                         break
                     continue
+                least_miss = min(least_miss, hy.miss_cost(pt, dt[k], c))
                 c0 = base + (h.engine_start_fuel if u > 0 else 0.0)  # from off: a start
                 best0 = min(best0, c0)
                 best1 = min(best1, base)
                 if u > 1 and sp.higher_powers_dominated(pt, battery):
                     break
-            jcost[k, i, 0] = best0 if best0 < math.inf else fallback
-            jcost[k, i, 1] = best1 if best1 < math.inf else fallback
+            if best1 < math.inf:
+                jcost[k, i, 0] = hy.less_unavoidable_miss(best0, least_miss)
+                jcost[k, i, 1] = hy.less_unavoidable_miss(best1, least_miss)
+            else:
+                jcost[k, i, 0] = hy.less_unavoidable_miss(fallback, fallback_miss)
+                jcost[k, i, 1] = jcost[k, i, 0]
 
 
 @kernel(_nrt=False)

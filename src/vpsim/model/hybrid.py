@@ -393,11 +393,34 @@ def ecms_cost(point, dt, start, s_factor, c, e, h):
     round trip's loss, would cycle the pack (at eta_c = 0.95, the power-split's, it pulsed the engine: it
     charged hard and glided on the battery, 0.57 MJ of battery loss on HWFET against the DP's 0.17)."""
     mdot = point[6]
-    missing = point[13]
     chem = bt.chemical_power(point[9], point[8], e.coulombic_efficiency)
     cost = mdot * dt + s_factor * fuel_equivalent(chem * dt, 1.0, c) + start * h.engine_start_fuel
+    if point[13] > MISS_TOLERANCE_N:
+        cost += miss_cost(point, dt, c)
+    return cost
+
+
+@equation
+def miss_cost(point, dt, c):
+    """The trace miss's part of :func:`ecms_cost` (kg): the wheel work the choice leaves undone over dt, its
+    fuel at the heating value, MISS_PENALTY times over; 0 without a miss."""
+    missing = point[13]
     if missing > MISS_TOLERANCE_N:  # the machine's speed stands in for the vehicle's (same sign, > 0 moving)
-        cost += MISS_PENALTY * fuel_equivalent(missing * (point[0] + 1.0) * dt, 1.0, c)
+        return MISS_PENALTY * fuel_equivalent(missing * (point[0] + 1.0) * dt, 1.0, c)
+    return 0.0
+
+
+@equation
+def less_unavoidable_miss(cost, least_miss):
+    """The DP's cost-to-go at one state less the price of the least trace miss any choice there leaves (0
+    where one follows the trace). The choice at the state is the same (the price is a constant there); what
+    changes is that a charge is not worth more for shrinking a miss no choice can avoid. With the price in,
+    the DP bought a smaller unavoidable miss with fuel: on the power split's US06, where MG1 and the pack's
+    current cap the hardest accelerations at any charge, it charged to the top of its grid (0.60 -> 0.70)
+    for a higher pack voltage there, and was no longer the lower bound of the fuel the causal managements
+    are judged against (docs/model.md, "Energy management")."""
+    if least_miss < math.inf and least_miss > 0.0:
+        return cost - least_miss
     return cost
 
 
