@@ -6,6 +6,7 @@
     python benchmarks/mhev_oof.py LIST --converter   # the automatics' torque converter in the mild hybrids
     python benchmarks/mhev_oof.py LIST --crank-accessories   # the fitted load on the crank (not kept)
     python benchmarks/mhev_oof.py LIST --aspiration-classes  # the belt class split by aspiration (not kept)
+    python benchmarks/mhev_oof.py LIST --accessory-max 1000  # the fitted load capped (not kept)
 
 Runs exactly the fleet run's mild-hybrid part (``vpsim.fleet.run._run_mhevs``: the mild hybrids' family
 folds, the classes ``mhev_p0`` / ``mhev_p1``, the technology grid and fit, one backward ECMS run per
@@ -158,6 +159,13 @@ def main() -> None:
         action="store_true",
         help="fit the accessory load on the crank (engine.accessory_power) instead of the electric network",
     )
+    ap.add_argument(
+        "--accessory-max",
+        type=float,
+        default=None,
+        metavar="W",
+        help="the fitted accessory load's upper bound (W; the fleet: 3,000, the conventional classes' bound)",
+    )
     a = ap.parse_args()
     if a.aspiration_classes:  # in this process only: the fleet's classes are the layouts
         layout_class = mm.mhev_class
@@ -165,6 +173,9 @@ def main() -> None:
         mm.mhev_class = lambda r: (
             ASPIRATED if layout_class(r) == "mhev_p0" and not r.boosted else layout_class(r)
         )
+    if a.accessory_max is not None:  # in this process only
+        mm.ACCESSORY_AXIS = mm.ACCESSORY_AXIS[mm.ACCESSORY_AXIS <= a.accessory_max]
+        mm.fit_accessories_on("electric")
     if a.crank_accessories:
         mm.fit_accessories_on("engine")
     if a.csv:  # made (or refused) now, not after minutes of runs
