@@ -1,0 +1,106 @@
+"""How much the fleet's headline figures move with the deal of families into folds (not shipped).
+
+    python benchmarks/fold_seed_spread.py ../shared/data/epa/22-tstcar.csv            # seeds 0-9
+    python benchmarks/fold_seed_spread.py LIST --seeds 20 --workers 2
+
+``vpsim fleet`` deals the vehicle families into 5 folds in an order shuffled with one fixed seed
+(:data:`vpsim.fleet.calibrate.SEED`), fits each class's technology without the fold and predicts the fold.
+A different seed is an equally valid deal; the spread of the figures over seeds is the part of a headline
+figure that comes from the deal, not from the model. This runs exactly the fleet's conventional part
+(:mod:`vpsim.fleet.run`: the technology grid once, then per seed the folds, the cross-validated fit and the
+backward predictions), without the peer, for the fleet's own seed and ``--seeds`` others (0, 1, ...), and
+prints per test the median error, median |error| and 90th percentile |error| (mpg, out of fold) at the
+fleet's seed, and their range and standard deviation over all seeds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from vpsim.fleet import calibrate as cal
+from vpsim.fleet import run as fleet_run
+from vpsim.fleet.cycles import FLEET_CYCLES, fleet_cycle
+from vpsim.fleet.epa import mpg_from_l_per_100km, read_test_car_list
+
+
+def figures(errors: np.ndarray) -> tuple[float, float, float]:
+    a = np.abs(errors)
+    return float(np.median(errors)), float(np.median(a)), float(np.quantile(a, 0.9))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("list", help="the EPA test car list (22-tstcar.csv)")
+    ap.add_argument("--seeds", type=int, default=10, help="other seeds to deal with: 0 .. N-1 (default 10)")
+    ap.add_argument("--workers", type=int, default=2, help="local processes for the runs (default 2)")
+    a = ap.parse_args()
+    if a.seeds < 1 or a.workers < 1:
+        ap.error("--seeds and --workers must be at least 1")
+    t0 = time.perf_counter()
+    cars = read_test_car_list(a.list)
+    vehicles = [v for v in cars.vehicles if any(c in v.measured_mpg for c in FLEET_CYCLES)]
+    groups = cal.vehicle_groups(vehicles, "family")
+    work = [(v, tuple(c for c in FLEET_CYCLES if c in v.measured_mpg)) for v in vehicles]
+    chunks = [work[i : i + fleet_run.CHUNK] for i in range(0, len(work), fleet_run.CHUNK)]
+    by_key = {v.key: v for v in vehicles}
+    seeds = [cal.SEED, *range(a.seeds)]
+    table: dict[str, list[tuple[float, float, float]]] = {c: [] for c in FLEET_CYCLES}
+    executor = fleet_run._Pool(a.workers) if a.workers > 1 else fleet_run._Serial()
+    with executor:
+        grid_rows = [r for part in executor.map(fleet_run.grid_chunk, chunks) for r in part]
+        ok = [r for r in grid_rows if r["log_fuel"] is not None]
+        lg = np.stack([r["log_fuel"] for r in ok])
+        meas = np.array([fleet_run._log_l100(by_key[r["key"]].measured_mpg[r["cycle"]]) for r in ok])
+        vclass = np.array([fleet_run._vehicle_class(by_key[r["key"]]) for r in ok])
+        fpw = {
+            c: cal.fuel_per_watt(fleet_cycle(c).duration_s, fleet_cycle(c).distance_m) for c in FLEET_CYCLES
+        }
+        per_watt = np.array([fpw[r["cycle"]] for r in ok])
+        gears = {(r["key"], r["cycle"]): r["gear"] for r in ok}
+        print(
+            f"{len(vehicles)} vehicles, {len(set(groups.values()))} families, {len(ok)} rows; "
+            f"grid {time.perf_counter() - t0:.0f} s"
+        )
+        for seed in seeds:
+            fold_of = cal.assign_folds([v.key for v in vehicles], 5, seed=seed, groups=groups)
+            vfold = np.array([fold_of[r["key"]] for r in ok])
+            tech = cal.cross_validate(lg, meas, vfold, vclass, 5, per_watt)
+            items = [
+                (
+                    by_key[r["key"]],
+                    r["cycle"],
+                    tech[(fold_of[r["key"]], vclass[i])],
+                    gears[(r["key"], r["cycle"])],
+                )
+                for i, r in enumerate(ok)
+            ]
+            step = fleet_run.CHUNK * 2
+            pch = [items[i : i + step] for i in range(0, len(items), step)]
+            preds = [p for part in executor.map(fleet_run.predict_chunk, pch, "backward") for p in part]
+            errs: dict[str, list[float]] = {c: [] for c in FLEET_CYCLES}
+            for (v, c, _, _), p in zip(items, preds, strict=True):
+                if not p["error"]:
+                    mpg = mpg_from_l_per_100km(p["predicted_l_per_100km"])
+                    errs[c].append(100.0 * (mpg / v.measured_mpg[c] - 1.0))
+            line = []
+            for c in FLEET_CYCLES:
+                f = figures(np.array(errs[c]))
+                table[c].append(f)
+                line.append(f"{c} {f[0]:+.2f} / {f[1]:.2f} / {f[2]:.2f}")
+            print(f"  seed {seed:>5}: " + "; ".join(line))
+    print("median / median |error| / p90 |error| (%): the fleet's seed; over all seeds min-max (std)")
+    for c in FLEET_CYCLES:
+        x = np.array(table[c])
+        parts = [
+            f"{x[0, j]:+.2f} [{x[:, j].min():+.2f} .. {x[:, j].max():+.2f}] ({x[:, j].std(ddof=1):.2f})"
+            for j in range(3)
+        ]
+        print(f"  {c:9s} n {sum(1 for r in ok if r['cycle'] == c):4d}  " + "  ".join(parts))
+    print(f"{len(seeds)} deals, {time.perf_counter() - t0:.0f} s wall")
+
+
+if __name__ == "__main__":
+    main()
