@@ -149,9 +149,10 @@ def write_list(
         rows += car_rows(("X100",) + base[1:], model="Family Hybrid")  # hybrid by name
         rows += car_rows(("X101",) + base[1:], fuel="Federal Cert Diesel 7-15 PPM Sulfur")
         rows += car_rows(("X102",) + base[1:], fuel="Electricity", displacement_l=0.001)
-        rows += car_rows(("X103",) + base[1:]) + car_rows(
-            ("X103",) + base[1:], fuel="E85 (85% Ethanol 15% EPA Unleaded Gasoline)"
-        )
+        e85 = "E85 (85% Ethanol 15% EPA Unleaded Gasoline)"
+        # a flex-fuel car tested on both fuels (read from its gasoline tests), and one on E85 only (excluded)
+        rows += car_rows(("X103",) + base[1:]) + car_rows(("X103",) + base[1:], fuel=e85, scale=0.75)
+        rows += car_rows(("X114",) + base[1:], fuel=e85)
         rows += car_rows(("X104",) + base[1:], etw_lb=150)  # implausible mass (lb)
         rows += car_rows(("X105",) + base[1:], target_a_lbf="")  # missing road load A
         hy = list(base)

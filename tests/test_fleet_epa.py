@@ -39,7 +39,12 @@ def test_unit_conversions_against_hand_values():
 
 def test_bad_rows_are_excluded_with_their_reason(tmp_path):
     cars = read_test_car_list(write_list(tmp_path / "list.csv"))
-    assert len(cars.vehicles) == len(CARS) + 1  # X107 keeps its bag 3 and HWY tests
+    # X107 keeps its bag 3 and HWY tests; X103, a flex-fuel car, its gasoline tests (its E85 ones, at 0.75
+    # of the mpg, are skipped, not averaged in)
+    assert len(cars.vehicles) == len(CARS) + 2
+    x103 = next(v for v in cars.vehicles if v.vehicle_id == "X103")
+    base = next(v for v in cars.vehicles if v.vehicle_id == CARS[1][0])
+    assert x103.measured_mpg == base.measured_mpg
     assert cars.excluded == {
         # made-up makes: no layout of vpsim.fleet.hev fits them
         "hybrid, no built layout": 5,

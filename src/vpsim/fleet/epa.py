@@ -22,7 +22,8 @@ reason                          rule
 ``plug-in hybrid``              a charge-depleting (``CD``) or electricity test beside gasoline tests
 ``fuel cell``                   a test on hydrogen
 ``diesel``                      a test on diesel fuel
-``flex-fuel (E85 test)``        a test on E85
+``flex-fuel (E85 test)``        tests on E85 and none on certification gasoline (a flex-fuel car with both is
+                                read from its gasoline tests, the E85 ones skipped as other fuels' are)
 ``mild hybrid, <why>``          a mild hybrid that :mod:`vpsim.fleet.mhev` cannot read (``mhev_vehicles``):
                                 no known system for its maker, a missing field, no usable test. A mild hybrid:
                                 ``MHEV`` in the model name, or an FTP test with a fourth bag (the 4-bag FTP
@@ -609,7 +610,9 @@ def _classify(tests: list[dict]) -> str | None:
         return "fuel cell"
     if any("diesel" in f for f in fuels):
         return "diesel"
-    if any("e85" in f for f in fuels):
+    if any("e85" in f for f in fuels) and CERT_GASOLINE.lower() not in fuels:
+        # (a flex-fuel car tested on certification gasoline too is a gasoline car: its E85 tests are skipped
+        # as other fuels' are, _vehicle)
         return "flex-fuel (E85 test)"
     if any(HYBRID_NAME.search(t["model"]) for t in tests):
         return "hybrid"
