@@ -22,7 +22,7 @@ import numpy as np
 
 from vpsim.fleet import calibrate as cal
 from vpsim.fleet import run as fleet_run
-from vpsim.fleet.cycles import FLEET_CYCLES, fleet_cycle
+from vpsim.fleet.cycles import FLEET_CYCLES
 from vpsim.fleet.epa import mpg_from_l_per_100km, read_test_car_list
 
 
@@ -52,13 +52,7 @@ def main() -> None:
     with executor:
         grid_rows = [r for part in executor.map(fleet_run.grid_chunk, chunks) for r in part]
         ok = [r for r in grid_rows if r["log_fuel"] is not None]
-        lg = np.stack([r["log_fuel"] for r in ok])
-        meas = np.array([fleet_run._log_l100(by_key[r["key"]].measured_mpg[r["cycle"]]) for r in ok])
-        vclass = np.array([fleet_run._vehicle_class(by_key[r["key"]]) for r in ok])
-        fpw = {
-            c: cal.fuel_per_watt(fleet_cycle(c).duration_s, fleet_cycle(c).distance_m) for c in FLEET_CYCLES
-        }
-        per_watt = np.array([fpw[r["cycle"]] for r in ok])
+        lg, meas, vclass, per_watt = fleet_run.fit_inputs(ok, by_key, FLEET_CYCLES)
         gears = {(r["key"], r["cycle"]): r["gear"] for r in ok}
         print(
             f"{len(vehicles)} vehicles, {len(set(groups.values()))} families, {len(ok)} rows; "

@@ -230,6 +230,19 @@ def _grid_chunk(items: list[tuple[VehicleRecord, tuple[str, ...]]]) -> list[dict
     return out
 
 
+def fit_inputs(ok: list[dict], by_key: dict, cycles) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What the technology fit takes from the grid rows ``ok`` (those that ran) of the engine cars
+    ``by_key``: ln fuel at the grid's nodes, the measured ln L/100 km, each row's class, and its fuel per
+    watt of accessory load (:func:`vpsim.fleet.calibrate.fuel_per_watt`). The fleet run's and any rerun of
+    its fit with other folds (``benchmarks/fold_seed_spread.py``)."""
+    lg = np.stack([r["log_fuel"] for r in ok])
+    meas = np.array([_log_l100(by_key[r["key"]].measured_mpg[r["cycle"]]) for r in ok])
+    vclass = np.array([_vehicle_class(by_key[r["key"]]) for r in ok])
+    fpw = {c: cal.fuel_per_watt(fleet_cycle(c).duration_s, fleet_cycle(c).distance_m) for c in cycles}
+    per_watt = np.array([fpw[r["cycle"]] for r in ok])
+    return lg, meas, vclass, per_watt
+
+
 def predict_chunk(items: list[tuple[VehicleRecord, str, dict, np.ndarray]], method: str) -> list[dict]:
     """One run per (record, cycle, technology, gear per sample) with ``method``; dicts with the prediction."""
     with _kernels_on_one_thread():
@@ -423,12 +436,8 @@ def run_fleet(
         ok = [r for r in grid_rows if r["log_fuel"] is not None]
         if not ok:
             raise VpsimError("no vehicle could be simulated on the technology grid: " + grid_rows[0]["error"])
-        lg = np.stack([r["log_fuel"] for r in ok])
-        meas = np.array([_log_l100(by_key[r["key"]].measured_mpg[r["cycle"]]) for r in ok])
+        lg, meas, vclass, per_watt = fit_inputs(ok, by_key, cycles)
         vfold = np.array([fold_of[r["key"]] for r in ok])
-        vclass = np.array([_vehicle_class(by_key[r["key"]]) for r in ok])
-        fpw = {c: cal.fuel_per_watt(fleet_cycle(c).duration_s, fleet_cycle(c).distance_m) for c in cycles}
-        per_watt = np.array([fpw[r["cycle"]] for r in ok])
         tech = cal.cross_validate(lg, meas, vfold, vclass, folds, per_watt)
         tech_all = cal.fit_all(lg, meas, vclass, per_watt)
         # 4. predictions at each vehicle's out-of-fold technology
