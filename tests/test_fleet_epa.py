@@ -37,6 +37,47 @@ def test_unit_conversions_against_hand_values():
     assert epa.mpg_from_l_per_100km(10.0) == pytest.approx(23.5215, rel=1e-5)
 
 
+def test_an_empty_cylinder_count_is_filled_only_where_the_list_agrees(tmp_path):
+    """fill_cylinders: the engine code's tests first, else two or more other test vehicles of the same make
+    and displacement that all agree; otherwise the car stays out as ``missing cylinders``."""
+    import csv
+
+    from fleet_csv import EXTRA, car_rows
+    from vpsim.fleet.epa import COL
+    from vpsim.fleet.vehicle import record_parameters, vehicle_toml
+
+    acme, cogs, bolt, dyna = CARS[1], CARS[9], CARS[3], CARS[10]  # 2.0 L x4, 2.0 L x4, 2.0 L x4, 1.6 L x4
+    assert (acme[3], cogs[3], bolt[3], dyna[3]) == (2.0, 2.0, 2.0, 1.6)
+    rows = []
+    for car in (acme, cogs, bolt, dyna):
+        rows += car_rows(car)
+    rows += car_rows(("W001",) + acme[1:])  # a second Acme 2.0 L with 4 cylinders
+    rows += car_rows(("W002",) + bolt[1:], cylinders=3)  # a Bolt&Nut 2.0 L with 3: the make disagrees
+    rows += car_rows(("W003", "Other") + acme[2:], engine_code="ENG1", cylinders=5)
+    rows += car_rows(("F001",) + acme[1:], cylinders="")  # two Acme witnesses: filled
+    rows += car_rows(("F002",) + cogs[1:], cylinders="")  # one Cogs 2.0 L only: not filled
+    rows += car_rows(("F003",) + dyna[1:], cylinders="", engine_code="ENG1")  # its engine code: 5
+    rows += car_rows(("F004",) + bolt[1:], cylinders="")  # Bolt&Nut 2.0 L: 4 and 3, not filled
+    rows += car_rows(("F005",) + acme[1:], cylinders="4-ish")  # not a number: not filled
+    path = tmp_path / "list.csv"
+    with path.open("w", newline="", encoding="utf-8-sig") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(EXTRA) + list(COL.values()))
+        w.writeheader()
+        w.writerows(rows)
+    cars = read_test_car_list(path)
+    got = {v.vehicle_id: (v.cylinders, v.cylinders_source) for v in cars.vehicles}
+    assert got["F001"] == (4, "the field is empty; 4 from 2 other test vehicles of Acme with 2.00 L")
+    assert got["F003"] == (5, "the field is empty; 5 from 3 other test(s) of engine code ENG1")
+    assert got["W001"] == (4, "")  # a given count keeps its value and says nothing
+    reasons = {r["vehicle_id"]: r["reason"] for r in cars.excluded_rows if r["test_number"] == ""}
+    assert reasons["F002"] == "missing cylinders"
+    assert reasons["F004"] == "missing cylinders"
+    assert reasons["F005"] == "not a number: cylinders = '4-ish'"
+    f001 = next(v for v in cars.vehicles if v.vehicle_id == "F001")
+    text = vehicle_toml(f001, record_parameters(f001))
+    assert "4 cyl., S/B" in text and "(cylinders: the field is empty; 4 from 2 other test vehicles" in text
+
+
 def test_bad_rows_are_excluded_with_their_reason(tmp_path):
     cars = read_test_car_list(write_list(tmp_path / "list.csv"))
     # X107 keeps its bag 3 and HWY tests; X103, a flex-fuel car, its gasoline tests (its E85 ones, at 0.75

@@ -43,7 +43,8 @@ reason                          rule
                                 engine off in town); or positive wheel work on the HWFET over the fuel's
                                 heating value >= :data:`HWY_EFFICIENCY_HYBRID`
                                 (:func:`implied_hwy_efficiency`)
-``missing <field>``             a field the mapping needs is empty
+``missing <field>``             a field the mapping needs is empty (an empty cylinder count is first taken
+                                from the list's other tests where they agree: :func:`fill_cylinders`)
 ``implausible <field>``         a field is outside its plausible range (:data:`PLAUSIBLE`)
 ``implausible road load``       the target road load A + B v + C v^2 is not positive at every speed from 0 to
                                 the US06's top speed (:func:`road_load_problem`): a car that would be pushed
@@ -122,11 +123,13 @@ COL = {
     "target_a_lbf": "Target Coef A (lbf)",
     "target_b_lbf_per_mph": "Target Coef B (lbf/mph)",
     "target_c_lbf_per_mph2": "Target Coef C (lbf/mph**2)",
+    "engine_code": "Engine Code",
 }
 
 CERT_GASOLINE = "Tier 2 Cert Gasoline"
-# columns a list may lack (read as empty): bag 1 is read only for the hybrids' cold UDDS (vpsim.fleet.hev)
-OPTIONAL_COLUMNS = ("bag1",)
+# columns a list may lack (read as empty): bag 1 is read only for the hybrids' cold UDDS (vpsim.fleet.hev),
+# the engine code only to fill an empty cylinder count (fill_cylinders)
+OPTIONAL_COLUMNS = ("bag1", "engine_code")
 
 # plausible ranges of the record's fields (inclusive); outside => "implausible <field>"
 PLAUSIBLE = {
@@ -304,6 +307,7 @@ class VehicleRecord(CertificationRecord):
     boost_rule: str  # how ``boosted`` was decided
     measured_mpg: dict[str, float] = field(default_factory=dict)  # fleet cycle -> mpg
     n_tests: dict[str, int] = field(default_factory=dict)
+    cylinders_source: str = ""  # "" where the record gives the count, else its source (fill_cylinders)
 
     @property
     def specific_power_kw_per_l(self) -> float:
@@ -429,6 +433,7 @@ def read_test_car_list(path: str | Path) -> TestCarList:
                 r[k] = _text(r[k])
         r["line"] = i + 2 if lines is None else lines[i]  # header is line 1
         rows.append(r)
+    fill_cylinders(rows)
     if not rows and not ragged:
         raise VpsimError(f"{path}: no test rows below the header")
     groups: dict[tuple[str, int], list[dict]] = {}
@@ -675,6 +680,64 @@ def _harmonic(xs: list[float]) -> float:
     return len(xs) / sum(1.0 / x for x in xs)
 
 
+# an empty cylinder count is filled from other test vehicles of the same make and displacement only where at
+# least this many of them give one and all give the same (one other car could be the list's own typo)
+CYLINDER_WITNESSES = 2
+
+
+def fill_cylinders(rows: list[dict]) -> None:
+    """Fill an empty ``# of Cylinders and Rotors`` from the list's other tests, where they agree: first the
+    tests of the same ``Engine Code`` (one engine, one cylinder count), else those of the same make and
+    displacement (to 0.01 L) on at least :data:`CYLINDER_WITNESSES` other test vehicles. Where they do not
+    agree, or none give one, the field stays empty (``missing cylinders``). Each filled row's
+    ``cylinders_source`` says where the count came from (the vehicle file's note on ``engine.bore``).
+
+    On the 2022 list this fills four cars: the BMW 230i (2.0 L: 4, as on 23 other BMW test vehicles of
+    2.00 L), the Kia Telluride (6, its engine code's tests on the Palisade and other Tellurides), the Mazda3
+    2.0 L (4, two others) and the Audi RS7 (3.996 L: 8, as on four other Audis of 4.00 L: the RS Q8, S8, SQ7
+    and SQ8). A field that is not a number is not filled (it is a different problem)."""
+
+    def key_md(r):
+        d = r["displacement_l"]
+        return (r["make"].strip().upper(), round(d, 2)) if math.isfinite(d) else None
+
+    by_code: dict[str, dict[float, int]] = {}
+    by_make: dict[tuple, dict[float, set]] = {}
+    for r in rows:
+        n = r["cylinders"]
+        if not math.isfinite(n):
+            continue
+        code = r.get("engine_code", "").strip().upper()
+        if code:
+            by_code.setdefault(code, Counter())[n] += 1
+        k = key_md(r)
+        if k is not None:
+            by_make.setdefault(k, {}).setdefault(n, set()).add(r["vehicle_id"])
+    for r in rows:
+        if math.isfinite(r["cylinders"]) or "cylinders" in r["not_a_number"]:
+            continue
+        code = r.get("engine_code", "").strip().upper()
+        seen = by_code.get(code) if code else None
+        if seen and len(seen) == 1:
+            ((n, count),) = seen.items()
+            r["cylinders"] = n
+            r["cylinders_source"] = (
+                f"the field is empty; {n:g} from {count} other test(s) of engine code {printable(code)}"
+            )
+            continue
+        k = key_md(r)
+        seen_md = by_make.get(k) if k is not None else None
+        if seen_md and len(seen_md) == 1:
+            ((n, vids),) = seen_md.items()
+            others = vids - {r["vehicle_id"]}
+            if len(others) >= CYLINDER_WITNESSES:
+                r["cylinders"] = n
+                r["cylinders_source"] = (
+                    f"the field is empty; {n:g} from {len(others)} other test vehicles of "
+                    f"{printable(r['make'].strip())} with {k[1]:.2f} L"
+                )
+
+
 WHOLE = ("cylinders", "n_gears")  # counts: 2.5 cylinders are no engine, 6.7 gears no gearbox
 
 
@@ -803,6 +866,7 @@ def record_fields(vid: str, cfg: int, first: dict, values: dict[str, list[float]
         "target_c_lbf_per_mph2": first["target_c_lbf_per_mph2"],
         "measured_mpg": {c: _harmonic(v) for c, v in values.items() if v},
         "n_tests": {c: len(v) for c, v in values.items() if v},
+        "cylinders_source": first.get("cylinders_source", ""),
     }
 
 

@@ -173,6 +173,7 @@ class HEVRecord(CertificationRecord):
     udds_rule: str  # how the hot UDDS was read from the FTP bags
     measured_mpg: dict[str, float] = field(default_factory=dict)
     n_tests: dict[str, int] = field(default_factory=dict)
+    cylinders_source: str = ""  # "" where the record gives the count (vpsim.fleet.epa.fill_cylinders)
 
     powertrain = "hev"
 
@@ -484,11 +485,11 @@ def hev_vehicle_toml(rec: HEVRecord, params, source: str = "", technology_note: 
     record block; ``[record.measured_mpg]`` holds ``udds`` (the hot UDDS, FTP bags 3 + 4), ``hwy``, ``us06``:
     ``vpsim simulate`` compares them with the charge-sustaining figure."""
     from ..textio import printable
-    from .vehicle import hybrid_sections, record_block, toml_head, with_record_block
+    from .vehicle import cylinders_note, hybrid_sections, record_block, toml_head, with_record_block
 
     sizes = "the layout's rule (vpsim.fleet.hev): the preset's, scaled"
     notes = {
-        "engine.bore": "record: displacement and cylinders",
+        "engine.bore": "record: displacement and cylinders" + cylinders_note(rec),
         "engine.rated_power": "record: rated power (the engine's, W)",
         "engine.thermal_efficiency": technology_note or "the preset's",
         "electric.accessory_power": technology_note or "the preset's (W)",

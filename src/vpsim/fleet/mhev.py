@@ -189,6 +189,7 @@ class MHEVRecord(CertificationRecord):
     bag_rule: str  # how the FTP's bags were read
     measured_mpg: dict[str, float] = field(default_factory=dict)
     n_tests: dict[str, int] = field(default_factory=dict)
+    cylinders_source: str = ""  # "" where the record gives the count (vpsim.fleet.epa.fill_cylinders)
 
     powertrain = "mhev"
 
@@ -456,11 +457,11 @@ def mhev_vehicle_toml(rec: MHEVRecord, params, source: str = "", technology_note
     ``[record.measured_mpg]`` holds the fleet's tests (``ftp_bag2``, ``ftp_bag3``, ``hwy``, ``us06``), which
     ``vpsim simulate`` compares with the charge-sustaining figure."""
     from ..textio import printable
-    from .vehicle import hybrid_sections, record_block, toml_head, with_record_block
+    from .vehicle import cylinders_note, hybrid_sections, record_block, toml_head, with_record_block
 
     sys_ = SYSTEMS[rec.system]
     notes = {
-        "engine.bore": "record: displacement and cylinders",
+        "engine.bore": "record: displacement and cylinders" + cylinders_note(rec),
         "engine.rated_power": "record: rated power (W)",
         "engine.thermal_efficiency": technology_note or "the preset's",
         "engine.friction_coefficient": technology_note or "the preset's",

@@ -487,6 +487,13 @@ def with_record_block(lines: list[str], block: list[str]) -> str:
     return "\n".join([*lines, RECORD_BEGIN, *(("# " + x) if x else "#" for x in block), RECORD_END]) + "\n"
 
 
+def cylinders_note(rec) -> str:
+    """What a vehicle file says of a cylinder count the record left empty
+    (:func:`vpsim.fleet.epa.fill_cylinders`); "" where the record gives it."""
+    src = getattr(rec, "cylinders_source", "")
+    return f" (cylinders: {src})" if src else ""
+
+
 def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", technology_note: str = "") -> str:
     """An editable TOML that :func:`vpsim.params.load_parameters` reads (``vpsim simulate --vehicle``).
 
@@ -525,7 +532,8 @@ def vehicle_toml(rec: VehicleRecord, params: Parameters, source: str = "", techn
         else "default: N/V with a 0.70 top gear",
         "transmission.efficiency": "default",
         **CONVERTER_NOTES,
-        "engine.bore": f"record: {rec.displacement_l:g} L, {rec.cylinders} cyl., S/B {STROKE_BORE_RATIO}",
+        "engine.bore": f"record: {rec.displacement_l:g} L, {rec.cylinders} cyl., S/B {STROKE_BORE_RATIO}"
+        + cylinders_note(rec),
         "engine.thermal_efficiency": technology_note or "preset",
         "engine.friction_coefficient": technology_note or "preset",
         "engine.accessory_power": technology_note or "default: alternator base load (W)",
