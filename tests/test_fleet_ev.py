@@ -96,6 +96,26 @@ def test_the_fleet_fits_the_bev_class_out_of_fold(tmp_path):
     assert again == fold_of
 
 
+def test_fold_seed_spread_reproduces_the_fleets_ev_figures_at_its_seed(tmp_path, benchmark_script, capsys):
+    """benchmarks/fold_seed_spread.py --part bev: at the fleet's own seed it gives the figures `vpsim fleet`
+    reports for the EVs (the same grid, folds, fit and runs), and another seed deals the families anew."""
+    import time
+
+    from vpsim.fleet.report import error_stats
+    from vpsim.fleet.run import run_fleet
+
+    spread = benchmark_script("fold_seed_spread")
+    lst = write_ev_list(tmp_path / "ev.csv")
+    table = spread.electrified(read_test_car_list(lst), "bev", [cal.SEED, 0], 1, time.perf_counter())
+    assert "2 deals" in capsys.readouterr().out
+    df = run_fleet(lst, folds=5, peer=False, workers=1).ev_frame()
+    for c, rows in table.items():
+        st = error_stats(df.loc[df["cycle"] == c, "error_pct"])
+        want = (st["median_error_pct"], st["median_abs_error_pct"], st["p90_abs_error_pct"])
+        assert rows[0] == pytest.approx(want, abs=1e-3)  # error_stats rounds to 3 decimals
+        assert len(rows) == 2
+
+
 def test_the_bev_classes_of_real_records(shared_dir, tmp_path):
     """The class split (vpsim.fleet.ev.ev_class) on named records of the 2022 list: the Audi e-tron S's
     induction machines, the Taycan's two-speed gearbox, the Model 3 AWD's two axles, the Bolt's one, the
