@@ -35,6 +35,10 @@ def test_bench_tiny_cli_writes_json_and_prints_one_table(capsys, tmp_path):
     assert REQUIRED <= set(report)
     assert RATIOS <= set(report["ratios"])
     assert report["batch_backward_runs_per_s"] > 0
+    b = report["batch"]["batch_backward"]  # the one-thread figure beside the threads' (None on one thread)
+    assert b["threads"] >= 1 and (b["one_thread_runs_per_s"] is None) == (b["threads"] == 1)
+    if b["threads"] > 1:
+        assert b["one_thread_runs_per_s"] > 0 and "on one thread" in text
     assert report["linearity_max_dev"] >= 0
     row = next(r for r in report["rows"] if r["tool"] == "vpsim" and r["method"] == "backward")
     assert row["cycle"] == "udds" and row["steps"] == 1369 and row["median_ms"] > 0 and row["py_peak_kib"] > 0

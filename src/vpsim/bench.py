@@ -43,6 +43,7 @@ import time
 import tracemalloc
 import warnings
 from dataclasses import asdict, dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -607,6 +608,32 @@ def batch_variants(n: int, seed: int = 0):
     )
 
 
+def _threads() -> int:
+    import numba
+
+    return int(numba.get_num_threads())
+
+
+def _one_thread_runs_per_s(fn, n: int, settings: Settings) -> float | None:
+    """Runs per second of the batch ``fn`` (``n`` variants) with Numba's parallel loops on one thread (the
+    median of ``settings.batch_repeats`` runs); None where the process has one thread anyway."""
+    import numba
+
+    threads = numba.get_num_threads()
+    if threads <= 1:
+        return None
+    times = []
+    numba.set_num_threads(1)
+    try:
+        for _ in range(settings.batch_repeats):
+            t0 = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t0)
+    finally:
+        numba.set_num_threads(threads)
+    return n / statistics.median(times)
+
+
 def _batch(settings: Settings, progress) -> dict:
     from .batch import run_batch
     from .cycles import load_cycle
@@ -635,12 +662,17 @@ def _batch(settings: Settings, progress) -> dict:
             out[key] = {"variants": n, "runs_per_s": None, "error": _one_line(exc)}
             continue
         med = statistics.median(times)
+        one = _one_thread_runs_per_s(partial(run_batch, cyc, variants, method=method, mode=mode), n, settings)
         out[key] = {
             "variants": n,
             "cycle": "udds",
             "mode": mode,
             "median_s": med,
             "runs_per_s": n / med,
+            # the same batch on one thread: the kernel's own speed, apart from how much of the second core
+            # the machine gives (on a shared virtual machine the 2-thread figure moved 1.55-1.98x this one)
+            "one_thread_runs_per_s": one,
+            "threads": _threads(),
             "trace_miss_share": float(np.mean(df["trace_miss_s"] > 0)),
             "fuel_l_per_100km_range": [
                 float(df["fuel_l_per_100km"].min()),

@@ -78,10 +78,13 @@ def format_report(report: dict) -> str:
             # run_batch's default: the paper mode (and driver 1 forward), where the stiff driveline creeps at
             # standstill and the soft PI leaves the band (the paper's own behaviour, docs/methods.md)
             setting = f"{b.get('mode', 'paper')} mode" + (", driver 1" if key == "batch_forward" else "")
+            one = b.get("one_thread_runs_per_s")
+            on_one = f"; on one thread {one:,.0f} runs/s ({b['runs_per_s'] / one:.2f}x on {b['threads']})"
             lines.append(
                 f"{key.replace('_', ' ')}: {b['variants']} variants on {b['cycle']} ({setting}) "
                 f"in {b['median_s']:.3f} s = "
                 f"{b['runs_per_s']:,.0f} runs/s (variants with a trace miss: {b['trace_miss_share']:.0%})"
+                + (on_one if one else "")
             )
         else:
             lines.append(f"{key.replace('_', ' ')}: not measured ({b.get('error', 'unavailable')})")
