@@ -15,6 +15,7 @@ import pytest
 
 from fleet_csv import write_list
 from vpsim.cli.main import main
+from vpsim.errors import VpsimError
 from vpsim.fleet import calibrate as cal
 from vpsim.fleet import peer
 from vpsim.fleet.epa import read_test_car_list
@@ -110,6 +111,7 @@ def test_summary_declares_the_validation(tmp_path, capsys):
     s = json.loads((out / "summary.json").read_text())
     v = s["validation"]
     assert v["grouping"] == "family" and v["folds"] == 3 and v["groups"] >= 3
+    assert v["seed"] == cal.SEED  # the fleet's own deal unless --seed says otherwise
     assert v["tuned_on_this_list"] == [dict(t) for t in TUNED_ON_THIS_LIST]
     report = (out / "report.md").read_text()
     assert "Constants chosen while looking at this list" in report
@@ -122,6 +124,30 @@ def test_summary_declares_the_validation(tmp_path, capsys):
             assert h["value"] == (lo if h["bound"] == "low" else hi) and h["reason"], (fit, par)
     assert main(["fleet", str(lst), "--out", str(out), "--group-by", "maker"]) == 2
     assert "'maker' is not one of" in capsys.readouterr().err
+
+
+def test_another_seed_deals_the_families_anew_and_says_so(tmp_path, capsys):
+    """``vpsim fleet --seed N``: the same families into other folds (each still whole), the seed in
+    summary.json and on the screen; a negative or non-integer seed is one line, exit 2."""
+    lst = write_list(tmp_path / "list.csv", bad_rows=False)
+    base = run_fleet(lst, cycles=("hwy",), folds=3, peer=False, workers=1)
+    other = run_fleet(lst, cycles=("hwy",), folds=3, peer=False, workers=1, seed=7)
+    fold = {r["vehicle_id"]: r["fold"] for r in base.rows}
+    fold7 = {r["vehicle_id"]: r["fold"] for r in other.rows}
+    assert set(fold) == set(fold7) and fold != fold7
+    groups = cal.vehicle_groups(base.cars.vehicles, "family")
+    for members in {g: [k for k, x in groups.items() if x == g] for g in set(groups.values())}.values():
+        assert len({fold7[k.split("#")[0]] for k in members}) == 1
+    assert base.seed == cal.SEED and other.seed == 7
+    out = tmp_path / "o"
+    args = ["fleet", str(lst), "--out", str(out), "--folds", "3", "--cycles", "hwy", "--no-peer", "--quiet"]
+    assert main([*args, "--seed", "7"]) == 0
+    assert f"dealt with seed 7 (the fleet's: {cal.SEED})" in capsys.readouterr().out
+    assert json.loads((out / "summary.json").read_text())["validation"]["seed"] == 7
+    assert main([*args, "--seed", "-1"]) == 2
+    assert "--seed" in capsys.readouterr().err
+    with pytest.raises(VpsimError, match="--seed 1.5: expected a whole number"):
+        run_fleet(lst, cycles=("hwy",), folds=3, peer=False, workers=1, seed=1.5)
 
 
 def test_on_bounds_sees_a_value_on_its_bound():

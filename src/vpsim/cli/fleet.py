@@ -38,6 +38,13 @@ from .main import cli
     help="What a fold holds out together: a vehicle family (same test vehicle, model and engine, or same "
     "model inputs), a manufacturer (leave one out), or single records.",
 )
+@click.option(
+    "--seed",
+    type=click.IntRange(min=0),
+    default=None,
+    help="The order the groups are dealt into folds in (default: the fleet's fixed seed, "
+    "vpsim.fleet.calibrate.SEED); another seed is an equally valid deal: how much the figures move with it.",
+)
 @click.option("--method", type=click.Choice(["backward", "forward"]), default="backward", show_default=True)
 @click.option("--local-cluster", "local_cluster", type=int, default=None, help="Run on N local Dask workers.")
 @click.option("--scheduler", default=None, help="Run on the Dask scheduler at this address.")
@@ -56,13 +63,14 @@ from .main import cli
 )
 @click.option("--quiet", is_flag=True, help="No progress on stderr.")
 def fleet(
-    file, out, cycles, folds, group_by, method, local_cluster, scheduler, workers, no_peer, limit, quiet
+    file, out, cycles, folds, group_by, seed, method, local_cluster, scheduler, workers, no_peer, limit, quiet
 ):
     """Predict the measured fuel economy of the vehicles of an EPA test car list FILE."""
     import matplotlib
 
     matplotlib.use("Agg")
     from ..errors import VpsimError
+    from ..fleet.calibrate import SEED
     from ..fleet.report import prepare_output_folder, write_outputs
     from ..fleet.run import run_fleet
 
@@ -85,6 +93,7 @@ def fleet(
         peer=not no_peer,
         workers=workers,
         group_by=group_by,
+        seed=SEED if seed is None else seed,
     )
     command = (
         "vpsim fleet " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if sys.argv[1:2] == ["fleet"] else ""
@@ -99,7 +108,8 @@ def fleet(
     fc = s["peer"]["fastsim_calibrated"]
     measured = fs.get("measured", True)
     v = s["validation"]
-    click.echo(f"held out by {v['grouping']}: {v['folds']} folds of {v['groups']} groups")
+    deal = "" if v["seed"] == SEED else f", dealt with seed {v['seed']} (the fleet's: {SEED})"
+    click.echo(f"held out by {v['grouping']}: {v['folds']} folds of {v['groups']} groups{deal}")
     click.echo(
         f"{'cycle':10s} {'n':>5s} {'median':>8s} {'med|e|':>8s} {'p90|e|':>8s}"
         + (

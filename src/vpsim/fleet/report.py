@@ -265,6 +265,7 @@ def validation(run) -> dict:
         "grouping": run.grouping,
         "folds": run.folds,
         "groups": run.n_groups,
+        "seed": run.seed,
         "tuned_on_this_list": [dict(t) for t in TUNED_ON_THIS_LIST],
     }
 

@@ -125,6 +125,7 @@ class FleetRun:
     peer: dict = field(default_factory=dict)  # FASTSim status: available, version, reason
     grouping: str = cal.DEFAULT_GROUPING  # what cross-validation holds out together (calibrate.GROUPINGS)
     n_groups: int = 0
+    seed: int = cal.SEED  # the deal of groups into folds (calibrate.assign_folds)
     peer_technology: dict = field(default_factory=dict)  # the calibrated FASTSim's, "fold<k>.<class>"
     # the battery-electric records (vpsim.fleet.ev): rows, their technology and folds (_run_evs)
     ev: dict = field(default_factory=dict)
@@ -365,6 +366,7 @@ def run_fleet(
     peer: bool = True,
     workers: int | None = None,
     group_by: str = cal.DEFAULT_GROUPING,
+    seed: int = cal.SEED,
 ) -> FleetRun:
     """Run every usable vehicle of ``source`` (a path or a :class:`TestCarList`) on the cycles it measured.
 
@@ -373,6 +375,8 @@ def run_fleet(
     processes when no Dask cluster is given (default: the number of cores; 1 runs in this process).
     ``group_by``: what a fold holds out together (:func:`vpsim.fleet.calibrate.vehicle_groups`): ``family``
     (default), ``record``, or ``manufacturer`` (one fold per manufacturer; ``folds`` is then not used).
+    ``seed``: the order the groups are dealt into folds in (:func:`vpsim.fleet.calibrate.assign_folds`; every
+    part of the fleet, and its peer's calibration, on the same deal); another seed is an equally valid deal.
     """
     t_start = time.perf_counter()
     cycles = tuple(cycles)
@@ -397,6 +401,8 @@ def run_fleet(
         raise VpsimError(f"--group-by {group_by!r}: expected one of {', '.join(cal.GROUPINGS)}")
     if folds < 2:
         raise VpsimError(f"--folds must be at least 2 (cross-validation), got {folds}")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise VpsimError(f"--seed {seed!r}: expected a whole number, 0 or more")
     cars = source if isinstance(source, TestCarList) else read_test_car_list(source)
     vehicles = [v for v in cars.vehicles if any(c in v.measured_mpg for c in cycles)]
     if limit is not None:
@@ -410,7 +416,7 @@ def run_fleet(
             f"{len(vehicles)} usable vehicle(s) in {n_groups} {group_by} group(s) with a test on "
             f"{', '.join(cycles)}: too few for {max(folds, 2)} folds"
         )
-    fold_of = cal.assign_folds([v.key for v in vehicles], folds, groups=groups)
+    fold_of = cal.assign_folds([v.key for v in vehicles], folds, seed=seed, groups=groups)
     timings = {"read_s": time.perf_counter() - t_start}
     work = [(v, tuple(c for c in cycles if c in v.measured_mpg)) for v in vehicles]
     chunks = [work[i : i + CHUNK] for i in range(0, len(work), CHUNK)]
@@ -514,17 +520,17 @@ def run_fleet(
         # 6. the battery-electric records: the same procedure with the class "bev" (vpsim.fleet.ev)
         t0 = time.perf_counter()
         evs = cars.ev_vehicles if limit is None else cars.ev_vehicles[:limit]
-        ev_out = _run_evs(evs, folds, group_by, executor, peer_state, progress, timings)
+        ev_out = _run_evs(evs, folds, group_by, executor, peer_state, progress, timings, seed)
         timings["ev_s"] = time.perf_counter() - t0
         # 7. the full hybrids: the same procedure with the classes hev_split, hev_p2 (vpsim.fleet.hev)
         t0 = time.perf_counter()
         hevs = cars.hev_vehicles if limit is None else cars.hev_vehicles[:limit]
-        hev_out = _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings)
+        hev_out = _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings, seed)
         timings["hev_s"] = time.perf_counter() - t0
         # 8. the mild hybrids: the same procedure with the classes mhev_p0, mhev_p1 (vpsim.fleet.mhev)
         t0 = time.perf_counter()
         mhevs = cars.mhev_vehicles if limit is None else cars.mhev_vehicles[:limit]
-        mhev_out = _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings)
+        mhev_out = _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings, seed)
         timings["mhev_s"] = time.perf_counter() - t0
     rows = []
     for v, cs in work:
@@ -568,6 +574,7 @@ def run_fleet(
         peer_state,
         grouping=group_by,
         n_groups=n_groups,
+        seed=seed,
         peer_technology=peer_technology,
         ev=ev_out,
         hev=hev_out,

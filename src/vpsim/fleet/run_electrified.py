@@ -64,7 +64,7 @@ def _predict(executor, predict_chunk, work, failed, tech, fold_of, class_of, chu
     return preds
 
 
-def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings) -> dict:
+def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings, seed: int = cal.SEED) -> dict:
     """The battery-electric records on their two tests: technology of the class ``bev`` fitted out of fold
     exactly as the conventional classes' (folds of :func:`vpsim.fleet.calibrate.assign_folds` over the EV
     families, :func:`~vpsim.fleet.calibrate.per_fold_and_class`), then one backward run per vehicle and
@@ -89,7 +89,7 @@ def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings) -> d
             f"{len(evs)} battery-electric vehicle(s) in {n_groups} group(s): too few for {k} folds"
         )
         return out
-    fold_of = cal.assign_folds([v.key for v in evs], k, groups=groups)
+    fold_of = cal.assign_folds([v.key for v in evs], k, seed=seed, groups=groups)
     out.update(folds=k, groups=n_groups, fold_of=fold_of, group_of=groups)
     work = [(v, tuple(c for c in evm.EV_CYCLES if c in v.measured_mpge)) for v in evs]
     chunks = [work[i : i + EV_CHUNK] for i in range(0, len(work), EV_CHUNK)]
@@ -223,7 +223,7 @@ def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings) -> d
     return out
 
 
-def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings) -> dict:
+def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings, seed: int = cal.SEED) -> dict:
     """The full hybrids on their tests: technology per layout class (:data:`vpsim.fleet.hev.CLASSES`) fitted
     out of fold as the other classes' (folds over the hybrid families), then one backward ECMS run per
     vehicle and test at its fold's technology, the charge-sustaining figure compared; FASTSim's hybrid
@@ -242,10 +242,10 @@ def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings) ->
         ph.hev_calibration_chunk, ph.calibrate_hev_peer, ph.hev_peer_chunk, ph.HEV_PEER_PARAMS, "hybrid"
     )
     part = HybridFleet(hm, hm.hev_class, ph.hev_peer_chunk, calibrated, what)
-    return _run_hybrids(hevs, part, folds, group_by, executor, peer_state, progress, timings)
+    return _run_hybrids(hevs, part, folds, group_by, executor, peer_state, progress, timings, seed)
 
 
-def _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings) -> dict:
+def _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings, seed: int = cal.SEED) -> dict:
     """The mild hybrids (:mod:`vpsim.fleet.mhev`) as the full hybrids (:func:`_run_hevs`), classes
     :data:`vpsim.fleet.mhev.CLASSES`; the peer is FASTSim's conventional car of the same record
     (:mod:`vpsim.fleet.peer`: FASTSim 3.1 has no mild-hybrid resource), with its defaults and calibrated
@@ -267,7 +267,7 @@ def _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings) 
         "conventional car",
     )
     part = HybridFleet(mm, mm.mhev_class, peer_mod.peer_chunk, calibrated, what)
-    return _run_hybrids(mhevs, part, folds, group_by, executor, peer_state, progress, timings)
+    return _run_hybrids(mhevs, part, folds, group_by, executor, peer_state, progress, timings, seed)
 
 
 # a hybrid part's third technology parameter in its rows, under the column name the other parts give it
@@ -291,7 +291,9 @@ class HybridFleet(NamedTuple):
     what: dict
 
 
-def _run_hybrids(recs, part: HybridFleet, folds, group_by, executor, peer_state, progress, timings):
+def _run_hybrids(
+    recs, part: HybridFleet, folds, group_by, executor, peer_state, progress, timings, seed: int = cal.SEED
+):
     """The hybrids ``recs`` of the fleet part ``part`` (:class:`HybridFleet`) on their tests
     ``part.what["cycles"]``."""
     from .run import _log_l100, _progress
@@ -310,7 +312,7 @@ def _run_hybrids(recs, part: HybridFleet, folds, group_by, executor, peer_state,
     if n_groups < max(k, 2):
         out["status"] = f"{len(recs)} {name}(s) in {n_groups} group(s): too few for {k} folds"
         return out
-    fold_of = cal.assign_folds([v.key for v in recs], k, groups=groups)
+    fold_of = cal.assign_folds([v.key for v in recs], k, seed=seed, groups=groups)
     out.update(folds=k, groups=n_groups, fold_of=fold_of, group_of=groups)
     work = [(v, tuple(c for c in what["cycles"] if c in v.measured_mpg)) for v in recs]
     chunks = [work[i : i + HEV_CHUNK] for i in range(0, len(work), HEV_CHUNK)]
