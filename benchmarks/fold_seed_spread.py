@@ -68,13 +68,9 @@ def main() -> None:
         ok = [r for r in grid_rows if r["log_fuel"] is not None]
         lg, meas, vclass, per_watt = fleet_run.fit_inputs(ok, by_key, FLEET_CYCLES)
         gears = {(r["key"], r["cycle"]): r["gear"] for r in ok}
-        print(
-            f"{len(vehicles)} vehicles, {len(set(groups.values()))} families, {len(ok)} rows; "
-            f"grid {time.perf_counter() - t0:.0f} s"
-        )
+        header("conventional", vehicles, groups, ok, t0)
         for seed in seeds:
-            fold_of = cal.assign_folds([v.key for v in vehicles], 5, seed=seed, groups=groups)
-            vfold = np.array([fold_of[r["key"]] for r in ok])
+            fold_of, vfold = deal(vehicles, seed, groups, ok)
             tech = cal.cross_validate(lg, meas, vfold, vclass, 5, per_watt)
             items = [
                 (
@@ -100,6 +96,19 @@ def main() -> None:
                 line.append(f"{c} {f[0]:+.2f} / {f[1]:.2f} / {f[2]:.2f}")
             print(f"  seed {seed:>5}: " + "; ".join(line))
     summary(table, {c: sum(1 for r in ok if r["cycle"] == c) for c in FLEET_CYCLES}, len(seeds), t0)
+
+
+def header(part: str, recs, groups: dict, ok: list, t0: float) -> None:
+    print(
+        f"{part}: {len(recs)} vehicles, {len(set(groups.values()))} families, {len(ok)} rows; "
+        f"grid {time.perf_counter() - t0:.0f} s"
+    )
+
+
+def deal(recs, seed: int, groups: dict, ok: list) -> tuple[dict, np.ndarray]:
+    """The fleet's 5 folds dealt with ``seed``: (fold of each record's key, fold of each grid row)."""
+    fold_of = cal.assign_folds([v.key for v in recs], 5, seed=seed, groups=groups)
+    return fold_of, np.array([fold_of[r["key"]] for r in ok])
 
 
 def summary(table: dict, n: dict, n_seeds: int, t0: float) -> None:
@@ -163,13 +172,9 @@ def electrified(cars, part: str, seeds: list[int], workers: int, t0: float) -> d
         grid = np.stack([r[grid_key] for r in ok])
         meas = np.array([log_measured(by_key[r["key"]], r["cycle"]) for r in ok])
         vclass = np.array([class_of[r["key"]] for r in ok], dtype=object)
-        print(
-            f"{part}: {len(recs)} vehicles, {len(set(groups.values()))} families, {len(ok)} rows; "
-            f"grid {time.perf_counter() - t0:.0f} s"
-        )
+        header(part, recs, groups, ok, t0)
         for seed in seeds:
-            fold_of = cal.assign_folds([v.key for v in recs], 5, seed=seed, groups=groups)
-            vfold = np.array([fold_of[r["key"]] for r in ok])
+            fold_of, vfold = deal(recs, seed, groups, ok)
             tech = cal.per_fold_and_class(
                 lambda rows: hm.fit(grid[rows], meas[rows]), vfold, vclass, 5, hm.CLASSES
             )
