@@ -131,7 +131,7 @@ def electrified(cars, part: str, seeds: list[int], workers: int, t0: float) -> d
     from vpsim.fleet import hev as hvm
     from vpsim.fleet import mhev as mhm
     from vpsim.fleet.run import _log_l100
-    from vpsim.fleet.run_electrified import EV_CHUNK, HEV_CHUNK, _predict
+    from vpsim.fleet.run_electrified import EV_CHUNK, HEV_CHUNK, _fit_classes, _predict
 
     if part == "bev":
         hm, recs, cycles, class_fn, chunk = evm, cars.ev_vehicles, evm.EV_CYCLES, evm.ev_class, EV_CHUNK
@@ -171,13 +171,10 @@ def electrified(cars, part: str, seeds: list[int], workers: int, t0: float) -> d
         failed = {(r["key"], r["cycle"]): r["error"] for r in grid_rows if r[grid_key] is None}
         grid = np.stack([r[grid_key] for r in ok])
         meas = np.array([log_measured(by_key[r["key"]], r["cycle"]) for r in ok])
-        vclass = np.array([class_of[r["key"]] for r in ok], dtype=object)
         header(part, recs, groups, ok, t0)
         for seed in seeds:
-            fold_of, vfold = deal(recs, seed, groups, ok)
-            tech = cal.per_fold_and_class(
-                lambda rows: hm.fit(grid[rows], meas[rows]), vfold, vclass, 5, hm.CLASSES
-            )
+            fold_of, _ = deal(recs, seed, groups, ok)
+            tech = _fit_classes(hm, grid, meas, ok, class_of, fold_of, 5, {})  # the fleet part's own fit
             preds = _predict(executor, hm.predict_chunk, work, failed, tech, fold_of, class_of, 4 * chunk)
             line = []
             for c in cycles:
