@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 from _fuzz import run_cli
-from hypothesis import given, settings
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: the made-up list
@@ -460,3 +460,63 @@ def test_rows_with_extra_fields_leave_out_their_vehicles_only(tmp_path_factory, 
     for i in hit:
         first.setdefault((rows[i][i_id], int(rows[i][i_cfg])), i + 1)
     assert sorted(int(w.split("line ")[1].split()[0]) for w in said) == sorted(first.values())
+
+
+_JSON_VALUES = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(2**70), 2**70),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=12),
+    st.lists(st.integers(), max_size=2),
+)
+_CELLS = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.text(alphabet=st.characters(blacklist_categories=("Cs",)), max_size=8),
+    st.just(""),
+)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    seed=_JSON_VALUES,
+    folds=_JSON_VALUES,
+    grouping=_JSON_VALUES,
+    error=_CELLS,
+    peer=_CELLS,
+    family=_CELLS,
+    raw=st.one_of(st.none(), st.binary(max_size=64)),
+)
+def test_fleet_deals_answers_any_folder_in_one_line_or_with_finite_figures(
+    tmp_path_factory, capsys, seed, folds, grouping, error, peer, family, raw
+):
+    """``vpsim fleet-deals`` on a made-up folder beside a sound one: any summary.json values, any cell in
+    the per-row table, or raw bytes in place of either."""
+    import json as _json
+
+    root = tmp_path_factory.mktemp("deals")
+    good, bad = root / "good", root / "bad"
+    for d, validation, cells in (
+        (good, {"grouping": "family", "folds": 5, "seed": 0}, ("1.5", "3.0", "F1")),
+        (bad, {"grouping": grouping, "folds": folds, "seed": seed}, (error, peer, family)),
+    ):
+        d.mkdir()
+        (d / "summary.json").write_text(_json.dumps({"n_vehicles": 2, "validation": validation}))
+        with (d / "vehicles.csv").open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(
+                [
+                    "vehicle_id",
+                    "configuration",
+                    "cycle",
+                    "error_pct",
+                    "family",
+                    "fastsim_calibrated_error_pct",
+                ]
+            )
+            w.writerow(["V1", 0, "hwy", "2.0", "F0", "4.0"])
+            w.writerow(["V2", 0, "hwy", cells[0], cells[2], cells[1]])
+    if raw is not None:
+        (bad / ("summary.json" if raw[:1] in (b"", b"{") else "vehicles.csv")).write_bytes(raw)
+    for as_json in ((), ("--json",)):
+        run_cli(capsys, "fleet-deals", good, bad, *as_json)

@@ -193,3 +193,31 @@ _NOT_RUN = f"{'not run':>26s}"  # a peer column without figures, as wide as trio
 
 def _f(x) -> str:
     return "       –" if x is None else f"{x:+7.1f}%"
+
+
+@cli.command("fleet-deals")
+@click.argument("folders", nargs=-1, type=click.Path(file_okay=False))
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option(
+    "--plot",
+    "plot",
+    default=None,
+    type=click.Path(dir_okay=False),
+    help="Write a figure: each deal's difference from FASTSim with its interval, and the pooled interval.",
+)
+def fleet_deals(folders, as_json, plot):
+    """vpsim against the calibrated FASTSim over several deals of families into folds: FOLDERS are the
+    output folders of `vpsim fleet FILE --out DIR --seed N`, one per seed (docs/fleet.md, "How sure the
+    comparison is")."""
+    from ..fleet.deals import compare_deals
+    from ._output import dumps
+
+    comparison = compare_deals(folders)
+    if plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        ax = comparison.plot()
+        ax.figure.tight_layout()
+        ax.figure.savefig(plot, dpi=120)
+    click.echo(dumps(comparison.as_dict()) if as_json else str(comparison))

@@ -79,6 +79,31 @@ def weighted_medians(sorted_values: np.ndarray, weights: np.ndarray) -> np.ndarr
     return 0.5 * (sorted_values[lo] + sorted_values[hi])
 
 
+def family_bootstrap(
+    errors, peer_errors, families, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED
+):
+    """The draws behind :func:`paired_difference`: ``(e, q, n_families, diffs)`` with ``e`` and ``q`` the
+    |errors| of the rows where both are finite, and ``diffs`` vpsim's median |error| minus the peer's in each
+    of ``resamples`` draws of as many whole families as there are, with replacement (the draws depend only
+    on the number of families and ``seed``: two deals of the same rows are drawn alike). ``None`` when no
+    row has both errors."""
+    e = np.abs(np.asarray(errors, float))
+    q = np.abs(np.asarray(peer_errors, float))
+    fam = np.asarray(families, dtype=object)
+    ok = np.isfinite(e) & np.isfinite(q)
+    e, q, fam = e[ok], q[ok], fam[ok]
+    if e.size == 0:
+        return None
+    _, code = np.unique(fam.astype(str), return_inverse=True)
+    n_fam = int(code.max()) + 1
+    counts = np.random.default_rng(seed).multinomial(n_fam, np.full(n_fam, 1.0 / n_fam), size=resamples)
+    diffs = np.zeros(resamples)
+    for x, sign in ((e, 1.0), (q, -1.0)):
+        order = np.argsort(x, kind="stable")
+        diffs += sign * weighted_medians(x[order], counts[:, code[order]])
+    return e, q, n_fam, diffs
+
+
 def paired_difference(
     errors, peer_errors, families, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED
 ) -> dict:
@@ -89,20 +114,10 @@ def paired_difference(
     ``families``, ``median_abs_error_pct`` (vpsim), ``peer_median_abs_error_pct``, ``difference_pts``,
     ``ci95_pts`` (the 2.5th and 97.5th percentiles of the resampled differences), ``share_vpsim_lower``
     (of the resamples), ``resamples``."""
-    e = np.abs(np.asarray(errors, float))
-    q = np.abs(np.asarray(peer_errors, float))
-    fam = np.asarray(families, dtype=object)
-    ok = np.isfinite(e) & np.isfinite(q)
-    e, q, fam = e[ok], q[ok], fam[ok]
-    if e.size == 0:
+    drawn = family_bootstrap(errors, peer_errors, families, resamples, seed)
+    if drawn is None:
         return {"n": 0, "measured": False, "reason": "no row with both predictions"}
-    _, code = np.unique(fam.astype(str), return_inverse=True)
-    n_fam = int(code.max()) + 1
-    counts = np.random.default_rng(seed).multinomial(n_fam, np.full(n_fam, 1.0 / n_fam), size=resamples)
-    diffs = np.zeros(resamples)
-    for x, sign in ((e, 1.0), (q, -1.0)):
-        order = np.argsort(x, kind="stable")
-        diffs += sign * weighted_medians(x[order], counts[:, code[order]])
+    e, q, n_fam, diffs = drawn
     point = float(np.median(e) - np.median(q))
     lo, hi = np.percentile(diffs, [2.5, 97.5])
     return {
