@@ -112,3 +112,8 @@ def test_cli(tmp_path, capsys):
     assert png.stat().st_size > 10_000
     assert main(["charge-balance", "--soc-offsets", "0,x"]) == 2
     assert "--soc-offsets '0,x'" in capsys.readouterr().err
+    # a figure that cannot be written: one line, as every --plot (an unknown format was an internal error)
+    for bad in (tmp_path / "fit.xyz", tmp_path / "nowhere" / "fit.png"):
+        assert main(["charge-balance", "--cycle", "udds", "--plot", str(bad)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"--plot {bad}: cannot write" in err

@@ -170,6 +170,8 @@ def test_real_runs_without_the_peer_give_vpsim_s_figures_of_each_summary(tmp_pat
     assert main(["fleet-deals", *map(str, folders), "--json", "--plot", str(tmp_path / "d.png")]) == 0
     out = json.loads(capsys.readouterr().out)
     assert [d["seed"] for d in out["deals"]] == [1, 2] and out["grouping"] == "family" and out["folds"] == 3
+    assert main(["fleet-deals", *map(str, folders), "--plot", str(tmp_path / "d.nosuchformat")]) == 2
+    assert "cannot write" in capsys.readouterr().err
 
 
 @pytest.mark.skipif(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from ..errors import VpsimError
-from ._output import dumps
+from ._output import dumps, save_plot
 from .main import cli, vehicle_option
 
 
@@ -45,10 +45,5 @@ def charge_balance(cycle, vehicle, method, ems, soc_offsets, as_json, plot):
     offsets = None if soc_offsets is None else _offsets(soc_offsets)
     cb = regression(cycle, vehicle, method=method, ems=ems, soc_offsets=offsets)
     if plot:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        ax = cb.plot()
-        ax.figure.tight_layout()
-        ax.figure.savefig(plot, dpi=120)
+        save_plot(cb.plot, plot)
     click.echo(dumps(cb.as_dict()) if as_json else str(cb))

@@ -210,14 +210,9 @@ def fleet_deals(folders, as_json, plot):
     output folders of `vpsim fleet FILE --out DIR --seed N`, one per seed (docs/fleet.md, "How sure the
     comparison is")."""
     from ..fleet.deals import compare_deals
-    from ._output import dumps
+    from ._output import dumps, save_plot
 
     comparison = compare_deals(folders)
     if plot:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        ax = comparison.plot()
-        ax.figure.tight_layout()
-        ax.figure.savefig(plot, dpi=120)
+        save_plot(comparison.plot, plot)
     click.echo(dumps(comparison.as_dict()) if as_json else str(comparison))

@@ -92,21 +92,10 @@ def import_machine(file, as_json, plot):
 
 
 def _write_plot(m, path: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from ..plots import plot_machine_efficiency
+    from ._output import save_plot
 
-    ax = plot_machine_efficiency(m)
-    try:
-        ax.figure.tight_layout()
-        ax.figure.savefig(path, dpi=120)
-    except (OSError, ValueError) as exc:
-        raise VpsimError(f"--plot {path}: cannot write ({getattr(exc, 'strerror', None) or exc})") from None
-    finally:
-        plt.close(ax.figure)
+    save_plot(lambda: plot_machine_efficiency(m), path)
 
 
 def cycle_energy_errors(spec, measured) -> dict:

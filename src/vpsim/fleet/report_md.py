@@ -169,7 +169,9 @@ def _differences_md(d: dict) -> list[str]:
         "Median |error| of vpsim minus that of the calibrated FASTSim on the same rows (points; negative: "
         "vpsim closer to the measurement), and a 95 % interval from a paired bootstrap that draws whole "
         f"families (the groups the folds hold out together), {BOOTSTRAP_RESAMPLES:,} draws. "
-        "An interval that straddles 0 does not tell the two apart on this list.",
+        "An interval that straddles 0 does not tell the two apart on this list. These figures are of one "
+        "deal of families into folds (`validation.seed`); `vpsim fleet FILE --out DIR --seed N` runs "
+        "another, and `vpsim fleet-deals DIR DIR ...` sets several side by side.",
         "",
         "| powertrain | test | n | families | vpsim | FASTSim calibrated | difference | 95 % interval "
         "| share of draws with vpsim lower |",
