@@ -107,6 +107,7 @@ def test_a_behind_verdict_and_a_part_without_its_peer(tmp_path):
     assert f["verdict"] == "behind" and f["deals_vpsim_behind"] == 2 and f["pooled_ci95_pts"][0] > 0
     e = r.tests["bev"]["udds"]
     assert e["verdict"] == "no peer" and e["vpsim_median_abs_error_pct"]["by_deal"] == [3.0, 3.0]
+    assert e["families"] == 3 and e["n"] == 3
     assert e["difference_pts"]["mean"] is None
     assert "no peer" in str(r)
 

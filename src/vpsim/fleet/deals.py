@@ -193,9 +193,10 @@ def _test_figures(deals, pt, test, resamples, seed) -> dict | None:
         pools.append(draws)
     if reference is None or not len(reference):
         return None
+    predicted = np.isfinite(reference["error_pct"].to_numpy(float))
     out = {
-        "n": int(np.isfinite(reference["error_pct"].to_numpy(float)).sum()),
-        "families": n_fam,
+        "n": int(predicted.sum()),  # rows vpsim predicts; the differences: those both tools predict
+        "families": n_fam if n_fam is not None else int(reference["family"][predicted].nunique()),
         "vpsim_median_abs_error_pct": _range(vp),
         "peer_median_abs_error_pct": _range(peer),
         "difference_pts": _range(diff),
