@@ -665,6 +665,99 @@ def cases() -> list[Case]:
         ),
     ]
 
+    # --- fleet-deals: the output folders of several fleet runs
+    S = "fleet-deals"
+
+    def deal(name: str, seed: int = 0, summary=None, table: bytes | None = None):
+        """A made-up fleet output folder ``name``: a summary of the deal and a small vehicles.csv."""
+
+        def setup(d: Path):
+            f = d / name
+            f.mkdir()
+            s = {"n_vehicles": 2, "validation": {"grouping": "family", "folds": 5, "seed": seed}}
+            data = summary if summary is not None else json.dumps(s)
+            (f / "summary.json").write_bytes(data if isinstance(data, bytes) else data.encode())
+            rows = (
+                b"vehicle_id,configuration,cycle,error_pct,family,fastsim_calibrated_error_pct\n"
+                b"V1,0,hwy,2.0,F0,4.0\nV2,0,hwy,-3.0,F1,5.0\n"
+            )
+            (f / "vehicles.csv").write_bytes(rows if table is None else table)
+
+        return setup
+
+    def both(*setups):
+        return lambda d: [setup(d) for setup in setups]
+
+    fd = ["fleet-deals", "a", "b"]
+    C += [
+        Case(S, "one folder", ["fleet-deals", "a"], match="two or more", setup=deal("a")),
+        Case(S, "the same deal twice", fd, match="same deal", setup=both(deal("a"), deal("b"))),
+        Case(
+            S,
+            "a file as a folder",
+            ["fleet-deals", "a", "car.toml"],
+            match="is a file",
+            setup=deal("a"),
+        ),
+        Case(
+            S,
+            "summary.json nested deeply",
+            fd,
+            match="nested too deeply",
+            setup=both(deal("a"), deal("b", 1, summary="[" * 100_000 + "]" * 100_000)),
+        ),
+        Case(
+            S,
+            "summary.json NaN seed",
+            fd,
+            match="NaN is not a JSON number",
+            setup=both(
+                deal("a"),
+                deal("b", 1, summary=('{"validation": {"grouping": "family", "folds": 5, "seed": NaN}}')),
+            ),
+        ),
+        Case(
+            S,
+            "summary.json binary",
+            fd,
+            match="summary.json",
+            setup=both(deal("a"), deal("b", 1, summary=b"\x00\xff" * 40)),
+        ),
+        Case(
+            S,
+            "vehicles.csv binary",
+            fd,
+            match="vehicles.csv",
+            setup=both(deal("a"), deal("b", 1, table=b"\x00\xff" * 40)),
+        ),
+        Case(
+            S,
+            "vehicles.csv a word for an error",
+            fd,
+            match="expected a number",
+            setup=both(
+                deal("a"),
+                deal("b", 1, table=b"vehicle_id,configuration,cycle,error_pct,family\nV1,0,hwy,x,F0\n"),
+            ),
+        ),
+        Case(
+            S,
+            "--plot unknown format",
+            [*fd, "--plot", "d.xyz"],
+            match="cannot write",
+            setup=both(deal("a"), deal("b", 1)),
+        ),
+        Case(
+            S,
+            "two deals",
+            [*fd, "--json"],
+            expect="ok",
+            match="deals",
+            setup=both(deal("a"), deal("b", 1)),
+            check=lambda d, out: None if "conventional" in _json_out(out)["tests"] else "no test compared",
+        ),
+    ]
+
     # --- parameter (vehicle) files: the old surface's remaining cases
     S = "vehicle file"
     sim = ["simulate", "--vehicle", "v.toml", "--cycle", "cycle.csv"]

@@ -131,7 +131,13 @@ def test_folders_that_cannot_be_compared_are_one_line(tmp_path, capsys):
     cases["no vehicles_ev.csv"] = [a, _folder(tmp_path / "e", 4, [1, 2, 3], [4, 5, 6], ev=ev)]
     bad = _folder(tmp_path / "bad", 5, [1, 2, 3], [4, 5, 6])
     (bad / "summary.json").write_text("{not json")
-    cases["not JSON"] = [a, bad]
+    cases["not valid JSON"] = [a, bad]
+    deep = _folder(tmp_path / "deep", 8, [1, 2, 3], [4, 5, 6])
+    (deep / "summary.json").write_text("[" * 100_000 + "]" * 100_000)  # was an internal RecursionError
+    cases["nested too deeply"] = [a, deep]
+    binary = _folder(tmp_path / "binary", 9, [1, 2, 3], [4, 5, 6])
+    (binary / "vehicles.csv").write_bytes(b"\x00\xff" * 50)
+    cases["vehicles.csv"] = [a, binary]
     old = _folder(tmp_path / "old", 6, [1, 2, 3], [4, 5, 6])
     (old / "summary.json").write_text(json.dumps({"validation": {"grouping": "family", "folds": 5}}))
     cases["no validation.seed"] = [a, old]

@@ -22,7 +22,7 @@ folders of one deal, are refused in one line.
 
 from __future__ import annotations
 
-import json
+import io
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +31,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import VpsimError
+from ..textio import printable, read_json, read_text
 from .report import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, EV_CYCLES, HEV_CYCLES, MHEV_CYCLES, family_bootstrap
 
 # powertrain -> (the folder's per-row table, the tests it holds; None: the conventional run's --cycles)
@@ -43,6 +44,7 @@ PARTS = {
 ROW_KEY = ("vehicle_id", "configuration", "cycle")
 PEER_COLUMN = "fastsim_calibrated_error_pct"
 NEEDED = (*ROW_KEY, "error_pct", "family")
+MAX_TABLE_BYTES = 256 * 1024**2  # a per-row table larger than this is refused (the 2022 list's: about 1 MB)
 
 
 @dataclass(frozen=True)
@@ -63,12 +65,7 @@ def read_deal(folder) -> Deal:
     path = folder / "summary.json"
     if not path.is_file():
         raise VpsimError(f"{folder}: no summary.json; expected a folder written by `vpsim fleet --out`")
-    try:
-        s = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise VpsimError(f"{path}: not JSON ({getattr(e, 'msg', e)})") from None
-    except OSError as e:
-        raise VpsimError(f"{path}: cannot be read ({e.strerror})") from None
+    s = read_json(path, VpsimError, what="fleet summary")
     v = s.get("validation") if isinstance(s, dict) else None
     if not isinstance(v, dict) or not all(k in v for k in ("grouping", "folds", "seed")):
         raise VpsimError(
@@ -90,12 +87,11 @@ def read_deal(folder) -> Deal:
             if pt == "conventional":
                 raise VpsimError(f"{f}: missing; expected the table `vpsim fleet --out` writes")
             continue
+        text = read_text(f, VpsimError, limit=MAX_TABLE_BYTES, what="fleet table")
         try:
-            df = pd.read_csv(f)
-        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as e:
-            raise VpsimError(f"{f}: not a table ({str(e).splitlines()[0]})") from None
-        except OSError as e:
-            raise VpsimError(f"{f}: cannot be read ({e.strerror})") from None
+            df = pd.read_csv(io.StringIO(text))
+        except (pd.errors.ParserError, pd.errors.EmptyDataError) as e:
+            raise VpsimError(f"{f}: not a table ({printable(str(e).splitlines()[0])[:200]})") from None
         missing = [c for c in NEEDED if c not in df.columns]
         if missing and len(df):
             raise VpsimError(f"{f}: no column {', '.join(missing)} (written by an older vpsim; run it again)")
