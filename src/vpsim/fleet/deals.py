@@ -307,10 +307,8 @@ class DealComparison:
             _, ax = plt.subplots(figsize=(7.5, 0.42 * max(len(items), 3) + 1.2))
         n = len(self.deals)
         for y, (_, _, f) in enumerate(items):
-            lo, hi = f["pooled_ci95_pts"]
-            ax.plot([lo, hi], [y, y], color="0.75", lw=7, solid_capstyle="butt", zorder=1)
-            for i, d in enumerate(self.deals):
-                yy = y + (i - (n - 1) / 2) * 0.5 / max(n, 2)
+            for i, d in enumerate(self.deals):  # the deals fanned out above the pooled bar
+                yy = y - 0.38 + 0.5 * i / max(n - 1, 1)
                 c = f["ci95_pts_by_deal"][i]
                 x = f["difference_pts"]["by_deal"][i]
                 ax.errorbar(
@@ -318,17 +316,34 @@ class DealComparison:
                     yy,
                     xerr=[[x - c[0]], [c[1] - x]],
                     fmt="o",
-                    ms=3,
-                    lw=0.8,
+                    ms=2.5,
+                    lw=0.7,
+                    alpha=0.8,
                     color=f"C{i % 10}",
                     label=f"seed {d.seed}" if y == 0 else None,
-                    zorder=2,
                 )
+            lo, hi = f["pooled_ci95_pts"]
+            ax.plot(
+                [lo, hi],
+                [y + 0.28, y + 0.28],
+                color="0.3",
+                lw=4,
+                solid_capstyle="butt",
+                label="pooled 95 % interval" if y == 0 else None,
+            )
+            ax.plot(
+                f["difference_pts"]["mean"],
+                y + 0.28,
+                "D",
+                color="k",
+                ms=4,
+                label="mean over the deals" if y == 0 else None,
+            )
         ax.axvline(0.0, color="k", lw=0.8)
         ax.set_yticks(range(len(items)), [f"{pt} {test}" for pt, test, _ in items])
         ax.invert_yaxis()
         ax.set_xlabel("vpsim minus calibrated FASTSim, median |error| (points; < 0: vpsim closer)")
-        ax.set_title(f"{n} deals of families into folds; grey: pooled 95 % interval", fontsize=10)
+        ax.set_title(f"{n} deals of families into folds, each with its 95 % interval", fontsize=10)
         if items:
             ax.legend(fontsize=7, loc="best")
         return ax
