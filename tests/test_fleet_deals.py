@@ -84,6 +84,7 @@ def test_identical_deals_pool_to_each_deals_interval_and_a_tie_is_not_told_apart
     f = compare_deals([a, b]).tests["conventional"]["hwy"]
     assert f["families"] == 30
     assert f["ci95_pts_by_deal"][0] == f["ci95_pts_by_deal"][1] == f["pooled_ci95_pts"]  # the same draws
+    assert f["mean_ci95_pts"] == f["pooled_ci95_pts"]  # and their mean over two equal deals is each
     lo, hi = f["pooled_ci95_pts"]
     assert lo < 0.0 < hi and f["verdict"] == "not told apart" and f["deals_not_told_apart"] == 2
     point = float(np.median(np.abs(vp)) - np.median(np.abs(peer)))
