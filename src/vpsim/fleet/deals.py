@@ -298,8 +298,9 @@ class DealComparison:
         return "\n".join(L)
 
     def plot(self, ax=None):
-        """Each deal's vpsim-minus-FASTSim difference with its 95 % interval, and the pooled interval (a
-        grey bar), per powertrain and test; zero is the line where the two tools are level."""
+        """Each deal's vpsim-minus-FASTSim difference with its 95 % interval, and below them the pooled
+        interval (a dark bar) with the mean over the deals (a diamond), per powertrain and test; zero is the
+        line where the two tools are level."""
         import matplotlib.pyplot as plt
 
         items = [
