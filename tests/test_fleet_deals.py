@@ -57,6 +57,8 @@ def test_hand_values_over_three_deals(tmp_path):
         "by_deal": [3.0, 3.0, 3.6],
     }
     assert f["peer_median_abs_error_pct"]["by_deal"] == [8.0, 8.0, 8.0]
+    # numpy's linear 90th percentile of |errors| 1..5 is 4.6; of 1, 2, 3, 4, 5.5 it is 4.9
+    assert f["vpsim_p90_abs_error_pct"]["by_deal"] == [4.6, 4.9, 4.6]
     assert f["difference_pts"] == {"mean": -4.8, "min": -5.0, "max": -4.4, "by_deal": [-5.0, -5.0, -4.4]}
     assert (f["deals_vpsim_ahead"], f["deals_not_told_apart"], f["deals_vpsim_behind"]) == (3, 0, 0)
     assert f["verdict"] == "ahead" and f["pooled_share_vpsim_lower"] == 1.0
@@ -174,6 +176,9 @@ def test_real_runs_without_the_peer_give_vpsim_s_figures_of_each_summary(tmp_pat
             assert f["verdict"] == "no peer"
             assert f["vpsim_median_abs_error_pct"]["by_deal"][i] == pytest.approx(
                 s["cycles"][c]["median_abs_error_pct"], abs=2e-3
+            )
+            assert f["vpsim_p90_abs_error_pct"]["by_deal"][i] == pytest.approx(
+                s["cycles"][c]["p90_abs_error_pct"], abs=2e-3
             )
     assert main(["fleet-deals", *map(str, folders), "--json", "--plot", str(tmp_path / "d.png")]) == 0
     out = json.loads(capsys.readouterr().out)
