@@ -207,3 +207,48 @@ def test_real_runs_with_the_peer_reproduce_each_summarys_bootstrap(tmp_path, cap
     assert main(["fleet-deals", *map(str, folders), "--plot", str(tmp_path / "d.png")]) == 0
     assert "2 deals of family folds (3 folds), seeds 1, 2" in capsys.readouterr().out
     assert (tmp_path / "d.png").stat().st_size > 1000
+
+
+def test_several_seeds_in_one_command_give_the_separate_runs_figures(tmp_path, capsys):
+    """`vpsim fleet ... --seed 1 --seed 2` remembers the deal-independent chunk results across the deals
+    (vpsim.fleet.run._Remembering): every table and summary equals that of a separate run, byte for byte."""
+    lst = write_list(tmp_path / "list.csv", bad_rows=False)
+    alone = [_fleet(tmp_path, lst, s, peer=False) for s in (1, 2)]
+    out = tmp_path / "both"
+    args = ["fleet", str(lst), "--out", str(out), "--folds", "3", "--cycles", "hwy,ftp_bag2", "--no-peer"]
+    assert main([*args, "--seed", "1", "--seed", "2", "--workers", "1", "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert "2 deals of family folds (3 folds), seeds 1, 2" in text and "wrote" in text
+    for s, single in zip((1, 2), alone, strict=True):
+        for name in (
+            "vehicles.csv",
+            "vehicles_ev.csv",
+            "vehicles_hev.csv",
+            "vehicles_mhev.csv",
+            "summary.json",
+        ):
+            assert (out / f"seed_{s}" / name).read_bytes() == (single / name).read_bytes(), (s, name)
+    deals = json.loads((out / "deals.json").read_text())
+    assert [d["seed"] for d in deals["deals"]] == [1, 2]
+    assert (out / "deals.png").stat().st_size > 1000
+    assert main([*args, "--seed", "3", "--seed", "3", "--quiet"]) == 2
+    assert "--seed 3 given more than once" in capsys.readouterr().err
+
+
+def test_remembering_executor_runs_each_new_chunk_once_and_keeps_the_order():
+    from vpsim.fleet.run import _Remembering, _Serial
+
+    calls = []
+
+    def square(chunk, offset):
+        calls.append(chunk)
+        return [x * x + offset for x in chunk]
+
+    memory: dict = {}
+    ex = _Remembering(_Serial(), memory)
+    assert list(ex.map(square, [[1, 2], [3], [1, 2]], 0)) == [[1, 4], [9], [1, 4]]
+    assert calls == [[1, 2], [3]]  # the repeated chunk once
+    assert list(ex.map(square, [[3], [5]], 0)) == [[9], [25]]
+    assert calls == [[1, 2], [3], [5]]  # only the new one
+    assert list(ex.map(square, [[3]], 1)) == [[10]]  # other arguments: another result
+    assert calls[-1] == [3] and len(memory) == 4

@@ -7,6 +7,7 @@ import sys
 
 import click
 
+from ._output import dumps
 from .main import cli
 
 
@@ -40,10 +41,13 @@ from .main import cli
 )
 @click.option(
     "--seed",
+    "seeds",
     type=click.IntRange(min=0),
-    default=None,
+    multiple=True,
     help="The order the groups are dealt into folds in (default: the fleet's fixed seed, "
-    "vpsim.fleet.calibrate.SEED); another seed is an equally valid deal: how much the figures move with it.",
+    "vpsim.fleet.calibrate.SEED); another seed is an equally valid deal: how much the figures move with it. "
+    "Given several times, each deal is written to OUT/seed_<N>/ (the technology grids and FASTSim's "
+    "deal-independent runs computed once) and `vpsim fleet-deals` of them to OUT/deals.json and deals.png.",
 )
 @click.option("--method", type=click.Choice(["backward", "forward"]), default="backward", show_default=True)
 @click.option("--local-cluster", "local_cluster", type=int, default=None, help="Run on N local Dask workers.")
@@ -63,9 +67,38 @@ from .main import cli
 )
 @click.option("--quiet", is_flag=True, help="No progress on stderr.")
 def fleet(
-    file, out, cycles, folds, group_by, seed, method, local_cluster, scheduler, workers, no_peer, limit, quiet
+    file,
+    out,
+    cycles,
+    folds,
+    group_by,
+    seeds,
+    method,
+    local_cluster,
+    scheduler,
+    workers,
+    no_peer,
+    limit,
+    quiet,
 ):
     """Predict the measured fuel economy of the vehicles of an EPA test car list FILE."""
+    if len(seeds) > 1:
+        return _several_deals(
+            file,
+            out,
+            cycles,
+            folds,
+            group_by,
+            seeds,
+            method,
+            local_cluster,
+            scheduler,
+            workers,
+            no_peer,
+            limit,
+            quiet,
+        )
+    seed = seeds[0] if seeds else None
     import matplotlib
 
     matplotlib.use("Agg")
@@ -186,6 +219,71 @@ def fleet(
         f"wrote {out}/vehicles.csv, vehicles_ev.csv, vehicles_hev.csv, summary.json, run.json, report.md, "
         "excluded.csv, technology.json, figures"
     )
+
+
+def _several_deals(
+    file,
+    out,
+    cycles,
+    folds,
+    group_by,
+    seeds,
+    method,
+    local_cluster,
+    scheduler,
+    workers,
+    no_peer,
+    limit,
+    quiet,
+):
+    """`vpsim fleet ... --seed A --seed B ...`: each deal into OUT/seed_<N>/, one memory of chunk results
+    across them (vpsim.fleet.run._Remembering), then the deals side by side (vpsim.fleet.deals)."""
+    import time
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from ..errors import VpsimError
+    from ..fleet.deals import compare_deals
+    from ..fleet.report import prepare_output_folder, write_outputs
+    from ..fleet.run import run_fleet
+    from ._output import save_plot
+
+    twice = sorted({s for s in seeds if seeds.count(s) > 1})
+    if twice:
+        raise VpsimError(f"--seed {', '.join(map(str, twice))} given more than once; give each deal once")
+    names = tuple(c.strip() for c in cycles.split(",") if c.strip())
+    if limit is not None and limit < 1:
+        raise VpsimError(f"--limit {limit}: expected a positive number of vehicles")
+    folders = [Path(out) / f"seed_{s}" for s in seeds]
+    for f in folders:
+        prepare_output_folder(f, [file])
+    memory: dict = {}
+    for seed, folder in zip(seeds, folders, strict=True):
+        t0 = time.perf_counter()
+        run = run_fleet(
+            file,
+            cycles=names,
+            folds=folds,
+            method=method,
+            local_cluster=local_cluster,
+            scheduler=scheduler,
+            progress=not quiet,
+            limit=limit,
+            peer=not no_peer,
+            workers=workers,
+            group_by=group_by,
+            seed=seed,
+            memory=memory,
+        )
+        write_outputs(run, folder, command=f"vpsim fleet {file} --out {folder} --seed {seed}")
+        click.echo(f"seed {seed}: wrote {folder} ({time.perf_counter() - t0:.0f} s)")
+    comparison = compare_deals(folders)
+    (Path(out) / "deals.json").write_text(dumps(comparison.as_dict()) + "\n")
+    save_plot(comparison.plot, str(Path(out) / "deals.png"))
+    click.echo(str(comparison))
+    click.echo(f"wrote {out}/deals.json, deals.png")
 
 
 _NOT_RUN = f"{'not run':>26s}"  # a peer column without figures, as wide as trio()'s three

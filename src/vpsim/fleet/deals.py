@@ -35,7 +35,15 @@ import pandas as pd
 
 from ..errors import VpsimError
 from ..textio import printable, read_json, read_text
-from .report import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, EV_CYCLES, HEV_CYCLES, MHEV_CYCLES, family_bootstrap
+from .report import (
+    BOOTSTRAP_RESAMPLES,
+    BOOTSTRAP_SEED,
+    EV_CYCLES,
+    HEV_CYCLES,
+    MHEV_CYCLES,
+    check_complete,
+    family_bootstrap,
+)
 
 # powertrain -> (the folder's per-row table, the tests it holds; None: the conventional run's --cycles)
 PARTS = {
@@ -68,6 +76,7 @@ def read_deal(folder) -> Deal:
     path = folder / "summary.json"
     if not path.is_file():
         raise VpsimError(f"{folder}: no summary.json; expected a folder written by `vpsim fleet --out`")
+    check_complete(folder, "summary.json")  # a run killed while writing: its files are of two runs
     s = read_json(path, VpsimError, what="fleet summary")
     v = s.get("validation") if isinstance(s, dict) else None
     if not isinstance(v, dict) or not all(k in v for k in ("grouping", "folds", "seed")):

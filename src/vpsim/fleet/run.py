@@ -327,6 +327,42 @@ class _Pool:
             yield f.result()
 
 
+class _Remembering:
+    """An executor that keeps each chunk's result under what produced it (the function, the chunk and the
+    arguments, pickled and hashed) and submits only the chunks it has not seen. Every result of the fleet's
+    chunk functions follows from those alone, so several deals of one list (``run_fleet(..., seed=s,
+    memory=m)`` with one ``m``) compute the deal-independent work once: the technology grids and FASTSim's
+    default and calibration-grid runs; what depends on the deal (the fits' predictions) differs in its
+    arguments and is run. Results come out in submission order, as from the executor it wraps."""
+
+    def __init__(self, inner, memory: dict):
+        self.inner, self.memory, self.name = inner, memory, inner.name
+
+    def __enter__(self):
+        self.inner.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        return self.inner.__exit__(*exc)
+
+    def map(self, fn, chunks, *args):
+        import hashlib
+        import pickle
+
+        chunks = list(chunks)
+        name = (fn.__module__, fn.__qualname__)
+        keys = [hashlib.blake2b(pickle.dumps((name, c, args), protocol=5)).digest() for c in chunks]
+        todo: dict[bytes, object] = {}
+        for k, c in zip(keys, chunks, strict=True):
+            if k not in self.memory and k not in todo:
+                todo[k] = c
+        fresh = self.inner.map(fn, list(todo.values()), *args)
+        for k in keys:
+            if k not in self.memory:
+                self.memory[k] = next(fresh)
+            yield self.memory[k]
+
+
 def _dask(scheduler: str | None, local: int | None):
     """The sweeps' Dask executor (connection, local cluster, clean-up), mapping in submission order."""
     from ..sweep.runner import _DaskExecutor
@@ -367,6 +403,7 @@ def run_fleet(
     workers: int | None = None,
     group_by: str = cal.DEFAULT_GROUPING,
     seed: int = cal.SEED,
+    memory: dict | None = None,
 ) -> FleetRun:
     """Run every usable vehicle of ``source`` (a path or a :class:`TestCarList`) on the cycles it measured.
 
@@ -377,6 +414,9 @@ def run_fleet(
     (default), ``record``, or ``manufacturer`` (one fold per manufacturer; ``folds`` is then not used).
     ``seed``: the order the groups are dealt into folds in (:func:`vpsim.fleet.calibrate.assign_folds`; every
     part of the fleet, and its peer's calibration, on the same deal); another seed is an equally valid deal.
+    ``memory``: a dict kept between calls (empty at first) in which the runs' chunk results are remembered
+    (:class:`_Remembering`), so that runs of one list on several seeds compute the deal-independent grids
+    and peer runs once; the figures are those of separate runs.
     """
     t_start = time.perf_counter()
     cycles = tuple(cycles)
@@ -429,6 +469,8 @@ def run_fleet(
         if workers is None and len(work) < 4 * CHUNK:  # a small fleet is not worth starting processes for
             n = 1
         executor = _Serial() if n == 1 or len(chunks) == 1 else _Pool(min(n, len(chunks)))
+    if memory is not None:
+        executor = _Remembering(executor, memory)
     with executor:
         # 2. the technology grid
         t0 = time.perf_counter()
