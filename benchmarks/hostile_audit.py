@@ -643,6 +643,12 @@ def cases() -> list[Case]:
         Case(S, "--folds 0", [*fl, "--out", "o", "--folds", "0"], match="--folds"),
         Case(S, "--folds -3", [*fl, "--out", "o", "--folds", "-3"], match="--folds"),
         Case(S, "--workers 0", [*fl, "--out", "o", "--workers", "0"], match="workers"),
+        Case(
+            S, "--seed twice", [*fl, "--out", "o", "--seed", "3", "--seed", "3"], match="given more than once"
+        ),
+        Case(
+            S, "--seed -1 among several", [*fl, "--out", "o", "--seed", "3", "--seed", "-1"], match="--seed"
+        ),
         Case(S, "--out under a file", [*fl, "--out", "car.toml/sub"], match="cannot write there"),
         Case(S, "--out holds the list", [*fl, "--out", "."], match="holds an input"),
         Case(S, "--out is the list", [*fl, "--out", "list.csv"], match="list.csv"),
