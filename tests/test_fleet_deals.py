@@ -164,11 +164,16 @@ def _fleet(tmp_path, lst, seed, peer: bool):
     return out
 
 
-def test_real_runs_without_the_peer_give_vpsim_s_figures_of_each_summary(tmp_path, capsys):
+def _two_deals(tmp_path, capsys, peer: bool):
+    """The made-up list run on seeds 1 and 2 (separate runs), and fleet-deals of the two folders."""
     lst = write_list(tmp_path / "list.csv", bad_rows=False)
-    folders = [_fleet(tmp_path, lst, s, peer=False) for s in (1, 2)]
+    folders = [_fleet(tmp_path, lst, s, peer=peer) for s in (1, 2)]
     capsys.readouterr()
-    r = compare_deals(folders)
+    return folders, compare_deals(folders)
+
+
+def test_real_runs_without_the_peer_give_vpsim_s_figures_of_each_summary(tmp_path, capsys):
+    folders, r = _two_deals(tmp_path, capsys, peer=False)
     for i, d in enumerate(folders):
         s = json.loads((d / "summary.json").read_text())
         for c in ("hwy", "ftp_bag2"):
@@ -191,10 +196,7 @@ def test_real_runs_without_the_peer_give_vpsim_s_figures_of_each_summary(tmp_pat
     importlib.util.find_spec("fastsim") is None, reason="FASTSim 3.1 not installed (.[bench])"
 )
 def test_real_runs_with_the_peer_reproduce_each_summarys_bootstrap(tmp_path, capsys):
-    lst = write_list(tmp_path / "list.csv", bad_rows=False)
-    folders = [_fleet(tmp_path, lst, s, peer=True) for s in (1, 2)]
-    capsys.readouterr()
-    r = compare_deals(folders)
+    folders, r = _two_deals(tmp_path, capsys, peer=True)
     for i, d in enumerate(folders):
         diff = json.loads((d / "summary.json").read_text())["peer"][
             "vpsim_minus_fastsim_calibrated_by_powertrain"

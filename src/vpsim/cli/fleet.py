@@ -82,23 +82,6 @@ def fleet(
     quiet,
 ):
     """Predict the measured fuel economy of the vehicles of an EPA test car list FILE."""
-    if len(seeds) > 1:
-        return _several_deals(
-            file,
-            out,
-            cycles,
-            folds,
-            group_by,
-            seeds,
-            method,
-            local_cluster,
-            scheduler,
-            workers,
-            no_peer,
-            limit,
-            quiet,
-        )
-    seed = seeds[0] if seeds else None
     import matplotlib
 
     matplotlib.use("Agg")
@@ -113,9 +96,7 @@ def fleet(
         raise VpsimError(f"--cycles names {', '.join(twice)} more than once; give each cycle once")
     if limit is not None and limit < 1:
         raise VpsimError(f"--limit {limit}: expected a positive number of vehicles")
-    prepare_output_folder(out, [file])  # before the work: a folder that cannot be written fails now
-    run = run_fleet(
-        file,
+    options = dict(
         cycles=names,
         folds=folds,
         method=method,
@@ -126,12 +107,12 @@ def fleet(
         peer=not no_peer,
         workers=workers,
         group_by=group_by,
-        seed=SEED if seed is None else seed,
     )
-    command = (
-        "vpsim fleet " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if sys.argv[1:2] == ["fleet"] else ""
-    )
-    s, info = write_outputs(run, out, command=command)
+    if len(seeds) > 1:
+        return _several_deals(file, out, seeds, options)
+    prepare_output_folder(out, [file])  # before the work: a folder that cannot be written fails now
+    run = run_fleet(file, **options, seed=seeds[0] if seeds else SEED)
+    s, info = write_outputs(run, out, command=_command())
     excl = sum(s["excluded"].values())
     click.echo(
         f"{s['n_vehicles']} vehicles, {info['n_rows']} vehicle x cycle rows; {excl} vehicles excluded:"
@@ -221,29 +202,12 @@ def fleet(
     )
 
 
-def _several_deals(
-    file,
-    out,
-    cycles,
-    folds,
-    group_by,
-    seeds,
-    method,
-    local_cluster,
-    scheduler,
-    workers,
-    no_peer,
-    limit,
-    quiet,
-):
+def _several_deals(file, out, seeds, options: dict):
     """`vpsim fleet ... --seed A --seed B ...`: each deal into OUT/seed_<N>/, one memory of chunk results
     across them (vpsim.fleet.run._Remembering), then the deals side by side (vpsim.fleet.deals)."""
     import time
     from pathlib import Path
 
-    import matplotlib
-
-    matplotlib.use("Agg")
     from ..errors import VpsimError
     from ..fleet.deals import compare_deals
     from ..fleet.report import prepare_output_folder, write_outputs
@@ -253,37 +217,28 @@ def _several_deals(
     twice = sorted({s for s in seeds if seeds.count(s) > 1})
     if twice:
         raise VpsimError(f"--seed {', '.join(map(str, twice))} given more than once; give each deal once")
-    names = tuple(c.strip() for c in cycles.split(",") if c.strip())
-    if limit is not None and limit < 1:
-        raise VpsimError(f"--limit {limit}: expected a positive number of vehicles")
     folders = [Path(out) / f"seed_{s}" for s in seeds]
     for f in folders:
         prepare_output_folder(f, [file])
     memory: dict = {}
     for seed, folder in zip(seeds, folders, strict=True):
         t0 = time.perf_counter()
-        run = run_fleet(
-            file,
-            cycles=names,
-            folds=folds,
-            method=method,
-            local_cluster=local_cluster,
-            scheduler=scheduler,
-            progress=not quiet,
-            limit=limit,
-            peer=not no_peer,
-            workers=workers,
-            group_by=group_by,
-            seed=seed,
-            memory=memory,
-        )
-        write_outputs(run, folder, command=f"vpsim fleet {file} --out {folder} --seed {seed}")
+        run = run_fleet(file, **options, seed=seed, memory=memory)
+        write_outputs(run, folder, command=_command(f"the deal --seed {seed} of"))
         click.echo(f"seed {seed}: wrote {folder} ({time.perf_counter() - t0:.0f} s)")
     comparison = compare_deals(folders)
     (Path(out) / "deals.json").write_text(dumps(comparison.as_dict()) + "\n")
     save_plot(comparison.plot, str(Path(out) / "deals.png"))
     click.echo(str(comparison))
     click.echo(f"wrote {out}/deals.json, deals.png")
+
+
+def _command(prefix: str = "") -> str:
+    """The command line that ran (for report.md), when this process was started as `vpsim fleet`."""
+    if sys.argv[1:2] != ["fleet"]:
+        return ""
+    line = "vpsim fleet " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    return f"{prefix} {line}" if prefix else line
 
 
 _NOT_RUN = f"{'not run':>26s}"  # a peer column without figures, as wide as trio()'s three
