@@ -235,6 +235,8 @@ def test_several_seeds_in_one_command_give_the_separate_runs_figures(tmp_path, c
     assert (out / "deals.png").stat().st_size > 1000
     assert main([*args, "--seed", "3", "--seed", "3", "--quiet"]) == 2
     assert "--seed 3 given more than once" in capsys.readouterr().err
+    assert main([*args, "--seed", "3", "--seed", "4", "--group-by", "manufacturer", "--quiet"]) == 2
+    assert "one deal (a fold per manufacturer)" in capsys.readouterr().err
 
 
 def test_remembering_executor_runs_each_new_chunk_once_and_keeps_the_order():

@@ -217,6 +217,8 @@ def _several_deals(file, out, seeds, options: dict):
     twice = sorted({s for s in seeds if seeds.count(s) > 1})
     if twice:
         raise VpsimError(f"--seed {', '.join(map(str, twice))} given more than once; give each deal once")
+    if options["group_by"] == "manufacturer":  # one fold per manufacturer: every seed deals alike
+        raise VpsimError("--group-by manufacturer has one deal (a fold per manufacturer): give one --seed")
     folders = [Path(out) / f"seed_{s}" for s in seeds]
     for f in folders:
         prepare_output_folder(f, [file])
