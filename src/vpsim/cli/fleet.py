@@ -7,7 +7,7 @@ import sys
 
 import click
 
-from ._output import dumps
+from ._output import dumps, save_plot
 from .main import cli
 
 
@@ -212,7 +212,6 @@ def _several_deals(file, out, seeds, options: dict):
     from ..fleet.deals import compare_deals
     from ..fleet.report import prepare_output_folder, write_outputs
     from ..fleet.run import run_fleet
-    from ._output import save_plot
 
     twice = sorted({s for s in seeds if seeds.count(s) > 1})
     if twice:
@@ -265,7 +264,6 @@ def fleet_deals(folders, as_json, plot):
     output folders of `vpsim fleet FILE --out DIR --seed N`, one per seed (docs/fleet.md, "How sure the
     comparison is")."""
     from ..fleet.deals import compare_deals
-    from ._output import dumps, save_plot
 
     comparison = compare_deals(folders)
     if plot:
