@@ -133,6 +133,32 @@ def test_system_line_wastes_least_at_each_power_and_ring_speed():
     assert _net_cost(emap, 10e3, w_sys, 300.0, m) < _net_cost(emap, 10e3, w_own, 300.0, m)
 
 
+def test_operating_lines_are_shared_by_parameter_sets_that_differ_where_they_do_not_read():
+    """sp.operating_lines depends on the engine, machine and split sections only: a car that differs in its
+    mass and electric load takes the same lines (the same arrays), one with another engine its own; the
+    cached lines are those built afresh from their parts, and a run on them burns what a run after the
+    cache is emptied burns."""
+    from vpsim.methods import hev_split
+    from vpsim.model import electric as el
+    from vpsim.model.maps import cached_engine_map
+    from vpsim.model.record import engine_record
+
+    lines, best, cap = sp.operating_lines(SPLIT.engine, SPLIT.machine, SPLIT.split)
+    other = SPLIT.with_changes(electric={"accessory_power": 650.0}, vehicle={"mass": SPLIT.vehicle.mass + 80})
+    assert hev_split._inputs(other)["best"] is best
+    hot = SPLIT.with_changes(engine={"thermal_efficiency": SPLIT.engine.thermal_efficiency + 0.02})
+    assert hev_split._inputs(hot)["best"] is not best
+    emap = cached_engine_map(SPLIT.engine).with_exact()
+    w_lo = float(engine_record(SPLIT.engine).idle_speed)
+    fresh = sp.system_line(emap, w_lo, SPLIT.split.engine_max_speed, el.electric_records(SPLIT)[1], G, S)
+    for a, b in zip(best, fresh, strict=True):
+        assert a.tobytes() == b.tobytes()
+    first = vpsim.simulate("udds", "backward", other, ems="ecms").fuel_kg
+    sp.operating_lines.cache_clear()
+    again = SPLIT.with_changes(electric={"accessory_power": 650.0}, vehicle={"mass": SPLIT.vehicle.mass + 80})
+    assert vpsim.simulate("udds", "backward", again, ems="ecms").fuel_kg == first
+
+
 # --- the car on cycles -------------------------------------------------------------------------------------
 
 

@@ -949,3 +949,24 @@ def test_interp_with_precomputed_slopes_is_numpy_interp(widths, values, x):
         got = tb.interp_sloped_at(at, xp, fp, slopes, inv)
         assert got == tb.interp_at(at, xp, fp, inv)
         assert got == pytest.approx(float(np.interp(at, xp, fp)), rel=1e-12, abs=1e-12)
+
+
+def test_a_records_fields_view_reads_its_own_values():
+    """vpsim.model.record.fields: the record's fields as plain attributes (the lines and maps built in Python
+    read them thousands of times), each the record's own value and type, so an equation gives the same
+    numbers to the bit on either."""
+    from vpsim.model.record import engine_fields, engine_record, fields
+    from vpsim.params import load_parameters
+
+    for name in ("hofman2011", "mhev"):
+        eng = load_parameters(name).engine
+        rec = engine_record(eng)
+        view = fields(rec)
+        for field in rec.dtype.names:
+            a, b = getattr(view, field), getattr(rec, field)
+            assert type(a) is type(b), field
+            assert a == b or (np.isnan(a) and np.isnan(b)), field
+        assert engine_fields(eng) is engine_fields(eng)  # cached per engine
+        t, w = np.linspace(-20.0, 160.0, 37), np.linspace(80.0, 620.0, 37)
+        got = en.bqm_fuel_flow(t, w, engine_fields(eng))
+        assert got.tobytes() == en.bqm_fuel_flow(t, w, rec).tobytes()

@@ -235,20 +235,13 @@ def _inputs(params):
 
 
 def _build_inputs(params):
-    from ..model.maps import cached_engine_map
     from ..model.record import kernel_records
     from ..model.record import ratios as total_ratios
 
-    engine_map = cached_engine_map(params.engine)
     c = kernel_records(params)[0]
     e, m, tabs = el.electric_records(params)
-    # the line on the exact BQM fuel flow (19), the one the kernels burn
-    exact = engine_map.with_exact()
-    w_lo, w_hi = float(c.idle_speed), params.split.engine_max_speed
-    _, _, cap_speed, cap_power = sp.best_efficiency_line(exact, w_lo, w_hi)
     g, s = sp.generator_record(params), sp.split_record(params)
-    powers, ring, speeds = sp.system_line(exact, w_lo, w_hi, m, g, s)
-    lines, cap = sp.shaft_lines(engine_map, cap_speed, cap_power, c)
+    lines, best, cap = sp.operating_lines(params.engine, params.machine, params.split)
     return dict(
         c=c,
         e=e,
@@ -259,7 +252,7 @@ def _build_inputs(params):
         h=hy.hybrid_record(params),
         ratio=float(total_ratios(params.transmission)[0]),
         lines=lines,
-        best=(powers, ring, speeds),
+        best=best,
         cap=cap,
     )
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from . import engine as en
 from . import tables
-from .record import engine_record, memo
+from .record import engine_fields, engine_record, memo
 
 
 @runtime_checkable
@@ -61,9 +61,9 @@ def steady_state(a_eff, w_e, eng) -> SteadyState:
 
     See :func:`vpsim.model.engine.steady_pressure` (choked-flow check, else Newton on (19)).
     """
-    c = engine_record(eng)
+    c = engine_fields(eng)  # the equations' fields; the compiled loop takes the record
     a_eff, w_e = np.broadcast_arrays(np.asarray(a_eff, float), np.asarray(w_e, float))
-    p, it = en.steady_pressure_array(a_eff, w_e, c)
+    p, it = en.steady_pressure_array(a_eff, w_e, engine_record(eng))
     return SteadyState(
         intake_pressure=p,
         crank_torque=en.crank_torque(p, w_e, c),
@@ -109,7 +109,7 @@ def min_torque(w_e, eng):
 
 def bqm_fuel_flow(t_cr, w_e, eng):
     """BQM: fuel mass flow (kg/s) for imposed crank torque and engine speed, from delta(p_i) = 0."""
-    return en.bqm_fuel_flow(np.asarray(t_cr, float), np.asarray(w_e, float), engine_record(eng))
+    return en.bqm_fuel_flow(np.asarray(t_cr, float), np.asarray(w_e, float), engine_fields(eng))
 
 
 LINE_SPEED_STEP = 1.0  # rad/s between the nodes of the generated max- and min-torque lines
@@ -157,7 +157,7 @@ class GeneratedEngineMap:
 
     def intake_pressure(self, t_cr, w_e):
         return en.intake_pressure_for_torque(
-            np.asarray(t_cr, float), np.asarray(w_e, float), engine_record(self.engine)
+            np.asarray(t_cr, float), np.asarray(w_e, float), engine_fields(self.engine)
         )
 
     def with_exact(self, exact: bool = True) -> GeneratedEngineMap:

@@ -16,6 +16,7 @@ Records are read-only and cached per (immutable) parameter set.
 from __future__ import annotations
 
 import functools
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -233,9 +234,15 @@ def record(params):
 def engine_record(engine):
     """The record of an engine alone (maps, checks of an engine): the other sections are neutral values the
     engine's equations never read."""
+    vehicle, transmission, simulation = _neutral_sections()
+    return _record_of(vehicle, transmission, engine, simulation)[0]
+
+
+@functools.cache
+def _neutral_sections():
     from ..params import Simulation, Transmission, Vehicle
 
-    neutral = (
+    return (
         Vehicle(
             mass=1.0,
             frontal_area=1.0,
@@ -248,7 +255,24 @@ def engine_record(engine):
         Transmission(efficiency=1.0, gearbox_ratios=(1.0,), final_drive=1.0),
         Simulation(idle_fuel_flow=0.0, fuel_density=0.745, ode_relative_tolerance=1e-3, inverse_max_step=1.0),
     )
-    return _record_of(neutral[0], neutral[1], engine, neutral[2])[0]
+
+
+def fields(rec) -> SimpleNamespace:
+    """The fields of one record (``rec.mass``, ``rec.k_cu`` ...) as plain attributes, for the model's
+    equations evaluated by NumPy in Python (the lines and maps built once per parameter set).
+
+    A ``numpy.record`` reads a field through NumPy's Python-level ``__getattribute__``, about 1-2 us a
+    field; an equation reads dozens of fields per call, so on small arrays that look-up, not the arithmetic,
+    took most of the time (the power split's lines: 2.5 million look-ups for 240 parameter sets). The values
+    are the record's own NumPy scalars (``rec[name]``), so every result is the same to the bit. Compiled
+    kernels and the ``*_array`` loops take the record itself, never this."""
+    return SimpleNamespace(**{name: rec[name] for name in rec.dtype.names})
+
+
+@functools.lru_cache(maxsize=256)
+def engine_fields(engine) -> SimpleNamespace:
+    """:func:`fields` of :func:`engine_record`, cached per (immutable) engine."""
+    return fields(engine_record(engine))
 
 
 def ratios(transmission) -> np.ndarray:

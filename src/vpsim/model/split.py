@@ -40,6 +40,7 @@ the pack cannot take MG1's generated power.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -53,6 +54,7 @@ from . import rules
 from . import tables as tb
 from . import vehicle as vh
 from .engine import equation, inline
+from .record import fields
 
 LINE_POINTS = 121  # powers of the best-efficiency line (uniform from 0 to the engine's top power)
 LINE_SPEEDS = 931  # speeds it is searched over (0.5 rad/s apart on the preset)
@@ -370,13 +372,13 @@ def best_efficiency_line(engine_map, w_lo, w_hi):
     p_full = np.maximum(t_full * speeds, 0.0)
     top = float(p_full.max())
     powers = np.linspace(0.0, top, LINE_POINTS)
+    # every power at every speed in one evaluation (elementwise: the same numbers as power by power)
+    t = powers[1:, None] / speeds[None, :]
+    ok = t <= t_full[None, :] * (1.0 + 1e-12)
+    fuel = np.asarray(engine_map.fuel_flow(np.where(ok, t, 0.0), speeds[None, :]), float)
     best = np.empty(LINE_POINTS)
     best[0] = w_lo
-    for j in range(1, LINE_POINTS):
-        t = powers[j] / speeds
-        ok = t <= t_full * (1.0 + 1e-12)
-        fuel = np.where(ok, np.asarray(engine_map.fuel_flow(np.where(ok, t, 0.0), speeds), float), np.inf)
-        best[j] = speeds[int(np.argmin(fuel))]
+    best[1:] = speeds[np.argmin(np.where(ok, fuel, np.inf), axis=1)]
     return powers, best, speeds, np.maximum.accumulate(p_full)
 
 
@@ -386,6 +388,7 @@ def shaft_lines(engine_map, cap_speed, cap_power, c):
     (:func:`best_efficiency_line`) less what the engine's own accessories take
     (:func:`vpsim.model.engine.accessory_torque`; none by default: the crank's lines unchanged)."""
     speeds = engine_map.max_torque_speed
+    c = fields(c)
     t_acc = np.array([en.accessory_torque(float(w), c) for w in speeds])
     p_acc = np.array([en.accessory_torque(float(w), c) * w for w in cap_speed])
     return (speeds, engine_map.max_torque_values - t_acc), (cap_speed, np.maximum(cap_power - p_acc, 0.0))
@@ -491,6 +494,35 @@ def split_choose(
     return choice_on, choice_p, found
 
 
+@functools.lru_cache(maxsize=128)
+def operating_lines(engine, machine, split):
+    """The lines the power split's kernels read, from the parameter sections they depend on (``engine``,
+    ``machine``, ``split`` of :class:`vpsim.params.Parameters`): the engine's shaft full-load line, the
+    system operating line (powers, ring speeds, engine speeds) and its full-load power's running maximum, as
+    :func:`shaft_lines` and :func:`system_line` give them, on the exact BQM fuel flow (19) the kernels burn.
+
+    Cached per sections: a parameter set that differs only in what these lines do not read (the vehicle,
+    the battery, the electric network's load, the management) reuses them. Building them takes most of a
+    power split's first run (about 10 ms of NumPy against 1-2 ms for the cycle). Shared by every caller
+    and left writable (a read-only array is another signature of the compiled kernels): nobody writes
+    into them."""
+    from types import SimpleNamespace
+
+    from .electric import machine_spec
+    from .maps import cached_engine_map
+    from .record import engine_record
+
+    p = SimpleNamespace(engine=engine, machine=machine, split=split)  # what the records below read
+    engine_map = cached_engine_map(engine)
+    exact = engine_map.with_exact()
+    w_lo, w_hi = float(engine_record(engine).idle_speed), split.engine_max_speed
+    _, _, cap_speed, cap_power = best_efficiency_line(exact, w_lo, w_hi)
+    m, g, s = mc.machine_record(machine_spec(p)), generator_record(p), split_record(p)
+    best = system_line(exact, w_lo, w_hi, m, g, s)
+    lines, cap = shaft_lines(engine_map, cap_speed, cap_power, engine_record(engine))
+    return lines, best, cap
+
+
 def system_line(engine_map, w_lo, w_hi, m, g, s):
     """(P6) The system operating line: (powers, ring speeds, engine speed table[power, ring speed]) with
     powers uniform from 0 to the engine's top power and ring speeds from 0 to MG2's top speed over its
@@ -500,6 +532,7 @@ def system_line(engine_map, w_lo, w_hi, m, g, s):
     within its envelope; at low ring speed its torque is held at the envelope). Where no speed delivers a
     positive net power (P near 0), or none is within MG1's limits, the engine's own best-efficiency speed
     (P5). ``m``, ``g``, ``s``: MG2's and MG1's machine records and the gear set's (:func:`split_record`)."""
+    m, g, s = fields(m), fields(g), fields(s)
     k = float(s.ring_over_sun)
     speeds = np.linspace(w_lo, w_hi, SYSTEM_SPEEDS)
     t_full = np.asarray(engine_map.max_torque(speeds), float)
