@@ -11,6 +11,7 @@ from vpsim.cycles import Cycle, load_cycle
 from vpsim.methods import backward
 from vpsim.model import IDLE_SPEED
 from vpsim.model.maps import cached_engine_map
+from vpsim.params import load_parameters
 
 
 def _cruise_fuel_by_hand(params, v, gear):
@@ -300,3 +301,20 @@ def test_a_derived_schedule_is_kept_per_parameter_set_and_cycle(params):
     b = vpsim.simulate(cyc, "backward", params, gears=fresh)
     assert a.fuel_kg == b.fuel_kg
     np.testing.assert_array_equal(a.series["gear"], b.series["gear"])
+
+
+def test_a_derived_schedule_is_shared_by_parameter_sets_equal_in_what_the_rule_reads():
+    """The rule reads the vehicle, transmission, engine and simulation sections only: a P2 hybrid whose
+    battery, machine or accessories on the electric network differ takes the schedule derived for another
+    (the same object), and one whose vehicle differs gets its own, equal to a fresh derivation."""
+    cyc = load_cycle("udds")
+    p2 = load_parameters("hev_p2")
+    first = gears.schedule_for(cyc, p2)
+    other = p2.with_changes(electric={"accessory_power": 777.0}, machine={"loss_scale": 0.5})
+    assert other is not p2 and gears.schedule_for(cyc, other) is first
+    heavy = p2.with_changes(vehicle={"mass": 2.0 * p2.vehicle.mass})
+    got = gears.schedule_for(cyc, heavy)
+    fresh = gears.default_schedule(cyc, heavy, cached_engine_map(heavy.engine))
+    assert got is not first
+    np.testing.assert_array_equal(got.gear, fresh.gear)
+    assert not np.array_equal(got.gear, first.gear)  # the heavier car is held in lower gears somewhere

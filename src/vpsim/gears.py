@@ -184,29 +184,55 @@ def interval_demand(cycle: Cycle, ratio, params):
 
 
 SCHEDULES_KEPT = 16  # derived schedules kept per parameter set (the oldest goes first)
+SECTION_SETS_KEPT = 64  # sets of the sections the rule reads whose schedules are kept (the oldest goes first)
+# (vehicle, transmission, engine, simulation) -> {id(cycle): (cycle, schedule)}: the schedules of parameter
+# sets that differ only in what the rule does not read
+_BY_SECTIONS: dict = {}
 
 
 def schedule_for(cycle: Cycle, params) -> GearSchedule:
     """:func:`default_schedule` of ``cycle`` for ``params`` on the engine's generated map (what a method
     derives when given no schedule), derived once per (parameter set, cycle) and kept on the parameter set:
-    both are immutable. The rule's Python took 0.9 ms on UDDS, seven times the backward run it served. The
-    schedule returned is shared: do not write into its arrays. (They stay writable, as a fresh derivation's:
-    compiled kernels specialise on an array's writability, and a read-only schedule would be a signature the
-    install's compiled cache does not hold, compiled again on a user's first run.)"""
+    both are immutable. The rule's Python took 0.9 ms on UDDS, seven times the backward run it served.
+
+    The rule reads the parameter set's record (its vehicle, transmission, engine and simulation sections,
+    :func:`vpsim.model.record.record`), the transmission's rule settings and the engine's map, nothing else;
+    so a parameter set equal in those four sections takes the schedule derived for another (a hybrid's
+    battery, machines, accessories on the electric network or management varied over a grid: 1.7 ms of a
+    2.5 ms run each).
+
+    The schedule returned is shared: do not write into its arrays. (They stay writable, as a fresh
+    derivation's: compiled kernels specialise on an array's writability, and a read-only schedule would be a
+    signature the install's compiled cache does not hold, compiled again on a user's first run.)"""
     from .model.maps import cached_engine_map
 
     kept = memo(params, "default_schedules", lambda p: {})
     hit = kept.get(id(cycle))
     if hit is not None and hit[0] is cycle:  # (the entry holds the cycle: its id is not reused meanwhile)
         return hit[1]
-    schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
-    if len(kept) >= SCHEDULES_KEPT:
+    sections = (params.vehicle, params.transmission, params.engine, params.simulation)
+    shared = _BY_SECTIONS.get(sections)
+    if shared is None:
+        shared = {}
+        _keep(_BY_SECTIONS, sections, shared, SECTION_SETS_KEPT)
+    hit = shared.get(id(cycle))
+    if hit is not None and hit[0] is cycle:
+        schedule = hit[1]
+    else:
+        schedule = default_schedule(cycle, params, cached_engine_map(params.engine))
+        _keep(shared, id(cycle), (cycle, schedule), SCHEDULES_KEPT)
+    _keep(kept, id(cycle), (cycle, schedule), SCHEDULES_KEPT)
+    return schedule
+
+
+def _keep(table: dict, key, value, most: int) -> None:
+    """``table[key] = value``, the oldest entry dropped first when ``table`` holds ``most``."""
+    if len(table) >= most:
         try:
-            kept.pop(next(iter(kept)), None)
+            table.pop(next(iter(table)), None)
         except (RuntimeError, StopIteration):  # another thread changed the table meanwhile: keep it
             pass
-    kept[id(cycle)] = (cycle, schedule)
-    return schedule
+    table[key] = value
 
 
 def default_schedule(cycle: Cycle, params, engine_map=None, rule: GearRule | None = None) -> GearSchedule:

@@ -9,6 +9,7 @@ module may be imported first.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import numbers
@@ -536,11 +537,20 @@ def engine_check_figures(c) -> dict:
     return f
 
 
+@functools.lru_cache(maxsize=256)
+def _engine_figures(eng: Engine) -> dict:
+    """:func:`engine_check_figures` of one engine, once per (immutable) engine: a parameter set is checked
+    whenever it is made (``with_changes``), and a grid of technologies makes hundreds that share an engine.
+    On the engine's :func:`vpsim.model.record.engine_fields` (the record's values, read as plain
+    attributes), so the same figures as on its record."""
+    from .model.record import engine_fields
+
+    return engine_check_figures(engine_fields(eng))
+
+
 def _check_engine(eng: Engine, where: str) -> None:
     """The engine as a whole: displacement, peak and motoring BMEP, and that it can idle (module limits)."""
-    from .model.record import engine_record
-
-    f = engine_check_figures(engine_record(eng))
+    f = _engine_figures(eng)
     if not f["displacement_ok"]:
         lo, hi = DISPLACEMENT_RANGE
         raise ParameterError(
