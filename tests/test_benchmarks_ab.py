@@ -90,3 +90,14 @@ def test_engine_fuel_matrix_series_figures_see_one_ulp(benchmark_script):
     _, sz = efm._series_figures({"v": z})
     assert dx != dy and "sum_abs.gear" not in sx
     assert sz["sum_abs.v"] - sx["sum_abs.v"] == pytest.approx(0.5e-12, rel=1e-3)
+
+
+def test_design_first_runs_times_every_preset_three_ways(benchmark_script):
+    """benchmarks/design_first_runs.py: a figure per preset for the same set, a new vehicle and (not for the
+    battery-electric car) a new engine, each a positive time."""
+    res = benchmark_script("design_first_runs").measure(runs=2)
+    assert set(res) == {"hofman2011", "bev", "hev_p2", "hev_split", "mhev"}
+    for name, row in res.items():
+        keys = {"same", "new_vehicle"} | ({"new_engine"} if name != "bev" else set())
+        assert set(row) == keys, name
+        assert all(v > 0.0 for v in row.values()), name
