@@ -10,6 +10,13 @@ check of this file's transcription). Fits: non-negative least squares on P_loss 
 an iteratively reweighted L1 fit of the efficiency error with each file weighted equally (``l1eff``).
 Printed per file: leave-one-out median |efficiency error| (points), and with ``--floor`` the smallest median
 |error| a Nelder-Mead search finds on the file alone (the form's floor on that map).
+
+Two variants take a datasheet figure of each file beside its rating (read from the file with vpsim's safe
+reader), the copper and field-weakening terms times (figure / reference)^0.5: ``copper by torque
+density``, the rated torque over ``mc_mass`` (a machine light for its torque runs its copper at a higher
+current density); ``copper by P_r / (I V)``, the rated power over ``mc_max_crrnt`` x ``mc_min_volts`` (a
+machine that needs much current for its power at the lowest voltage loses more in its windings and
+inverter). Several files mark these figures "estimated".
 """
 
 from __future__ import annotations
@@ -33,7 +40,15 @@ VARIANTS = {
     "+drag omega, omega^2": BASE + ("omega", "omega2"),
     "+switching tau omega": BASE + ("tau_omega",),
     "copper by P_r": ("k0", "k_sw", "cu_pr", "fw_pr", "k_fe_h", "k_fe_e", "k_mech"),
+    "copper by torque density": ("k0", "k_sw", "cu_td", "fw_td", "k_fe_h", "k_fe_e", "k_mech"),
+    "copper by P_r / (I V)": ("k0", "k_sw", "cu_iv", "fw_iv", "k_fe_h", "k_fe_e", "k_mech"),
 }
+# the datasheet-figure variants' references (their spread's middle) and exponent
+TORQUE_DENSITY_REF = 3.5  # N m / kg
+POWER_PER_IV_REF = 1.5  # W / (A V)
+FIGURE_EXPONENT = 0.5
+# file name -> {"torque_density": ..., "power_per_iv": ...}, filled by main() from the files
+FIGURES: dict[str, dict[str, float]] = {}
 
 
 def columns(m, t, w) -> dict[str, np.ndarray]:
@@ -42,6 +57,9 @@ def columns(m, t, w) -> dict[str, np.ndarray]:
     nu = np.abs(w) / m.max_speed_radps
     fw = np.maximum(om, 1.0) ** 2 - 1.0
     cs = W0 / m.base_speed_radps
+    fig = FIGURES.get(m.name, {"torque_density": TORQUE_DENSITY_REF, "power_per_iv": POWER_PER_IV_REF})
+    td = (fig["torque_density"] / TORQUE_DENSITY_REF) ** FIGURE_EXPONENT
+    iv = (fig["power_per_iv"] / POWER_PER_IV_REF) ** FIGURE_EXPONENT
     return {
         "k0": np.ones_like(tau),
         "k_sw": tau,
@@ -55,7 +73,26 @@ def columns(m, t, w) -> dict[str, np.ndarray]:
         "tau_omega": tau * om,
         "cu_pr": tau**2,
         "fw_pr": tau**2 * fw,
+        "cu_td": td * cs * tau**2,
+        "fw_td": td * cs * tau**2 * fw,
+        "cu_iv": iv * cs * tau**2,
+        "fw_iv": iv * cs * tau**2 * fw,
     }
+
+
+def datasheet_figures(machines) -> dict[str, dict[str, float]]:
+    """Each file's rated torque over ``mc_mass`` and rated power over ``mc_max_crrnt`` x ``mc_min_volts``."""
+    from vpsim.engines.matlab import read_m_file
+
+    out = {}
+    for name, m in machines.items():
+        v = read_m_file(mf.advisor_dir() / f"{name}.m")
+        t_r = m.rated_power_w / m.base_speed_radps
+        out[m.name] = {
+            "torque_density": t_r / float(v["mc_mass"]),
+            "power_per_iv": m.rated_power_w / (float(v["mc_max_crrnt"]) * float(v["mc_min_volts"])),
+        }
+    return out
 
 
 def design(m, keys):
@@ -111,6 +148,7 @@ def main(argv=None) -> int:
         return 2
     ms = mf.load_all()
     names = list(mf.FILES)
+    FIGURES.update(datasheet_figures(ms))
     print("| variant | fit | " + " | ".join(names) + " |")
     print("|---|---|" + "---:|" * len(names))
     for label, keys in VARIANTS.items():
