@@ -40,6 +40,35 @@ def test_rows_columns_and_baseline():
     assert df["displacement_l"].between(1.8, 2.6).all()
 
 
+def test_a_run_prints_plots_and_is_a_dataframe(tmp_path):
+    """SweepRun: print gives the command line's rows line and where the results are; to_dataframe is the
+    results; plot draws the Pareto front where acceleration was computed (the baseline and the fastest
+    design among its points), fuel against displacement where it was not."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    run = run_sweep(make_spec(**SPEC), out=tmp_path / "s", workers=1)
+    text = str(run)
+    assert text.splitlines()[0] == run.rows_line()
+    assert text.startswith("14 rows: 14 computed now, 0 already present, 0 failed")
+    assert text.splitlines()[-1] == f"results in {run.path}"
+    assert run.to_dataframe() is run.results
+    fig = run.plot(cycle="hwfet")
+    ax = fig.axes[0]
+    assert "hwfet" in ax.get_title() and "0-100" in ax.get_xlabel()
+    plt.close(fig)
+    no_accel = run_sweep(make_spec(**SPEC, acceleration={"enabled": False}), workers=1)
+    assert str(no_accel).endswith("results in memory")
+    fig = no_accel.plot()
+    assert "displacement" in fig.axes[0].get_xlabel().lower()
+    plt.close(fig)
+    empty = runner_mod.SweepRun(no_accel.results.iloc[:0], "x", 0, 0, 0, 0, 0.0)
+    with pytest.raises(runner_mod.VpsimError, match="no results to plot"):
+        empty.plot()
+
+
 def test_same_rows_on_a_local_cluster_with_two_workers(tmp_path):
     spec = make_spec(**SPEC)
     serial = run_sweep(spec, tmp_path / "serial", workers=1, chunk_size=2)

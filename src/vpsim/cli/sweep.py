@@ -233,10 +233,7 @@ def sweep(spec, out, scheduler, local_cluster, workers, resume, fmt, chunk_size,
             f"found {len(run.damaged)} damaged result part(s) in {out} and computed their rows again: "
             f"{run.damaged[0]}" + (f" (and {len(run.damaged) - 1} more)" if len(run.damaged) > 1 else "")
         )
-    click.echo(
-        f"{run.n_rows} rows: {run.n_computed} computed now, {run.n_skipped} already present, "
-        f"{run.n_failed} failed (see the error column); {run.elapsed_s:.1f} s"
-    )
+    click.echo(run.rows_line())
     click.echo(f"wrote {run.path}")
     if plots and not run.results.empty:
         import matplotlib

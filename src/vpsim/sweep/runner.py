@@ -602,6 +602,51 @@ class SweepRun:
     # damaged result parts/blocks found when resuming (one line each); their rows were computed again
     damaged: list[str] = field(default_factory=list)
 
+    def rows_line(self) -> str:
+        """Rows asked, computed now, present before, failed, and the time: one line."""
+        return (
+            f"{self.n_rows} rows: {self.n_computed} computed now, {self.n_skipped} already present, "
+            f"{self.n_failed} failed (see the error column); {self.elapsed_s:.1f} s"
+        )
+
+    def __str__(self) -> str:
+        """What the command line prints of a run: damaged parts found, :meth:`rows_line`, chunks lost, where
+        the results are."""
+        lines = [self.rows_line()]
+        if self.damaged:
+            more = f" (and {len(self.damaged) - 1} more)" if len(self.damaged) > 1 else ""
+            lines.insert(
+                0,
+                f"found {len(self.damaged)} damaged result part(s) and computed their rows again: "
+                f"{self.damaged[0]}{more}",
+            )
+        if self.chunk_errors:
+            lines.append(
+                f"{len(self.chunk_errors)} chunk(s) could not be computed ({self.chunk_errors[0]}); "
+                "resume to retry them"
+            )
+        lines.append(f"results in {self.path}" if self.path is not None else "results in memory")
+        return "\n".join(lines)
+
+    def to_dataframe(self) -> pd.DataFrame:
+        """The results, one row per design x cycle x method (x driver): :attr:`results`."""
+        return self.results
+
+    def plot(self, *, cycle: str | None = None, method: str | None = None):
+        """The figure of the sweep: fuel on ``cycle`` (default the first) against 0-100 km/h with the Pareto
+        front where the sweep computed acceleration (:func:`vpsim.sweep.plots.plot_pareto`), otherwise fuel
+        against displacement (:func:`vpsim.sweep.plots.plot_fuel_vs_displacement`). Returns the Figure."""
+        from .plots import ACCEL, plot_fuel_vs_displacement, plot_pareto
+
+        df = self.results
+        if df.empty:
+            raise VpsimError("the sweep has no results to plot")
+        if ACCEL in df and np.isfinite(pd.to_numeric(df[ACCEL], errors="coerce")).any():
+            ax, _ = plot_pareto(df, cycle=cycle, method=method)
+        else:
+            ax = plot_fuel_vs_displacement(df, method=method)
+        return ax.figure
+
 
 def run_sweep(
     spec: SweepSpec | str | Path | dict,
