@@ -265,6 +265,35 @@ def test_fleet_cli_on_a_made_up_list(tmp_path, capsys):
     assert err.count("\n") == 1 and "not a technology.json" in err
 
 
+def test_a_fleet_run_prints_as_the_command_line_plots_and_is_a_dataframe(tmp_path, capsys):
+    """FleetRun: print gives the lines `vpsim fleet` prints (but where it wrote), to_dataframe the engine
+    cars' rows, plot the report's predicted-against-measured figure (a panel per cycle)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lst = write_list(tmp_path / "list.csv", bad_rows=False)
+    args = ["--folds", "3", "--cycles", "hwy,ftp_bag3", "--no-peer"]
+    run = run_fleet(lst, folds=3, cycles=("hwy", "ftp_bag3"), peer=False, workers=1, progress=False)
+    text = str(run)
+    assert main(["fleet", str(lst), "--out", str(tmp_path / "o"), *args, "--workers", "1", "--quiet"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[-1].startswith("wrote ")
+    runtime = [k for k, line in enumerate(printed) if line.startswith("runtime ")]
+    mine = text.splitlines()
+    # the same lines but the runtime's figures (two runs) and the output folder's
+    assert len(mine) == len(printed) - 1 and runtime == [len(mine) - 1]
+    assert mine[:-1] == printed[: len(mine) - 1]
+    assert "FASTSim not measured" in text
+    df = run.to_dataframe()
+    assert list(df.columns) == list(run.frame().columns) and len(df) == len(run.rows)
+    fig = run.plot()
+    titles = " ".join(ax.get_title() for ax in fig.axes)
+    assert "hwy" in titles and "ftp_bag3" in titles
+    plt.close(fig)
+
+
 def test_fleet_cli_bad_options_are_one_line(tmp_path, capsys):
     lst = write_list(tmp_path / "list.csv")
     assert main(["fleet", str(lst), "--out", str(tmp_path / "o"), "--cycles", "nedc"]) == 2

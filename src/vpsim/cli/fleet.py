@@ -87,7 +87,7 @@ def fleet(
     matplotlib.use("Agg")
     from ..errors import VpsimError
     from ..fleet.calibrate import SEED
-    from ..fleet.report import prepare_output_folder, write_outputs
+    from ..fleet.report import prepare_output_folder, summary_lines, write_outputs
     from ..fleet.run import run_fleet
 
     names = tuple(c.strip() for c in cycles.split(",") if c.strip())
@@ -113,89 +113,7 @@ def fleet(
     prepare_output_folder(out, [file])  # before the work: a folder that cannot be written fails now
     run = run_fleet(file, **options, seed=seeds[0] if seeds else SEED)
     s, info = write_outputs(run, out, command=_command())
-    excl = sum(s["excluded"].values())
-    click.echo(
-        f"{s['n_vehicles']} vehicles, {info['n_rows']} vehicle x cycle rows; {excl} vehicles excluded:"
-    )
-    click.echo("  " + ", ".join(f"{k} {v}" for k, v in s["excluded"].items()))
-    fs = s["peer"]["fastsim"]
-    fc = s["peer"]["fastsim_calibrated"]
-    measured = fs.get("measured", True)
-    v = s["validation"]
-    deal = "" if v["seed"] == SEED else f", dealt with seed {v['seed']} (the fleet's: {SEED})"
-    click.echo(f"held out by {v['grouping']}: {v['folds']} folds of {v['groups']} groups{deal}")
-    click.echo(
-        f"{'cycle':10s} {'n':>5s} {'median':>8s} {'med|e|':>8s} {'p90|e|':>8s}"
-        + (
-            "   FASTSim calibrated: median, med|e|, p90   FASTSim defaults: median, med|e|, p90"
-            if measured
-            else ""
-        )
-    )
-
-    def trio(x):
-        return f"{_f(x['median_error_pct'])} {_f(x['median_abs_error_pct'])} {_f(x['p90_abs_error_pct'])}"
-
-    for c in names:
-        line = f"{c:10s} {s['cycles'][c]['n']:5d} {trio(s['cycles'][c])}"
-        if measured:
-            line += f"   {trio(fc[c])}   {trio(fs[c])}"
-        click.echo(line)
-    if not measured:
-        click.echo(f"FASTSim not measured: {fs.get('reason')}")
-    # the electric and hybrid parts, each beside its peer (calibrated, then defaults) as the engine cars
-    parts = (
-        ("bev", "battery-electric: {n} vehicles ({status}), MPGe"),
-        ("hev", "full hybrids: {n} vehicles ({status}), mpg charge-sustaining (ECMS)"),
-        ("mhev", "mild hybrids: {n} vehicles ({status}), mpg charge-sustaining (ECMS)"),
-    )
-    for pt, title in parts:
-        part = s["by_powertrain"][pt]
-        peer = s["peer"]["fastsim_by_powertrain"].get(pt, {})
-        peer_cal = s["peer"]["fastsim_calibrated_by_powertrain"].get(pt, {})
-        click.echo(title.format(n=part["n_vehicles"], status=part["status"]))
-        if "vehicle" in peer and part["cycles"]:
-            click.echo(f"  (peer: {peer['vehicle']})")
-        for c, v in part["cycles"].items():
-            line = f"{c:10s} {v['n']:5d} {trio(v)}"
-            if "measured" not in peer and c in peer:
-                line += f"   {trio(peer_cal[c]) if c in peer_cal else _NOT_RUN}   {trio(peer[c])}"
-            click.echo(line)
-    diffs = s["peer"].get("vpsim_minus_fastsim_calibrated_by_powertrain", {})
-    if diffs.get("measured") is not False and diffs:
-        click.echo(
-            "vpsim minus the calibrated FASTSim, median |error| in points [95 % interval, families drawn]:"
-        )
-        for pt, tests in diffs.items():
-            shown = [
-                f"{c} {d['difference_pts']:+.1f} [{d['ci95_pts'][0]:+.1f}, {d['ci95_pts'][1]:+.1f}]"
-                for c, d in tests.items()
-                if isinstance(d, dict) and d.get("n")
-            ]
-            if shown:
-                click.echo(f"  {pt}: " + "; ".join(shown))
-    rep = {c: r for c, r in info.get("record_repeatability", {}).items() if r.get("rows")}
-    if rep:
-        beyond = "rows_beyond_12_pct_whatever_the_model"
-        click.echo(
-            "rows the record cannot tell apart (identical inputs), and of them beyond 12 % whatever the "
-            "model: " + ", ".join(f"{c} {r['rows']}, {r[beyond]}" for c, r in rep.items()) + " (report.md)"
-        )
-    left = {c: b["out_of_fold"] for c, b in info.get("between_manufacturers", {}).items()}
-    if left:
-        figures = [
-            f"{c} {o['median_abs_error_pct']:.1f} / {o['p90_abs_error_pct']:.1f} %" for c, o in left.items()
-        ]
-        click.echo(
-            "left by a correction per manufacturer (out of fold; median / p90 |error|): "
-            + "; ".join(figures)
-            + " (report.md)"
-        )
-    rt = info["runtime_s"]
-    click.echo(
-        f"runtime {rt['total_s']:.1f} s ({info['execution']}): "
-        + ", ".join(f"{k} {v:.1f} s" for k, v in rt.items() if k != "total_s")
-    )
+    click.echo("\n".join(summary_lines(s, info, names)))
     click.echo(
         f"wrote {out}/vehicles.csv, vehicles_ev.csv, vehicles_hev.csv, summary.json, run.json, report.md, "
         "excluded.csv, technology.json, figures"
@@ -240,13 +158,6 @@ def _command(prefix: str = "") -> str:
         return ""
     line = "vpsim fleet " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     return f"{prefix} {line}" if prefix else line
-
-
-_NOT_RUN = f"{'not run':>26s}"  # a peer column without figures, as wide as trio()'s three
-
-
-def _f(x) -> str:
-    return "       –" if x is None else f"{x:+7.1f}%"
 
 
 @cli.command("fleet-deals")

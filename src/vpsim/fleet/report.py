@@ -342,6 +342,108 @@ def _inputs(run) -> dict[str, tuple]:
     return {rec.key: model_inputs(rec) for rec in run.cars.vehicles}
 
 
+_NOT_RUN = f"{'not run':>26s}"  # a peer column without figures, as wide as the figures' three
+
+
+def _f(x) -> str:
+    return "       –" if x is None else f"{x:+7.1f}%"
+
+
+def summary_lines(s: dict, info: dict, names) -> list[str]:
+    """What ``vpsim fleet`` prints of a run: counts and exclusions, how it was held out, each cycle's median
+    / median |error| / p90 beside FASTSim's (calibrated, defaults), the electric and hybrid parts, the
+    differences from the calibrated FASTSim with their intervals, the record's repeatability, what a
+    correction per manufacturer leaves, and the runtime. ``s``: :func:`summary`; ``info``:
+    :func:`run_info`; ``names``: the engine cars' cycles, in order."""
+    from .calibrate import SEED
+
+    out: list[str] = []
+    excl = sum(s["excluded"].values())
+    out.append(
+        f"{s['n_vehicles']} vehicles, {info['n_rows']} vehicle x cycle rows; {excl} vehicles excluded:"
+    )
+    out.append("  " + ", ".join(f"{k} {v}" for k, v in s["excluded"].items()))
+    fs = s["peer"]["fastsim"]
+    fc = s["peer"]["fastsim_calibrated"]
+    measured = fs.get("measured", True)
+    v = s["validation"]
+    deal = "" if v["seed"] == SEED else f", dealt with seed {v['seed']} (the fleet's: {SEED})"
+    out.append(f"held out by {v['grouping']}: {v['folds']} folds of {v['groups']} groups{deal}")
+    out.append(
+        f"{'cycle':10s} {'n':>5s} {'median':>8s} {'med|e|':>8s} {'p90|e|':>8s}"
+        + (
+            "   FASTSim calibrated: median, med|e|, p90   FASTSim defaults: median, med|e|, p90"
+            if measured
+            else ""
+        )
+    )
+
+    def trio(x):
+        return f"{_f(x['median_error_pct'])} {_f(x['median_abs_error_pct'])} {_f(x['p90_abs_error_pct'])}"
+
+    for c in names:
+        line = f"{c:10s} {s['cycles'][c]['n']:5d} {trio(s['cycles'][c])}"
+        if measured:
+            line += f"   {trio(fc[c])}   {trio(fs[c])}"
+        out.append(line)
+    if not measured:
+        out.append(f"FASTSim not measured: {fs.get('reason')}")
+    # the electric and hybrid parts, each beside its peer (calibrated, then defaults) as the engine cars
+    parts = (
+        ("bev", "battery-electric: {n} vehicles ({status}), MPGe"),
+        ("hev", "full hybrids: {n} vehicles ({status}), mpg charge-sustaining (ECMS)"),
+        ("mhev", "mild hybrids: {n} vehicles ({status}), mpg charge-sustaining (ECMS)"),
+    )
+    for pt, title in parts:
+        part = s["by_powertrain"][pt]
+        peer = s["peer"]["fastsim_by_powertrain"].get(pt, {})
+        peer_cal = s["peer"]["fastsim_calibrated_by_powertrain"].get(pt, {})
+        out.append(title.format(n=part["n_vehicles"], status=part["status"]))
+        if "vehicle" in peer and part["cycles"]:
+            out.append(f"  (peer: {peer['vehicle']})")
+        for c, v in part["cycles"].items():
+            line = f"{c:10s} {v['n']:5d} {trio(v)}"
+            if "measured" not in peer and c in peer:
+                line += f"   {trio(peer_cal[c]) if c in peer_cal else _NOT_RUN}   {trio(peer[c])}"
+            out.append(line)
+    diffs = s["peer"].get("vpsim_minus_fastsim_calibrated_by_powertrain", {})
+    if diffs.get("measured") is not False and diffs:
+        out.append(
+            "vpsim minus the calibrated FASTSim, median |error| in points [95 % interval, families drawn]:"
+        )
+        for pt, tests in diffs.items():
+            shown = [
+                f"{c} {d['difference_pts']:+.1f} [{d['ci95_pts'][0]:+.1f}, {d['ci95_pts'][1]:+.1f}]"
+                for c, d in tests.items()
+                if isinstance(d, dict) and d.get("n")
+            ]
+            if shown:
+                out.append(f"  {pt}: " + "; ".join(shown))
+    rep = {c: r for c, r in info.get("record_repeatability", {}).items() if r.get("rows")}
+    if rep:
+        beyond = "rows_beyond_12_pct_whatever_the_model"
+        out.append(
+            "rows the record cannot tell apart (identical inputs), and of them beyond 12 % whatever the "
+            "model: " + ", ".join(f"{c} {r['rows']}, {r[beyond]}" for c, r in rep.items()) + " (report.md)"
+        )
+    left = {c: b["out_of_fold"] for c, b in info.get("between_manufacturers", {}).items()}
+    if left:
+        figures = [
+            f"{c} {o['median_abs_error_pct']:.1f} / {o['p90_abs_error_pct']:.1f} %" for c, o in left.items()
+        ]
+        out.append(
+            "left by a correction per manufacturer (out of fold; median / p90 |error|): "
+            + "; ".join(figures)
+            + " (report.md)"
+        )
+    rt = info["runtime_s"]
+    out.append(
+        f"runtime {rt['total_s']:.1f} s ({info['execution']}): "
+        + ", ".join(f"{k} {v:.1f} s" for k, v in rt.items() if k != "total_s")
+    )
+    return out
+
+
 def run_info(run) -> dict:
     """How the run was made and what it met: settings, counts, trace misses, runtime (``run.json``)."""
     df = run.frame()

@@ -139,6 +139,30 @@ class FleetRun:
 
         return pd.DataFrame(self.rows)
 
+    def to_dataframe(self):
+        """The engine cars' rows (:meth:`frame`): one per vehicle x cycle, measured and predicted mpg, the
+        error, fold, class and technology, FASTSim's figures; the other parts: :meth:`ev_frame`,
+        :meth:`hev_frame`, :meth:`mhev_frame`."""
+        return self.frame()
+
+    def __str__(self) -> str:
+        """What ``vpsim fleet`` prints of the run (:func:`vpsim.fleet.report.summary_lines`): medians and
+        90th percentiles of the errors per part and cycle beside FASTSim's, the differences with their
+        intervals (a family bootstrap, a few seconds), the runtime."""
+        from .report import run_info, summary, summary_lines
+
+        return "\n".join(summary_lines(summary(self), run_info(self), self.cycles))
+
+    def plot(self):
+        """Predicted against measured fuel economy, one panel per cycle and part (the report's
+        ``predicted_vs_measured.png``); FASTSim's beside vpsim's where it ran. Returns the Figure."""
+        from .report_figures import figure_predicted_vs_measured
+
+        peer = bool(self.peer.get("available"))
+        return figure_predicted_vs_measured(
+            self.frame(), self.cycles, peer, self.ev_frame(), self.hev_frame()
+        )
+
     def ev_frame(self):
         """One row per battery-electric vehicle x test (``udds``, ``hwy``): MPGe measured and predicted."""
         import pandas as pd
