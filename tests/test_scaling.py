@@ -260,6 +260,18 @@ def test_compare_maps_of_the_model_itself(params) -> None:
     assert cmp.stats()["p90_abs_pct"] < 1e-9
     assert cmp.usable.sum() == np.sum(cmp.torque[None, :] <= e.max_torque_at(cmp.speed)[:, None] + 1e-9)
     assert len(cmp.rows()) == e.fuel_flow.size
+    st = cmp.stats()
+    assert str(cmp).startswith(f"{cmp.name}: generated against measured fuel flow at {st['n']} nodes")
+    df = cmp.to_dataframe()
+    assert len(df) == e.fuel_flow.size and int(df["usable"].sum()) == st["n"]
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = cmp.plot()
+    assert len(fig.axes) >= 3  # measured, generated, their difference (and colour bars)
+    plt.close(fig)
 
 
 def test_compare_on_cycle_reports_coverage(params) -> None:

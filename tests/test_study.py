@@ -192,3 +192,25 @@ def test_paper_bad_vehicle_is_one_line_before_anything_runs(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("vpsim: error: ") and "vehicle.mass" in err and err.count("\n") == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_a_study_prints_its_table_2_plots_it_and_is_a_dataframe(tmp_path):
+    """StudyResult: print gives Table 2 as `vpsim paper` prints it (a line per method, driver and cycle), the
+    DataFrame is Table 2, and plot draws a bar per method and driver on each cycle at its fuel."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    res = run_study(tmp_path, cycles=("nedc",), repeats=1, figures=False)
+    lines = str(res).splitlines()
+    assert len(lines) == len(res.table2) == 5
+    back = next(r for r in res.table2 if r["method"] == "backward")
+    fuel = f"{back['fuel_l_per_100km']:8.3f}"
+    assert any(line.split()[:1] == ["backward"] and fuel in line for line in lines)
+    df = res.to_dataframe()
+    assert list(df["fuel_l_per_100km"]) == [r["fuel_l_per_100km"] for r in res.table2]
+    fig = res.plot()
+    heights = sorted(p.get_height() for p in fig.axes[0].patches)
+    assert heights == pytest.approx(sorted(df["fuel_l_per_100km"]))
+    plt.close(fig)

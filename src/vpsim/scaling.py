@@ -193,6 +193,25 @@ class MapComparison:
         """Median and 90th percentile of |relative error|, and the median signed error, usable nodes, %."""
         return error_stats(self.relative_error[self.usable])
 
+    def __str__(self) -> str:
+        st = self.stats()
+        return (
+            f"{self.name}: generated against measured fuel flow at {st['n']} nodes (positive torque, within "
+            f"the measured full load): median |error| {st['median_abs_pct']:.1f} %, 90th percentile "
+            f"{st['p90_abs_pct']:.1f} %, median error {st['median_pct']:+.1f} %"
+        )
+
+    def to_dataframe(self):
+        """One row per measured node (:meth:`rows`): speed, torque, both fuel flows, the error, usable."""
+        import pandas as pd
+
+        return pd.DataFrame(self.rows())
+
+    def plot(self):
+        """The paper's Figure 7 for this engine (:func:`plot_figure7`): measured and generated BSFC, and
+        their relative difference. Returns the Figure."""
+        return plot_figure7([self])
+
     def rows(self) -> list[dict[str, Any]]:
         out = []
         for i, w in enumerate(self.speed):

@@ -225,6 +225,47 @@ class StudyResult:
     report: str = field(repr=False, default="")
     files: list[Path] = field(default_factory=list)
 
+    def __str__(self) -> str:
+        """Table 2 as ``vpsim paper`` prints it: fuel per method, driver and cycle, and its difference from
+        the backward method (the BQM)."""
+        from .jsonsafe import number
+
+        return "\n".join(
+            f"  {row['method']:<9} driver {row['driver']:<4} {row['cycle']:<6} "
+            f"{number(row['fuel_l_per_100km'], '8.3f', 'fuel_l_per_100km')} L/100 km  "
+            f"{number(row['diff_vs_bqm_pct'], '+7.2f', 'diff_vs_bqm_pct')} %"
+            for row in self.table2
+        )
+
+    def to_dataframe(self):
+        """Table 2 (the paper's mode), one row per method, driver and cycle; the other tables are the
+        attributes ``table1``, ``table2_extended``, ``table3``, ``tracking``, ``inversion``."""
+        import pandas as pd
+
+        return pd.DataFrame(self.table2)
+
+    def plot(self):
+        """Table 2 as bars: fuel per cycle for each method and driver. Returns the Figure."""
+        import matplotlib.pyplot as plt
+
+        df = self.to_dataframe()
+        runs = list(dict.fromkeys(zip(df["method"], df["driver"].astype(str), strict=True)))
+        cycles = list(dict.fromkeys(df["cycle"]))
+        fig, ax = plt.subplots(figsize=(8, 4.5))
+        width = 0.8 / max(len(runs), 1)
+        for k, (method, driver) in enumerate(runs):
+            sel = df[(df["method"] == method) & (df["driver"].astype(str) == driver)]
+            fuel = [float(sel.loc[sel["cycle"] == c, "fuel_l_per_100km"].iloc[0]) for c in cycles]
+            label = method if method == "backward" else f"{method}, driver {driver}"
+            at = [i + (k - (len(runs) - 1) / 2) * width for i in range(len(cycles))]
+            ax.bar(at, fuel, width, label=label)
+        ax.set_xticks(range(len(cycles)), [c.upper() for c in cycles])
+        ax.set_ylabel("fuel, L/100 km")
+        ax.set_title("Table 2: fuel per cycle, method and driver")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        return fig
+
 
 def _best_of(fn, repeats: int):
     """Run ``fn`` ``repeats`` times; its first Result with the smallest CPU time of all runs."""

@@ -9,7 +9,6 @@ from pathlib import Path
 import click
 
 from ..errors import VpsimError
-from ._output import number
 from .main import cli, vehicle_option
 from .simulate import _out_dir
 
@@ -72,12 +71,7 @@ def paper(out, vehicle, advisor_dir, repeats):
             state["done"] = done
 
         result = run_study(out, params=params, repeats=repeats, progress=progress, advisor_dir=advisor_dir)
-    for row in result.table2:
-        click.echo(
-            f"  {row['method']:<9} driver {row['driver']:<4} {row['cycle']:<6} "
-            f"{number(row['fuel_l_per_100km'], '8.3f', 'fuel_l_per_100km')} L/100 km  "
-            f"{number(row['diff_vs_bqm_pct'], '+7.2f', 'diff_vs_bqm_pct')} %"
-        )
+    click.echo(str(result))  # Table 2
     after = _files(out)
     written = {p for p, stamp in after.items() if before.get(p) != stamp} | {Path(p) for p in result.files}
     click.echo(
