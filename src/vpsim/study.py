@@ -245,24 +245,29 @@ class StudyResult:
         return pd.DataFrame(self.table2)
 
     def plot(self):
-        """Table 2 as bars: fuel per cycle for each method and driver. Returns the Figure."""
+        """Table 2 as bars: each method and driver's fuel against the backward method's (the BQM) on each
+        cycle, in %; the BQM's own fuel under the cycle's name. Returns the Figure."""
         import matplotlib.pyplot as plt
 
         df = self.to_dataframe()
-        runs = list(dict.fromkeys(zip(df["method"], df["driver"].astype(str), strict=True)))
+        others = df[df["method"] != "backward"]
+        runs = list(dict.fromkeys(zip(others["method"], others["driver"].astype(str), strict=True)))
         cycles = list(dict.fromkeys(df["cycle"]))
+        bqm = {r["cycle"]: r["fuel_l_per_100km"] for r in self.table2 if r["method"] == "backward"}
         fig, ax = plt.subplots(figsize=(8, 4.5))
         width = 0.8 / max(len(runs), 1)
         for k, (method, driver) in enumerate(runs):
-            sel = df[(df["method"] == method) & (df["driver"].astype(str) == driver)]
-            fuel = [float(sel.loc[sel["cycle"] == c, "fuel_l_per_100km"].iloc[0]) for c in cycles]
-            label = method if method == "backward" else f"{method}, driver {driver}"
+            sel = others[(others["method"] == method) & (others["driver"].astype(str) == driver)]
+            diff = [float(sel.loc[sel["cycle"] == c, "diff_vs_bqm_pct"].iloc[0]) for c in cycles]
             at = [i + (k - (len(runs) - 1) / 2) * width for i in range(len(cycles))]
-            ax.bar(at, fuel, width, label=label)
-        ax.set_xticks(range(len(cycles)), [c.upper() for c in cycles])
-        ax.set_ylabel("fuel, L/100 km")
-        ax.set_title("Table 2: fuel per cycle, method and driver")
-        ax.legend(fontsize=8)
+            ax.bar(at, diff, width, label=f"{method}, driver {driver}")
+        ax.axhline(0.0, color="black", lw=0.8)
+        labels = [f"{c.upper()}\n(backward {bqm[c]:.3f} L/100 km)" if c in bqm else c.upper() for c in cycles]
+        ax.set_xticks(range(len(cycles)), labels)
+        ax.set_ylabel("fuel against the backward method (BQM), %")
+        ax.set_title("Table 2: each method's fuel against the backward method's")
+        ax.grid(axis="y", alpha=0.3)
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
         fig.tight_layout()
         return fig
 
