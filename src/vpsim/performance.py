@@ -50,7 +50,7 @@ from .model import engine as en
 from .model import hybrid as hy
 from .model import vehicle as vh
 from .model._compile import kernel
-from .model.record import record_array
+from .model.record import fields, record_array
 
 LAUNCH_SPEED = 250.0  # rad/s, engine speed held while the clutch slips at launch
 SHIFT_FRACTION = 0.9  # default upshift speed as a fraction of the max-power speed
@@ -229,6 +229,12 @@ class _Designs:
     boost: np.ndarray  # (designs, BOOST_POINTS): a P2 machine's boost torque on BOOST_STEP speeds; 0 without
     rotor_inertia: np.ndarray  # the P2 machine's rotor, kg m^2 (0 without)
 
+    def __post_init__(self):
+        # the equations below read the records' fields as plain attributes (vpsim.model.record.fields: the
+        # same column arrays; a recarray's attribute look-up took most of a sweep's time); the compiled
+        # manifold rate takes the records themselves
+        self.c = fields(self.rec)
+
     def subset(self, sel) -> _Designs:
         return _Designs(
             self.rec[sel],
@@ -250,13 +256,11 @@ class _Designs:
         return self.boost[rows, j] * (1.0 - f) + self.boost[rows, j + 1] * f
 
     def _engine_speed(self, v, i, slip):
-        return np.where(
-            slip, self.w_launch, vh.engine_speed(v, i, self.rec)
-        )  # (14),(17); launch: clutch slips
+        return np.where(slip, self.w_launch, vh.engine_speed(v, i, self.c))  # (14),(17); launch: clutch slips
 
     def deriv(self, v, p, i, slip):
         """(dv/dt, dp_i/dt) at full throttle: (18) with (1),(14)-(17), and (9)."""
-        c = self.rec
+        c = self.c
         w_e = self._engine_speed(v, i, slip)
         t_cr = en.crank_torque(p, w_e, c)  # (2)-(8)
         # a P2 hybrid's machine turns with the gearbox input (behind the slipping clutch at launch) and adds
@@ -269,7 +273,7 @@ class _Designs:
         # drive force is smaller: see the ``stuck`` check)
         road = vh.aero_force(v, c) + vh.rolling_force_in_motion(v, c)
         dv = (vh.engine_to_wheel_force(t_in, i, c) - road) / m_eff
-        dp, _ = en.manifold_pressure_rate_array(p, c.max_throttle_area, w_e, c)
+        dp, _ = en.manifold_pressure_rate_array(p, c.max_throttle_area, w_e, self.rec)
         return dv, dp
 
     def step(self, v, p, i, slip, h, f1):
@@ -282,7 +286,7 @@ class _Designs:
         j11, j21, j12 = (fvv - f1v) / dv_, (fvp - f1p) / dv_, fpv - f1v
         # d(dp_i/dt)/dp_i, analytic: the throttle term is singular as p_i -> p_a (9),(10),(13)
         w_e = self._engine_speed(v, i, slip)
-        _, j22 = en.manifold_pressure_rate_array(p, self.rec.max_throttle_area, w_e, self.rec)
+        _, j22 = en.manifold_pressure_rate_array(p, self.c.max_throttle_area, w_e, self.rec)
         m11, m12, m21, m22 = 1.0 - _G * h * j11, -_G * h * j12, -_G * h * j21, 1.0 - _G * h * j22
         det = m11 * m22 - m12 * m21
         k1v, k1p = (m22 * f1v - m12 * f1p) / det, (m11 * f1p - m21 * f1v) / det
@@ -346,7 +350,7 @@ class _State:
     @classmethod
     def start(cls, d: _Designs) -> _State:
         n = d.rec.size
-        p0, _ = en.steady_pressure_array(d.rec.max_throttle_area, d.w_launch, d.rec)
+        p0, _ = en.steady_pressure_array(d.c.max_throttle_area, d.w_launch, d.rec)
         return cls(
             np.zeros(n),
             p0,
@@ -374,7 +378,7 @@ def _integrate(d: _Designs, st: _State, settings, *, reason_out, shifts, rows, c
     shift_lists, sel_s = shifts
     n = st.v.size
     idx = np.arange(n)
-    r_w = d.rec.wheel_radius
+    r_w = d.c.wheel_radius
     i = d.ratios[idx, st.gear - 1]
     f = d.deriv(st.v, st.p, i, st.slip)
     while not st.done.all():
