@@ -258,8 +258,9 @@ def _neutral_sections():
 
 
 def fields(rec) -> SimpleNamespace:
-    """The fields of one record (``rec.mass``, ``rec.k_cu`` ...) as plain attributes, for the model's
-    equations evaluated by NumPy in Python (the lines and maps built once per parameter set).
+    """The fields of one record (``rec.mass``, ``rec.k_cu`` ...), or of an array of records (each attribute
+    then the field's column, a view), as plain attributes, for the model's equations evaluated by NumPy in
+    Python (the lines and maps built once per parameter set, the 0-100 km/h run of a sweep's designs).
 
     A ``numpy.record`` reads a field through NumPy's Python-level ``__getattribute__``, about 1-2 us a
     field; an equation reads dozens of fields per call, so on small arrays that look-up, not the arithmetic,
