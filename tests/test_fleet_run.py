@@ -273,7 +273,7 @@ def test_a_fleet_run_prints_as_the_command_line_plots_and_is_a_dataframe(tmp_pat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    lst = write_list(tmp_path / "list.csv", bad_rows=False)
+    lst = write_list(tmp_path / "list.csv")  # with its hybrids, a mild one among them
     args = ["--folds", "3", "--cycles", "hwy,ftp_bag3", "--no-peer"]
     run = run_fleet(lst, folds=3, cycles=("hwy", "ftp_bag3"), peer=False, workers=1, progress=False)
     text = str(run)
@@ -289,9 +289,42 @@ def test_a_fleet_run_prints_as_the_command_line_plots_and_is_a_dataframe(tmp_pat
     df = run.to_dataframe()
     assert list(df.columns) == list(run.frame().columns) and len(df) == len(run.rows)
     fig = run.plot()
-    titles = " ".join(ax.get_title() for ax in fig.axes)
-    assert "hwy" in titles and "ftp_bag3" in titles
+    titles = [ax.get_title() for ax in fig.axes if ax.get_visible()]
+    assert "hwy (n = " in " ".join(titles) and "ftp_bag3 (n = " in " ".join(titles)
     plt.close(fig)
+
+
+def test_the_predicted_against_measured_figure_has_a_panel_per_part_and_test():
+    """figure_predicted_vs_measured: a panel per engine-car cycle, EV test, full-hybrid test and mild-hybrid
+    test present in the rows, each with its count; the mild hybrids' peer is FASTSim's conventional car."""
+    from vpsim.fleet.report_figures import figure_predicted_vs_measured
+
+    def rows(cycles, n, mpg, **extra):
+        return pd.DataFrame(
+            [
+                dict(cycle=c, measured_mpg=mpg + k, predicted_mpg=mpg + k + 0.5, status="ok", **extra)
+                for c in cycles
+                for k in range(n)
+            ]
+        )
+
+    df = rows(("hwy",), 3, 30.0, fastsim_calibrated_mpg=31.0)
+    hev = rows(("udds_hot", "hwy"), 2, 50.0, fastsim_calibrated_mpg=48.0)
+    mhev = rows(("ftp_bag2", "hwy", "us06"), 4, 25.0, fastsim_calibrated_mpg=26.0)
+    mhev.loc[0, "status"] = "trace_miss"
+    fig = figure_predicted_vs_measured(df, ("hwy",), True, None, hev, mhev)
+    titles = [ax.get_title() for ax in fig.axes if ax.get_visible()]
+    assert titles == [
+        "hwy (n = 3)",
+        "full hybrid, udds_hot (n = 2)",
+        "full hybrid, hwy (n = 2)",
+        "mild hybrid, ftp_bag2 (n = 4)",
+        "mild hybrid, hwy (n = 4)",
+        "mild hybrid, us06 (n = 4)",
+    ]
+    labels = fig.axes[3].get_legend_handles_labels()[1]
+    assert "FASTSim 3.1 conventional car, calibrated" in labels
+    assert "vpsim mild hybrid, trace miss" in labels
 
 
 def test_fleet_cli_bad_options_are_one_line(tmp_path, capsys):

@@ -870,7 +870,7 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
     w = worst(df, inputs=_inputs(run))
     figs = {
         "predicted_vs_measured.png": figure_predicted_vs_measured(
-            df, run.cycles, peer, run.ev_frame(), run.hev_frame()
+            df, run.cycles, peer, run.ev_frame(), run.hev_frame(), run.mhev_frame()
         ),
         "error_histograms.png": figure_histograms(df, run.cycles, peer),
         "error_by_group.png": figure_by_group(df, run.cycles),

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from .report import EV_CYCLES, GROUPS, HEV_CYCLES, _in_order
+from .report import EV_CYCLES, GROUPS, HEV_CYCLES, MHEV_CYCLES, _in_order
 
 
 def _axes_grid(n, ncols=2, size=(5.2, 4.2)):
@@ -38,52 +38,63 @@ def _diagonal(ax, lo, hi, title, measured_unit, predicted_unit):
     ax.legend(fontsize=7, loc="upper left")
 
 
-def figure_predicted_vs_measured(df, cycles, peer: bool, ev=None, hev=None):
+def _hybrid_panel(ax, rows, c, peer: bool, what: str, peer_label: str) -> None:
+    """One hybrid part's test ``c``: vpsim's charge-sustaining mpg (``what``: "full hybrid", "mild
+    hybrid") against the measurement, trace misses as red crosses, and its peer (``peer_label``) calibrated
+    on the same classes, or its defaults where it was not calibrated."""
+    sub = rows[(rows["cycle"] == c) & np.isfinite(rows["predicted_mpg"].to_numpy(float))]
+    vals = np.concatenate([sub["measured_mpg"], sub["predicted_mpg"]])
+    lo, hi = (0.9 * vals.min(), 1.05 * vals.max()) if vals.size else (0, 1)
+    for col, how in (("fastsim_calibrated_mpg", "calibrated"), ("fastsim_mpg", "defaults")):
+        # the peer calibrated as vpsim's hybrids are (the fair comparison), else its defaults
+        if peer and col in sub and np.isfinite(sub[col].to_numpy(float)).any():
+            ax.scatter(
+                sub["measured_mpg"],
+                sub[col],
+                s=14,
+                marker="s",
+                c="tab:orange",
+                alpha=0.45,
+                label=f"{peer_label}, {how}",
+            )
+            break
+    miss = (sub["status"] == "trace_miss").to_numpy()
+    ax.scatter(
+        sub["measured_mpg"][~miss],
+        sub["predicted_mpg"][~miss],
+        s=24,
+        marker="^" if what == "full hybrid" else "v",
+        c="tab:purple" if what == "full hybrid" else "tab:brown",
+        alpha=0.75,
+        label=f"vpsim {what} (ECMS, charge-sustaining)",
+    )
+    if miss.any():
+        ax.scatter(
+            sub["measured_mpg"][miss],
+            sub["predicted_mpg"][miss],
+            s=20,
+            marker="x",
+            c="tab:red",
+            label=f"vpsim {what}, trace miss",
+        )
+    _diagonal(ax, lo, hi, f"{what}, {c} (n = {len(sub)})", "mpg", "mpg")
+
+
+def figure_predicted_vs_measured(df, cycles, peer: bool, ev=None, hev=None, mhev=None):
     """One panel per conventional cycle (mpg); with battery-electric rows ``ev``, one per EV test (MPGe:
     green diamonds); with full-hybrid rows ``hev``, one per hybrid test (charge-sustaining mpg: purple
     triangles, trace misses as red crosses; FASTSim's hybrid calibrated on the same classes beside them, or
-    its defaults where it was not calibrated)."""
+    its defaults where it was not calibrated); with mild-hybrid rows ``mhev``, one per test the same way
+    (brown triangles; beside them FASTSim's conventional car of the same record, its peer)."""
     ev_cycles = [c for c in EV_CYCLES if ev is not None and (ev["cycle"] == c).any()]
     hev_cycles = [c for c in HEV_CYCLES if hev is not None and (hev["cycle"] == c).any()]
-    fig, axes = _axes_grid(len(cycles) + len(ev_cycles) + len(hev_cycles))
+    mhev_cycles = [c for c in MHEV_CYCLES if mhev is not None and (mhev["cycle"] == c).any()]
+    fig, axes = _axes_grid(len(cycles) + len(ev_cycles) + len(hev_cycles) + len(mhev_cycles))
     first = len(cycles) + len(ev_cycles)
     for ax, c in zip(axes[first:], hev_cycles, strict=False):
-        sub = hev[(hev["cycle"] == c) & np.isfinite(hev["predicted_mpg"].to_numpy(float))]
-        vals = np.concatenate([sub["measured_mpg"], sub["predicted_mpg"]])
-        lo, hi = (0.9 * vals.min(), 1.05 * vals.max()) if vals.size else (0, 1)
-        for col, what in (("fastsim_calibrated_mpg", "calibrated"), ("fastsim_mpg", "defaults")):
-            # the peer calibrated as vpsim's hybrids are (the fair comparison), else its defaults
-            if peer and col in sub and np.isfinite(sub[col].to_numpy(float)).any():
-                ax.scatter(
-                    sub["measured_mpg"],
-                    sub[col],
-                    s=14,
-                    marker="s",
-                    c="tab:orange",
-                    alpha=0.45,
-                    label=f"FASTSim 3.1 hybrid, {what}",
-                )
-                break
-        miss = (sub["status"] == "trace_miss").to_numpy()
-        ax.scatter(
-            sub["measured_mpg"][~miss],
-            sub["predicted_mpg"][~miss],
-            s=24,
-            marker="^",
-            c="tab:purple",
-            alpha=0.75,
-            label="vpsim hybrid (ECMS, charge-sustaining)",
-        )
-        if miss.any():
-            ax.scatter(
-                sub["measured_mpg"][miss],
-                sub["predicted_mpg"][miss],
-                s=20,
-                marker="x",
-                c="tab:red",
-                label="vpsim hybrid, trace miss",
-            )
-        _diagonal(ax, lo, hi, f"full hybrid, {c} (n = {len(sub)})", "mpg", "mpg")
+        _hybrid_panel(ax, hev, c, peer, "full hybrid", "FASTSim 3.1 hybrid")
+    for ax, c in zip(axes[first + len(hev_cycles) :], mhev_cycles, strict=False):
+        _hybrid_panel(ax, mhev, c, peer, "mild hybrid", "FASTSim 3.1 conventional car")
     for ax, c in zip(axes[len(cycles) :], ev_cycles, strict=False):
         sub = ev[(ev["cycle"] == c) & np.isfinite(ev["predicted_mpge"].to_numpy(float))]
         vals = np.concatenate([sub["measured_mpge"], sub["predicted_mpge"]])
@@ -146,7 +157,7 @@ def figure_predicted_vs_measured(df, cycles, peer: bool, ev=None, hev=None):
         _diagonal(ax, lo, hi, f"{c} (n = {len(sub)})", "mpg", "mpg")
     fig.suptitle(
         "Predicted against measured fuel economy (MPGe for the battery-electric cars), EPA test cars"
-        if not hev_cycles
+        if not (hev_cycles or mhev_cycles)
         else "Predicted against measured fuel economy (MPGe for the battery-electric cars; hybrids "
         "charge-sustaining), EPA test cars"
     )

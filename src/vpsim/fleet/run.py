@@ -160,7 +160,7 @@ class FleetRun:
 
         peer = bool(self.peer.get("available"))
         return figure_predicted_vs_measured(
-            self.frame(), self.cycles, peer, self.ev_frame(), self.hev_frame()
+            self.frame(), self.cycles, peer, self.ev_frame(), self.hev_frame(), self.mhev_frame()
         )
 
     def ev_frame(self):
