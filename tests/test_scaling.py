@@ -272,6 +272,12 @@ def test_compare_maps_of_the_model_itself(params) -> None:
     fig = cmp.plot()
     assert len(fig.axes) >= 3  # measured, generated, their difference (and colour bars)
     plt.close(fig)
+    from dataclasses import replace
+
+    none = replace(cmp, usable=np.zeros_like(cmp.usable))
+    assert str(none).endswith(
+        "at 0 nodes: no measured node has positive torque within the measured full load"
+    )
 
 
 def test_compare_on_cycle_reports_coverage(params) -> None:

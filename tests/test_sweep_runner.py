@@ -67,6 +67,10 @@ def test_a_run_prints_plots_and_is_a_dataframe(tmp_path):
     empty = runner_mod.SweepRun(no_accel.results.iloc[:0], "x", 0, 0, 0, 0, 0.0)
     with pytest.raises(runner_mod.VpsimError, match="no results to plot"):
         empty.plot()
+    with pytest.raises(
+        runner_mod.VpsimError, match="cycle 'udds' is not in the sweep's results; it has hwfet, nedc"
+    ):
+        run.plot(cycle="udds")
 
 
 def test_same_rows_on_a_local_cluster_with_two_workers(tmp_path):

@@ -195,10 +195,13 @@ class MapComparison:
 
     def __str__(self) -> str:
         st = self.stats()
+        head = f"{self.name}: generated against measured fuel flow at {st['n']} nodes"
+        if not st["n"]:
+            return f"{head}: no measured node has positive torque within the measured full load"
         return (
-            f"{self.name}: generated against measured fuel flow at {st['n']} nodes (positive torque, within "
-            f"the measured full load): median |error| {st['median_abs_pct']:.1f} %, 90th percentile "
-            f"{st['p90_abs_pct']:.1f} %, median error {st['median_pct']:+.1f} %"
+            f"{head} (positive torque, within the measured full load): median |error| "
+            f"{st['median_abs_pct']:.1f} %, 90th percentile {st['p90_abs_pct']:.1f} %, median error "
+            f"{st['median_pct']:+.1f} %"
         )
 
     def to_dataframe(self):

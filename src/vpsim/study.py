@@ -249,6 +249,8 @@ class StudyResult:
         cycle, in %; the BQM's own fuel under the cycle's name. Returns the Figure."""
         import matplotlib.pyplot as plt
 
+        from .jsonsafe import number
+
         df = self.to_dataframe()
         others = df[df["method"] != "backward"]
         runs = list(dict.fromkeys(zip(others["method"], others["driver"].astype(str), strict=True)))
@@ -262,7 +264,12 @@ class StudyResult:
             at = [i + (k - (len(runs) - 1) / 2) * width for i in range(len(cycles))]
             ax.bar(at, diff, width, label=f"{method}, driver {driver}")
         ax.axhline(0.0, color="black", lw=0.8)
-        labels = [f"{c.upper()}\n(backward {bqm[c]:.3f} L/100 km)" if c in bqm else c.upper() for c in cycles]
+        labels = [
+            f"{c.upper()}\n(backward {number(bqm[c], '.3f', 'fuel_l_per_100km')} L/100 km)"
+            if c in bqm
+            else c.upper()
+            for c in cycles
+        ]
         ax.set_xticks(range(len(cycles)), labels)
         ax.set_ylabel("fuel against the backward method (BQM), %")
         ax.set_title("Table 2: each method's fuel against the backward method's")

@@ -641,6 +641,10 @@ class SweepRun:
         df = self.results
         if df.empty:
             raise VpsimError("the sweep has no results to plot")
+        for name, value in (("cycle", cycle), ("method", method)):
+            have = sorted(set(df[name].astype(str)))
+            if value is not None and value not in have:
+                raise VpsimError(f"{name} {value!r} is not in the sweep's results; it has {', '.join(have)}")
         if ACCEL in df and np.isfinite(pd.to_numeric(df[ACCEL], errors="coerce")).any():
             ax, _ = plot_pareto(df, cycle=cycle, method=method)
         else:
