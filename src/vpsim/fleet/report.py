@@ -808,7 +808,7 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
     a folder killed halfway says so, and readers of its files (``vpsim vehicle from-epa --technology``)
     refuse it (:func:`check_complete`)."""
     # here, not at the top: these modules import this one's constants and analyses
-    from .report_figures import figure_by_group, figure_histograms, figure_predicted_vs_measured, figure_worst
+    from .report_figures import figure_by_group, figure_histograms, figure_worst
     from .report_md import markdown
 
     out = Path(out_dir)
@@ -869,9 +869,7 @@ def write_outputs(run, out_dir, command: str = "") -> tuple[dict, dict]:
     peer = bool(run.peer.get("available"))
     w = worst(df, inputs=_inputs(run))
     figs = {
-        "predicted_vs_measured.png": figure_predicted_vs_measured(
-            df, run.cycles, peer, run.ev_frame(), run.hev_frame(), run.mhev_frame()
-        ),
+        "predicted_vs_measured.png": run.plot(),
         "error_histograms.png": figure_histograms(df, run.cycles, peer),
         "error_by_group.png": figure_by_group(df, run.cycles),
         "worst_vehicles.png": figure_worst(w),

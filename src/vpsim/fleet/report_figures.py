@@ -38,6 +38,13 @@ def _diagonal(ax, lo, hi, title, measured_unit, predicted_unit):
     ax.legend(fontsize=7, loc="upper left")
 
 
+def _trace_misses(ax, sub, miss, size, label) -> None:
+    """The rows ``miss`` of ``sub`` (runs that missed the trace) as red crosses, if any."""
+    if miss.any():
+        x, y = sub["measured_mpg"][miss], sub["predicted_mpg"][miss]
+        ax.scatter(x, y, s=size, marker="x", c="tab:red", label=label)
+
+
 def _hybrid_panel(ax, rows, c, peer: bool, what: str, peer_label: str) -> None:
     """One hybrid part's test ``c``: vpsim's charge-sustaining mpg (``what``: "full hybrid", "mild
     hybrid") against the measurement, trace misses as red crosses, and its peer (``peer_label``) calibrated
@@ -68,15 +75,7 @@ def _hybrid_panel(ax, rows, c, peer: bool, what: str, peer_label: str) -> None:
         alpha=0.75,
         label=f"vpsim {what} (ECMS, charge-sustaining)",
     )
-    if miss.any():
-        ax.scatter(
-            sub["measured_mpg"][miss],
-            sub["predicted_mpg"][miss],
-            s=20,
-            marker="x",
-            c="tab:red",
-            label=f"vpsim {what}, trace miss",
-        )
+    _trace_misses(ax, sub, miss, 20, f"vpsim {what}, trace miss")
     _diagonal(ax, lo, hi, f"{what}, {c} (n = {len(sub)})", "mpg", "mpg")
 
 
@@ -145,15 +144,7 @@ def figure_predicted_vs_measured(df, cycles, peer: bool, ev=None, hev=None, mhev
             alpha=0.6,
             label="vpsim",
         )
-        if miss.any():
-            ax.scatter(
-                sub["measured_mpg"][miss],
-                sub["predicted_mpg"][miss],
-                s=12,
-                marker="x",
-                c="tab:red",
-                label="vpsim, trace miss",
-            )
+        _trace_misses(ax, sub, miss, 12, "vpsim, trace miss")
         _diagonal(ax, lo, hi, f"{c} (n = {len(sub)})", "mpg", "mpg")
     fig.suptitle(
         "Predicted against measured fuel economy (MPGe for the battery-electric cars), EPA test cars"
