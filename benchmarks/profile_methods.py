@@ -90,7 +90,8 @@ def split_backward(p, cyc, schedule, em):
         def kernel(r, extended=extended):
             backward.run_kernel(
                 cyc.time_s, *intervals, schedule.time_s, schedule.gear, ratios, recs, extended, kind,
-                m_speed, m_torque, table, l_speed, l_max, l_min, s_max, s_min, generated, gear, r, acc,
+                m_speed, m_torque, table, l_speed, l_max, l_min, s_max, s_min, generated, True,
+                backward._interval_gears(schedule, cyc), gear, r, acc,
             )  # fmt: skip
 
         call = median_us(lambda m=mode: simulate(cyc, "backward", p, gears=schedule, mode=m), 2000)

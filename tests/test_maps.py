@@ -126,3 +126,31 @@ def test_figure2_colours_are_distinct_and_figure3_fills_up_to_the_max_torque_lin
     em = cached_engine_map(params.engine)
     assert np.allclose(t[:, -1], em.max_torque(w[:, 0])) and np.isfinite(fuel).all()  # no gap under the line
     plt.close(ax.figure)
+
+
+@pytest.mark.parametrize("preset", ["hofman2011", "geo_metro_1l", "saturn_1_9l"])
+@settings(max_examples=80, deadline=None)
+@given(frac=st.floats(0.0, 1.0), below=st.floats(0.0, 2e4))
+def test_full_load_screen_is_below_the_generated_line(preset, frac, below):
+    """Property: a demand whose intake pressure is at or below ``full_load_screen`` at the line's last node is
+    at or below the max-torque line the map generator tabulated (interpolated by numpy, not by the kernels'
+    look-up), at any speed up to that node: what lets the backward methods skip reading the line there."""
+    from vpsim.params import load_parameters
+
+    eng = load_parameters(preset).engine
+    em = maps.cached_engine_map(eng)
+    c = engine_record(eng)
+    w_line, t_line = em.max_torque_speed, em.max_torque_values
+    w_end = float(w_line[-1])
+    p_screen = float(en.full_load_screen(w_end, w_end / (w_line.size - 1), c))
+    assert 0.9 * eng.ambient_pressure < p_screen < eng.ambient_pressure  # a bound that screens most demands
+    w = np.append(np.linspace(0.0, w_end, 20001), frac * w_end)  # (a dense grid: the worst is near the top)
+    t = en.crank_torque(np.full(w.size, p_screen - below), w, c)
+    assert np.all(t <= np.interp(w, w_line, t_line))
+
+
+def test_full_load_screen_is_off_where_the_line_is_capped_or_boosted(params):
+    """No bound for a power-capped line or a boosted engine (-inf: every demand reads the line)."""
+    for changes in ({"rated_power": 40e3}, {"boost_pressure": 1.8 * params.engine.ambient_pressure}):
+        c = engine_record(params.with_changes(engine=changes).engine)
+        assert en.full_load_screen(600.0, 1.0, c) == -np.inf, changes

@@ -85,6 +85,7 @@ def _point(
     inv_line,
     inv_ms,
     inv_mt,
+    p_screen,
 ):
     """The operating point interval k imposes in gear index g, limited by the max-torque line; its intake
     pressure and (``fuel_kind`` exact or table) fuel flow. Returns the values of one row (R_V .. R_MDOT).
@@ -103,18 +104,25 @@ def _point(
     w, dw, w_wheel, t_req, brake, clutch, fired, _ = rules.operating_point(
         v, a, i, g + 1, t_closed, extended, c, cm18_wheel
     )
-    t_max = tb.interp_sloped_at(w, line_speed, line_max, slope_max, inv_line)
-    short = t_req - t_max if t_req > t_max else 0.0
-    t_cr = t_req - short
-    t_fired = t_cr if fired >= 1.0 else t_closed  # cylinders cut: the throttle is closed (manifold, fuel)
     # the friction law's power of the speed (5): the gear's factor times the cycle's |v|^1.8 where the engine
     # turns with the wheels, else at its own speed (idle, a converter's pump)
     cm18 = _speed_power_at(w, w_wheel, cm18_wheel, c)
-    p = en.intake_pressure_for_torque(t_fired, w, c, cm18)
+    # cylinders cut: the throttle is closed (manifold, fuel); the demand is then below t_closed
+    p = en.intake_pressure_for_torque(t_req if fired >= 1.0 else t_closed, w, c, cm18)
+    short = 0.0
+    if not (w <= line_speed[line_speed.size - 1] and p <= p_screen):  # (else below the line)
+        t_max = tb.interp_sloped_at(w, line_speed, line_max, slope_max, inv_line)
+        if t_req > t_max:
+            short = t_req - t_max
+            if fired >= 1.0:
+                p = en.intake_pressure_for_torque(t_req - short, w, c, cm18)
+    t_cr = t_req - short
     if fuel_kind == FUEL_EXACT:
         mdot = en.fuel_flow(p, w, c)
     elif fuel_kind == FUEL_TABLE:
-        mdot = tb.bilinear_at(map_speed, map_torque, table, w, t_fired, inv_ms, inv_mt)
+        mdot = tb.bilinear_at(
+            map_speed, map_torque, table, w, t_cr if fired >= 1.0 else t_closed, inv_ms, inv_mt
+        )
     else:
         mdot = math.nan
     mdot = rules.engine_fuel_flow(mdot, clutch, fired, c)  # idle with the clutch open; fuel cut-off
@@ -285,6 +293,8 @@ def run_kernel(
     slope_max,
     slope_min,
     with_engine,
+    own_lines,
+    interval_gear,
     gear,
     rows,
     acc,
@@ -293,9 +303,18 @@ def run_kernel(
     FUEL_GIVEN: then only ``rows`` are filled, for :func:`account` after the map gave the fuel), and the
     sums of :func:`account` in the same pass. ``rows`` may have no columns (no series wanted). ``time_s``:
     the cycle's samples; ``dt_s``, ``speed``, ``accel``, ``speed18``: its intervals (:func:`cycle_intervals`);
-    ``slope_max``, ``slope_min``: the lines' slopes (:func:`_map_arrays`).
+    ``slope_max``, ``slope_min``: the lines' slopes (:func:`_map_arrays`). ``own_lines``: the lines are the
+    model's of this engine (:func:`vpsim.model.maps.generate_engine_map`), so the max-torque line is read only
+    where :func:`vpsim.model.engine.full_load_screen` cannot rule it out. ``interval_gear``: the gear index
+    (0-based) of every interval where the schedule's samples are the cycle's (:func:`_interval_gears`), else
+    empty (looked up in the schedule).
     """
     c = recs[0]
+    p_screen = -math.inf
+    if own_lines:
+        w_end = line_speed[line_speed.size - 1]
+        p_screen = en.full_load_screen(w_end, w_end / (line_speed.size - 1), c)
+    given = interval_gear.size == gear.size
     inv_line = tb.inverse_spacing(line_speed)
     inv_ms = tb.inverse_spacing(map_speed)
     inv_mt = tb.inverse_spacing(map_torque)
@@ -306,7 +325,10 @@ def run_kernel(
     g_f18 = -1  # the gear whose factor f18 is at hand (gears change every few seconds, intervals every one)
     f18 = 0.0
     for k in range(gear.size):
-        g, j = gear_index(time_s, k, sched_t, sched_gear, j)
+        if given:
+            g = interval_gear[k]
+        else:
+            g, j = gear_index(time_s, k, sched_t, sched_gear, j)
         gear[k] = g + 1
         if g != g_f18:
             f18 = en.speed_power(vh.engine_speed(1.0, ratios[g], c), c)
@@ -334,6 +356,7 @@ def run_kernel(
             inv_line,
             inv_ms,
             inv_mt,
+            p_screen,
         )
         if keep:
             _store(rows, k, time_s, v, a, w, dw, w_wheel, t_cr, short, brake, clutch, fired, p, mdot, 0.0)
@@ -475,6 +498,24 @@ def _generated_arrays(engine_map) -> tuple:
     return (kind, engine_map.speed, engine_map.torque, engine_map.table, w, l_max, l_min, s_max, s_min)
 
 
+NO_GEARS = np.empty(0, dtype=np.int64)
+
+
+def _interval_gears(schedule, cycle) -> np.ndarray:
+    """The gear index (0-based) of each of ``cycle``'s intervals where ``schedule`` was made on the cycle's
+    own samples (the same time array: a schedule from :func:`vpsim.gears.schedule_for` or
+    :func:`vpsim.gears.default_schedule`), kept on the schedule; else empty: the kernel then looks each up
+    (:func:`vpsim.model.tables.gear_index`, the same gear)."""
+    if schedule.time_s is not cycle.time_s:
+        return NO_GEARS
+    return memo(schedule, "interval_gears", _gears_of_intervals)
+
+
+def _gears_of_intervals(schedule) -> np.ndarray:
+    (g,) = readonly((schedule.gear[:-1] - 1,))
+    return g
+
+
 def run(
     cycle,
     params,
@@ -487,7 +528,8 @@ def run(
 ) -> Result:
     """Run the BQM on ``cycle``. ``engine_map`` defaults to the map generated from ``params.engine``."""
     mode = rules.canonical_mode(mode)
-    if engine_map is None:  # the model's own map: what the run takes from the parameter set, prepared once
+    own = engine_map is None
+    if own:  # the model's own map: what the run takes from the parameter set, prepared once
         engine_map, arrays, recs, ratios, steps = memo(params, "backward_prepared", _prepared)
         if schedule is None:
             schedule = schedule_for(cycle, params)
@@ -503,7 +545,12 @@ def run(
     extended = mode == "realistic"
     kind, m_speed, m_torque, table, l_speed, l_max, l_min, s_max, s_min = arrays
     generated = isinstance(engine_map, GeneratedEngineMap)
+    # the lines generated from this engine (the model's own map, or one generated from an equal engine)
+    own_lines = own or (
+        generated and (engine_map.engine is params.engine or engine_map.engine == params.engine)
+    )
     n = cycle.time_s.size - 1
+    interval_gear = _interval_gears(schedule, cycle)
 
     def passes(time_s, intervals, keep):
         dt_s, speed, accel, speed18 = intervals
@@ -532,6 +579,8 @@ def run(
             s_max,
             s_min,
             generated,
+            own_lines,
+            interval_gear if n_k == n else NO_GEARS,
             gear,
             rows,
             acc,

@@ -58,8 +58,8 @@ def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, node_powers, out
 
     The max-torque line matters only where the demanded intake pressure comes near the wide-open-throttle
     pressure p_max(w_e), which decreases with w_e: below p_max at a node above every speed of the run, less
-    the largest friction rise over two node intervals, no point can reach the (interpolated) line, so it is
-    not evaluated there.
+    the largest friction rise over two node intervals (:func:`vpsim.model.engine.full_load_screen`), no
+    point can reach the (interpolated) line, so it is not evaluated there.
     """
     # the lines' nodes as model.maps.generate_engine_map spaces them
     w_end = MAX_SPEED_FACTOR * c.map_speed_high
@@ -73,14 +73,7 @@ def _variant(c, rat, gear, dt, v, a, v18, v_top_gear, extended, node_powers, out
     node_cm18 = en.speed_power(line_w[1], c)  # (c_m^1.8 is homogeneous in the speed: node j's is j^1.8 this)
     j_s = min(int(math.ceil(w_top / step)) + 2, n_line - 1)
     w_s = line_w[j_s]
-    p_floor, _ = en.steady_pressure(c.max_throttle_area, w_s, c)
-    # the rise of the demanded pressure over two node intervals (friction grows with speed)
-    d_p = en.intake_pressure_for_torque(0.0, w_s, c) - en.intake_pressure_for_torque(
-        0.0, max(w_s - 2.0 * step, 0.0), c
-    )
-    p_screen = p_floor - d_p - 1e-7 * c.ambient_pressure
-    if c.boost_pressure > c.ambient_pressure or c.rated_power > 0.0:
-        p_screen = -math.inf  # the full-load pressure is not monotone (spool) or power-capped: no screening
+    p_screen = en.full_load_screen(w_s, step, c)
     cache_max = np.full(n_line, np.nan)
     cache_min = np.full(n_line if extended else 1, np.nan)
     # The closed-throttle line matters only where the engaged engine is asked for less than it (engine

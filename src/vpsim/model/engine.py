@@ -675,6 +675,28 @@ def full_load_torque(w_e, c):
 
 
 @equation
+def full_load_screen(w_s, step, c):
+    """An intake pressure below which no operating point at an engine speed up to ``w_s`` reaches the
+    max-torque line tabulated from the model at nodes ``step`` apart from 0
+    (:func:`vpsim.model.maps.generate_engine_map`), so a method need not read the line there; -inf where no
+    such bound holds.
+
+    The line's nodes are T_cr(p_max(w_j), w_j). The wide-open-throttle pressure p_max(w_e) falls as w_e rises,
+    so at every node up to ``w_s`` it is at least p_max(w_s); between two nodes the interpolated line stays
+    above T_cr(p_max(w_s), w_e) less the friction's rise over two node intervals (5), largest at the top (the
+    friction is convex in the speed). A demand whose intake pressure (2)-(8) inverted, the torque's
+    monotone image, is below p_max(w_s) less that rise (and 1e-7 of ambient for the solve's tolerance) is
+    below the line. A boosted engine's full-load pressure is not monotone (spool), a power cap bends the
+    line: no bound then."""
+    if c.boost_pressure > c.ambient_pressure or c.rated_power > 0.0:
+        return -math.inf
+    p_floor, _ = steady_pressure(c.max_throttle_area, w_s, c)
+    w_below = max(w_s - 2.0 * step, 0.0)
+    d_p = intake_pressure_for_torque(0.0, w_s, c) - intake_pressure_for_torque(0.0, w_below, c)
+    return p_floor - d_p - 1e-7 * c.ambient_pressure
+
+
+@equation
 def boost_for_power(power, w_e, c):
     """The boost (pressure upstream of the wide-open throttle) that gives ``power`` at engine speed w_e
     (from :data:`BOOST_SPOOL_SPEED` up): the intake pressure of that torque, (2)-(8) inverted, and the
