@@ -359,3 +359,26 @@ def test_idle_fuel_flow_from_the_measured_idle_and_the_accessories(tmp_path):
     # an explicit technology value wins
     q = record_parameters(rec, [fleet_cycle("hwy")], {"simulation.idle_fuel_flow": 2e-4})
     assert q.simulation.idle_fuel_flow == 2e-4
+
+
+def test_a_make_field_without_a_name_is_read_from_the_manufacturer():
+    """The 2022 list gives "2022" as the make of its Lucid Air records: the make is then the manufacturer
+    name's first word; a make that names one is kept as written."""
+    from vpsim.fleet.epa import named_make
+
+    assert named_make("2022", "Lucid USA, Inc") == "Lucid"
+    assert named_make("", "Tesla Inc.") == "Tesla"
+    assert named_make("2022", "") == "2022"  # nothing better to say: left as written
+    assert named_make("Land Rover", "Jaguar Land Rover L.P.") == "Land Rover"
+    assert named_make("MINI", "BMW") == "MINI"
+
+
+def test_the_reader_names_a_record_by_its_manufacturer_where_the_make_field_holds_a_year(tmp_path):
+    """Through the reader: an EV whose make field reads "2022" is listed under its manufacturer's name."""
+    from fleet_csv import EVS, write_ev_list
+
+    lst = write_ev_list(tmp_path / "ev.csv", evs=EVS[:1], make="2022")  # (manufacturer "VOLT&AMP")
+    with lst.open(encoding="utf-8-sig") as f:
+        assert ",2022," in f.read()
+    evs = read_test_car_list(lst).ev_vehicles
+    assert [(e.vehicle_id, e.make) for e in evs] == [("E001", "VOLT&AMP")]

@@ -375,6 +375,17 @@ def _num(x) -> float:
     return v if math.isfinite(v) else math.nan
 
 
+def named_make(make: str, manufacturer: str) -> str:
+    """The make a record names: its ``Represented Test Veh Make``, or where that holds no letter (the 2022
+    list gives "2022" for the three Lucid Air records) the first word of its ``Vehicle Manufacturer Name``
+    ("Lucid USA, Inc" -> "Lucid"). Reports, vehicle names and the rules that go by make read it; the folds
+    group by manufacturer and never read it."""
+    if any(ch.isalpha() for ch in make):
+        return make
+    first = manufacturer.replace(",", " ").split()
+    return first[0] if first else make
+
+
 def _text(x) -> str:
     if x is None or (isinstance(x, float) and math.isnan(x)):
         return ""
@@ -433,6 +444,8 @@ def read_test_car_list(path: str | Path) -> TestCarList:
                 r[k] = _text(r[k])
         r["line"] = i + 2 if lines is None else lines[i]  # header is line 1
         rows.append(r)
+    for r in rows:
+        r["make"] = named_make(r["make"], r["manufacturer"])
     fill_cylinders(rows)
     if not rows and not ragged:
         raise VpsimError(f"{path}: no test rows below the header")

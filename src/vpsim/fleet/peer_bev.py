@@ -389,7 +389,15 @@ def ev_records(csv_path, report: dict | None = None):
 
     from ..errors import VpsimError
     from ..textio import check_regular_file
-    from .epa import HP_TO_KW, LB_TO_KG, LBF_TO_N, lbf_per_mph2_to_si, lbf_per_mph_to_si, list_separator
+    from .epa import (
+        HP_TO_KW,
+        LB_TO_KG,
+        LBF_TO_N,
+        lbf_per_mph2_to_si,
+        lbf_per_mph_to_si,
+        list_separator,
+        named_make,
+    )
 
     csv_path = check_regular_file(csv_path, VpsimError, "CSV test car list")
     df = pd.read_csv(
@@ -412,7 +420,9 @@ def ev_records(csv_path, report: dict | None = None):
     rows, unpaired = [], []
     variants: dict = {}
     for key, g in ev.groupby(key_cols, sort=False):
-        vid, cfg, make, model = key[0].strip(), key[1].strip(), key[2].strip(), key[3].strip()
+        vid, cfg, model = key[0].strip(), key[1].strip(), key[3].strip()
+        maker = g["Vehicle Manufacturer Name"].iloc[0] if "Vehicle Manufacturer Name" in g else ""
+        make = named_make(key[2].strip(), maker.strip())
         name = f"{vid}#{cfg} {make} {model}"
         try:
             etw, a, b, c, hp = (float(x) for x in key[4:])
