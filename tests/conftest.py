@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import tempfile
 from pathlib import Path
 
 import matplotlib
@@ -13,6 +14,9 @@ matplotlib.use("Agg")
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("VPSIM_SHARED", REPO.parent / "shared"))
+# FASTSim's remembered runs (vpsim.fleet.peer_cache) in a folder of this test session's, not the user's
+# cache: every test run starts without them (the commands the tests start inherit it)
+os.environ["VPSIM_CACHE_DIR"] = tempfile.mkdtemp(prefix="vpsim-test-cache-")
 
 
 @pytest.fixture(scope="session")

@@ -634,3 +634,30 @@ def test_groups_read_in_order_mass_bins_light_to_heavy():
     assert [_mass_bin(m) for m in (1500, 1700, 2000, 2400, 3000)] == list(MASS_LABELS)
     assert _in_order(list(reversed(MASS_LABELS))) == list(MASS_LABELS)  # alphabetically "<1600 kg" is last
     assert _in_order(["6 cyl", "3 cyl", ">=8 cyl", "4 cyl"]) == ["3 cyl", "4 cyl", "6 cyl", ">=8 cyl"]
+
+
+def test_fleet_remembers_fastsims_runs_and_the_second_run_reads_them(tmp_path, monkeypatch):
+    """With FASTSim installed: a second fleet run on the same list reads every FASTSim run back and writes
+    the same tables byte for byte; `--no-peer-cache` leaves the cache alone (run.json says so)."""
+    pytest.importorskip("fastsim")
+    from vpsim.fleet import peer
+
+    if not peer.status()["available"]:
+        pytest.skip(peer.status()["reason"])
+    monkeypatch.setenv("VPSIM_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("VPSIM_PEER_CACHE", "1")  # (restored after the test: the flag below sets it)
+    lst = write_list(tmp_path / "list.csv", bad_rows=False)
+    args = ["--folds", "3", "--cycles", "hwy,us06", "--workers", "1", "--quiet"]
+    caches = []
+    for name in ("first", "second"):
+        assert main(["fleet", str(lst), "--out", str(tmp_path / name), *args]) == 0
+        caches.append(json.loads((tmp_path / name / "run.json").read_text())["peer"]["fastsim"]["run_cache"])
+    assert caches[0]["enabled"] and caches[0]["entries_before"] is None and caches[0]["entries_after"] > 0
+    assert caches[1]["entries_before"] == caches[1]["entries_after"] == caches[0]["entries_after"]
+    for f in ("vehicles.csv", "summary.json", "technology.json"):
+        assert (tmp_path / "first" / f).read_bytes() == (tmp_path / "second" / f).read_bytes(), f
+    assert main(["fleet", str(lst), "--out", str(tmp_path / "off"), *args, "--no-peer-cache"]) == 0
+    off = json.loads((tmp_path / "off" / "run.json").read_text())["peer"]["fastsim"]["run_cache"]
+    assert off == {"enabled": False, "path": None, "entries_before": None, "entries_after": None}
+    summary = [(tmp_path / d / "summary.json").read_bytes() for d in ("first", "off")]
+    assert summary[0] == summary[1]

@@ -60,6 +60,13 @@ from .main import cli
 )
 @click.option("--no-peer", "no_peer", is_flag=True, help="Do not run FASTSim beside vpsim.")
 @click.option(
+    "--no-peer-cache",
+    "no_peer_cache",
+    is_flag=True,
+    help="Run FASTSim for every record, not reading or writing its remembered runs "
+    "(vpsim.fleet.peer_cache: $VPSIM_CACHE_DIR, else ~/.cache/vpsim; VPSIM_PEER_CACHE=0 does the same).",
+)
+@click.option(
     "--limit",
     type=int,
     default=None,
@@ -78,10 +85,13 @@ def fleet(
     scheduler,
     workers,
     no_peer,
+    no_peer_cache,
     limit,
     quiet,
 ):
     """Predict the measured fuel economy of the vehicles of an EPA test car list FILE."""
+    import os
+
     import matplotlib
 
     matplotlib.use("Agg")
@@ -90,6 +100,8 @@ def fleet(
     from ..fleet.report import prepare_output_folder, summary_lines, write_outputs
     from ..fleet.run import run_fleet
 
+    if no_peer_cache:  # (in the environment: worker processes started from here read it too)
+        os.environ["VPSIM_PEER_CACHE"] = "0"
     names = tuple(c.strip() for c in cycles.split(",") if c.strip())
     twice = sorted({c for c in names if names.count(c) > 1})
     if twice:

@@ -153,27 +153,15 @@ def _sim_params():
     return fsim.SimParams.from_dict(params)
 
 
-def _run(rec, name, cycles, sim_params, technology=None, vehicle=None) -> tuple[float, bool]:
+def _run(rec, name, technology=None, vehicle=None) -> tuple[float, bool]:
     """(mpg, trace met) of FASTSim on one record and fleet cycle (``vehicle``: its :func:`peer_vehicle`
-    dict with FASTSim's defaults, if at hand)."""
-    import warnings
-
-    import fastsim as fsim
-
+    dict with FASTSim's defaults, if at hand); the run remembered (:mod:`vpsim.fleet.peer_cache`)."""
+    from . import peer_cache
     from .cycles import fleet_cycle
 
     cyc = fleet_cycle(name)
-    if name not in cycles:
-        cycles[name] = fsim.Cycle.from_dict(
-            {"time_seconds": cyc.time_s.tolist(), "speed_meters_per_second": cyc.speed_mps.tolist()}
-        )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)
-        d = peer_vehicle(rec, cyc) if vehicle is None else vehicle
-        veh = fsim.Vehicle.from_dict(with_technology(d, technology))
-        sd = fsim.SimDrive(veh, cycles[name], sim_params)
-        sd.run()
-        o = sd.to_dict()
+    d = peer_vehicle(rec, cyc) if vehicle is None else vehicle
+    o = peer_cache.run(with_technology(d, technology), cyc)
     fuel_j = o["veh"]["pt_type"]["Conv"]["fc"]["state"]["energy_fuel_joules"]
     dist_m = o["veh"]["state"]["dist_meters"]
     return (dist_m / METRES_PER_MILE) / (fuel_j / GASOLINE_J_PER_GAL), bool(
@@ -188,15 +176,13 @@ def _error_text(exc) -> str:
 
 def peer_chunk(items: list[tuple]) -> list[dict]:
     """FASTSim on each (record, fleet cycle[, technology]); dicts with ``peer_mpg`` or ``peer_error``."""
-    cycles: dict = {}
-    sim_params = _sim_params()
     out = []
     for item in items:
         rec, name = item[0], item[1]
         tech = item[2] if len(item) > 2 else None
         row = {"key": rec.key, "cycle": name, "peer_mpg": math.nan, "peer_error": "", "peer_trace_met": None}
         try:
-            row["peer_mpg"], row["peer_trace_met"] = _run(rec, name, cycles, sim_params, tech)
+            row["peer_mpg"], row["peer_trace_met"] = _run(rec, name, tech)
         except Exception as exc:  # FASTSim raises its own error types (Rust errors as RuntimeError)
             row["peer_error"] = _error_text(exc)
         out.append(row)
@@ -206,8 +192,6 @@ def peer_chunk(items: list[tuple]) -> list[dict]:
 def calibration_chunk(items: list[tuple]) -> list[dict]:
     """FASTSim on each (record, fleet cycle) at every (accessory power, part-load exponent) of
     :data:`CAL_AUX` x :data:`CAL_Q`: ``log_l100`` (len(CAL_AUX), len(CAL_Q)), or ``peer_error``."""
-    cycles: dict = {}
-    sim_params = _sim_params()
     out = []
     for rec, name in items:
         row = {"key": rec.key, "cycle": name, "log_l100": None, "peer_error": ""}
@@ -219,7 +203,7 @@ def calibration_chunk(items: list[tuple]) -> list[dict]:
             for i, aux in enumerate(CAL_AUX):
                 for j, q in enumerate(CAL_Q):
                     tech = {"accessory_power_w": aux, "part_load_exponent": q}
-                    mpg, _ = _run(rec, name, cycles, sim_params, tech, vehicle=d)
+                    mpg, _ = _run(rec, name, tech, vehicle=d)
                     grid[i, j] = math.log(mpg_from_l_per_100km(mpg))  # L/100 km
             if not np.all(np.isfinite(grid)):
                 raise ValueError("non-finite fuel on the calibration grid")

@@ -203,16 +203,12 @@ def run_bev_peer(vehicle_dict: dict, cycle_name: str) -> dict:
     ``terminal_wh_per_km`` (net at the battery's terminals), ``distance_m``, ``trace_miss`` (True when the
     car fell behind the trace), ``trace_miss_m`` (distance short of the trace's), the wheel's road-load
     energies ``rolling_wh`` and ``drag_wh``, ``friction_brake_wh`` and ``aux_wh``."""
-    import warnings
+    from ..cycles import load_cycle
+    from . import peer_cache
 
-    import fastsim as fsim
-
-    cyc = _fastsim_cycle(cycle_name)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)
-        sd = fsim.SimDrive(fsim.Vehicle.from_dict(vehicle_dict), cyc, _sim_params())
-        sd.run()
-        o = sd.to_dict()
+    if cycle_name not in BEV_CYCLES:
+        raise ValueError(f"unknown BEV test cycle {cycle_name!r}; expected one of {', '.join(BEV_CYCLES)}")
+    o = peer_cache.run(vehicle_dict, load_cycle(cycle_name))  # (remembered: vpsim.fleet.peer_cache)
     state = o["veh"]["state"]
     res = o["veh"]["pt_type"]["BEV"]["res"]["state"]
     dist_m = float(state["dist_meters"])

@@ -131,23 +131,12 @@ def with_hev_technology(d: dict, technology: dict | None) -> dict:
 
 def run_hev_peer(d: dict, cycle_name: str) -> dict:
     """FASTSim on ``d`` over ``cycle_name`` (a vpsim cycle): ``peer_mpg``, ``trace_miss``."""
-    import warnings
-
-    import fastsim as fsim
-
     from ..cycles import load_cycle
     from ..units import METRES_PER_MILE
-    from .peer import GASOLINE_J_PER_GAL, _sim_params
+    from . import peer_cache
+    from .peer import GASOLINE_J_PER_GAL
 
-    cyc = load_cycle(cycle_name)
-    fc = fsim.Cycle.from_dict(
-        {"time_seconds": cyc.time_s.tolist(), "speed_meters_per_second": cyc.speed_mps.tolist()}
-    )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)
-        sd = fsim.SimDrive(fsim.Vehicle.from_dict(d), fc, _sim_params())
-        sd.run()
-        o = sd.to_dict()
+    o = peer_cache.run(d, load_cycle(cycle_name))  # (remembered: vpsim.fleet.peer_cache)
     state = o["veh"]["state"]
     fuel_j = float(o["veh"]["pt_type"]["HEV"]["fc"]["state"]["energy_fuel_joules"])
     dist_m = float(state["dist_meters"])

@@ -533,6 +533,7 @@ def run_fleet(
         timings["predict_s"] = time.perf_counter() - t0
         # 5. the peer on the same records and cycles
         from . import peer as peer_mod
+        from . import peer_cache
 
         peer_state = (
             peer_mod.status()
@@ -542,6 +543,7 @@ def run_fleet(
         peer_rows: dict[tuple[str, str], dict] = {}
         peer_cal_rows: dict[tuple[str, str], dict] = {}
         peer_technology: dict = {}
+        cache_before = peer_cache.entries() if peer_state["available"] else None
         if peer_state["available"]:
             t0 = time.perf_counter()
             pitems = [(v, c) for v, cs in work for c in cs]
@@ -627,6 +629,8 @@ def run_fleet(
         f"fold{f}.{cls}": {k: (round(x, 6) if isinstance(x, float) else x) for k, x in t.items()}
         for (f, cls), t in sorted(tech.items())
     }
+    if peer_state["available"]:  # FASTSim's runs remembered on disk (vpsim.fleet.peer_cache): run.json
+        peer_state = dict(peer_state, run_cache=peer_cache.describe(cache_before))
     return FleetRun(
         rows,
         cars,
