@@ -229,3 +229,28 @@ def test_compiled_smoothing_matches_the_driver_on_short_cycles(speeds, step, a):
     ref = SmoothingDriver(t, v, a).evaluate(t)
     for got, want in zip(F[1:4], ref, strict=True):
         np.testing.assert_allclose(got[: t.size], want, rtol=1e-12, atol=1e-12)  # seen: 5e-14
+
+
+def test_runs_on_one_schedule_share_the_trajectory_and_match_a_fresh_one():
+    """The smoothing driver's trajectory is kept on the schedule per half-width (no car parameter changes
+    it): a second design's run on the same schedule reads it and gives what a run on a fresh copy of the
+    schedule computes; the shared arrays are read-only, so no result can write into the next run's."""
+    from vpsim.gears import GearSchedule
+    from vpsim.params import load_parameters
+
+    cyc, p, shared_sched = resolve_inputs("udds", "hofman2011")
+    sched = GearSchedule(shared_sched.time_s, shared_sched.gear, shared_sched.source)  # (this test's own)
+    heavy = p.with_changes(vehicle={"mass": 1900.0})
+    first = inverse.run(cyc, p, schedule=sched, mode="realistic")
+    shared = inverse.run(cyc, heavy, schedule=sched, mode="realistic")
+    kept = sched._derived["inverse_trajectories"]
+    assert set(kept) == {p.driver("1").inverse_a}
+    fresh = GearSchedule(sched.time_s.copy(), sched.gear.copy(), sched.source)
+    alone = inverse.run(cyc, heavy, schedule=fresh, mode="realistic")
+    assert shared.fuel_kg == alone.fuel_kg and shared.fuel_kg != first.fuel_kg
+    for key in ("speed_mps", "engine_speed_radps", "throttle_demand_m2"):
+        np.testing.assert_array_equal(shared.series[key], alone.series[key])
+    with pytest.raises(ValueError, match="read-only"):
+        shared.series["speed_mps"][0] = 1.0
+    inverse.run(cyc, p, driver="2", schedule=sched, mode="realistic")
+    assert set(kept) == {p.driver("1").inverse_a, load_parameters("hofman2011").driver("2").inverse_a}

@@ -242,6 +242,26 @@ def _grid_and_smoothing(t_s, v_s, sched_t, sched_g, c_v, c_dv, c_ddv):
     return F, I
 
 
+def _trajectory(time_s, speed, schedule: GearSchedule, a: float):
+    """(F, I) of :func:`_grid_and_smoothing` and :func:`speed_powers` of the smoothed speed: the smoothing
+    driver's trajectory on the cycle's samples ``time_s``, ``speed`` in ``schedule``'s gears, which no
+    parameter of the car changes. Kept on the (frozen) schedule per half-width a for the samples last
+    given (as the backward method keeps a cycle's intervals): every run of any design on that cycle and
+    schedule shares it (read-only arrays)."""
+    kept = memo(schedule, "inverse_trajectories", lambda _: {})
+    hit = kept.get(a)
+    if hit is not None and hit[0] is time_s and hit[1] is speed:
+        return hit[2]
+    taps = _sample_taps(a, float(time_s[1] - time_s[0]))
+    F, I = _grid_and_smoothing(time_s, speed, schedule.time_s, schedule.gear, *taps)
+    x108 = np.empty(F.shape[1])
+    speed_powers(F[1], x108)
+    out = readonly((F, I, x108))
+    if len(kept) < 8:  # (a few drivers' half-widths; beyond, computed each run)
+        kept[a] = (time_s, speed, out)
+    return out
+
+
 def _is_uniform(t) -> bool:
     d = np.diff(t)
     return bool(d.size >= 1 and np.all(np.abs(d - d[0]) <= 1e-9 * d[0]))
@@ -288,10 +308,11 @@ _ROW_KEYS = (
 
 
 @inline
-def invert_point(v, dv, ddv, ratio, gear, coef, extended, p_closed_max, c):
+def invert_point(v, dv, ddv, x108, ratio, gear, coef, extended, p_closed_max, c):
     """(33), (31), (32), (30) at one point in gear ``gear`` (1-based) of total ratio ``ratio`` (``coef``:
     :func:`gear_coefficients`' row of the gear), with the realistic car's rules in ``extended``
-    mode. Through an unlocked torque converter the point is the quasi-static one of
+    mode; ``x108``: max(v, 0)^0.8 (:func:`speed_powers`: the power in (33) and in c_m^1.8). Through an
+    unlocked torque converter the point is the quasi-static one of
     :func:`vpsim.model.rules.converter_point` (the throttle the steady one; no traction: as below idle).
     ``p_closed_max``: :func:`vpsim.model.engine.closed_throttle_pressure_bound`.
 
@@ -306,7 +327,6 @@ def invert_point(v, dv, ddv, ratio, gear, coef, extended, p_closed_max, c):
     if not moving:
         c4 = c4 + roll  # rolling resistance only while moving
         cb = 0.0
-    x108 = x1**0.8
     x2 = (dv - c1 * x1 * x1 - c2 * x108 * x1 - cb * x1 - c4) / c3  # (33)
     dx2 = (ddv - (2.0 * c1 * x1 + 1.8 * c2 * x108 + cb) * dv) / c3  # (31): dp_i/dt the trajectory needs
     w = vh.engine_speed(x1, ratio, c)
@@ -359,9 +379,25 @@ def invert_point(v, dv, ddv, ratio, gear, coef, extended, p_closed_max, c):
     return p, u_idle, w_idle, 0.0, w, t_c, brake, rules.CLUTCH_SLIPPING, moving, 1.0, c.idle_speed_power
 
 
+@inline
+def _speed_power08(v):
+    """max(v, 0)^0.8, as (33) takes it."""
+    x1 = v if v > 0.0 else 0.0
+    return x1**0.8
+
+
 @kernel
-def invert_points(v, dv, ddv, gear, ratios, coef, extended, recs, rows):
-    """:func:`invert_point` at every point (gear 1-based) into ``rows``; False if a gear does not exist."""
+def speed_powers(v, out):
+    """:func:`_speed_power08` of every point's v into ``out``: a power per point the trajectory fixes, so
+    runs of any design on one trajectory share it (:func:`_trajectory`)."""
+    for k in range(v.size):
+        out[k] = _speed_power08(v[k])
+
+
+@kernel
+def invert_points(v, dv, ddv, x108, gear, ratios, coef, extended, recs, rows):
+    """:func:`invert_point` at every point (gear 1-based) into ``rows``; False if a gear does not exist.
+    ``x108``: :func:`speed_powers` of v."""
     c = recs[0]
     for k in range(v.size):
         if not (1 <= gear[k] <= ratios.size):
@@ -370,7 +406,7 @@ def invert_points(v, dv, ddv, gear, ratios, coef, extended, recs, rows):
     for k in range(v.size):
         g = gear[k] - 1
         p, u, w_e, dw_e, w, t_cr, brake, clutch, moving, fired, cm18 = invert_point(
-            v[k], dv[k], ddv[k], ratios[g], g + 1, coef[g], extended, p_closed_max, c
+            v[k], dv[k], ddv[k], x108[k], ratios[g], g + 1, coef[g], extended, p_closed_max, c
         )
         rows[R_P, k] = p
         rows[R_U, k] = u
@@ -416,10 +452,13 @@ def invert(v, dv, ddv, gear, params, mode: str = "paper") -> dict[str, np.ndarra
     v, dv, ddv = (np.ascontiguousarray(x, dtype=float) for x in (v, dv, ddv))
     gear = np.ascontiguousarray(gear, dtype=np.int64)
     rows = np.empty((N_ROWS, v.size))
+    x108 = np.empty(v.size)
+    speed_powers(v, x108)
     ok = invert_points(
         v,
         dv,
         ddv,
+        x108,
         gear,
         total_ratios(params.transmission),
         gear_coefficients(params),
@@ -582,8 +621,7 @@ def run(
         # on a uniform grid the smoothing is a discrete convolution with 2a/dt + 1 taps; past MAX_TAPS (a very
         # fine grid or a very wide kernel) the window-by-window evaluation keeps the memory bounded
         if _is_uniform_compiled(time_s) and a / (time_s[1] - time_s[0]) <= MAX_TAPS / 2:
-            taps = _sample_taps(a, float(time_s[1] - time_s[0]))
-            F, I = _grid_and_smoothing(time_s, speed, schedule.time_s, schedule.gear, *taps)
+            F, I, x108 = _trajectory(time_s, speed, schedule, a)
             n = time_s.size - 1
             t, v, dv, ddv, gear = F[0], F[1], F[2], F[3], I[0]
             left, right, gear_s, dt, v_c = I[1, :n], I[2, :n], I[4, : n + 1], F[5, :n], F[4]
@@ -592,8 +630,11 @@ def run(
             v, dv, ddv = SmoothingDriver(time_s, speed, a).evaluate(t)
             gear_s = schedule.gear_at(t[: time_s.size])
             dt, v_c = np.diff(time_s), speed[sample]
+            x108 = np.empty(v.size)
+            speed_powers(v, x108)
         rows = np.empty((N_ROWS, t.size))
-        if not invert_points(v, dv, ddv, gear.astype(np.int64, copy=False), ratios, coef, extended, c, rows):
+        gear = gear.astype(np.int64, copy=False)
+        if not invert_points(v, dv, ddv, x108, gear, ratios, coef, extended, c, rows):
             raise VpsimError(f"gear numbers must be 1..{params.transmission.n_gears}")
         stopped, starts = _stop_engine_at_rest(t, v, dv, rows) if stop_start else (None, 0)
         acc = np.empty(N_ACC)
@@ -603,7 +644,7 @@ def run(
             acc[_A_FUEL] += starts * params.hybrid.engine_start_fuel
         return t, v, dv, ddv, gear_s, v_c, rows, acc, extra, stopped, starts
 
-    if not compiled(invert_points, account):  # compile (or load) outside the timing
+    if not compiled(invert_points, account, speed_powers):  # compile (or load) outside the timing
         passes(cycle.time_s[:3], cycle.speed_mps[:3], keep_series)
     t_cpu = time.process_time()
     # the paper caps the step at 1 s (simulation.inverse_max_step): longer intervals of a coarse or gappy
