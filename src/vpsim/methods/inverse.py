@@ -248,10 +248,10 @@ def _trajectory(time_s, speed, schedule: GearSchedule, a: float):
     parameter of the car changes. Kept on the (frozen) schedule per half-width a for the samples last
     given (as the backward method keeps a cycle's intervals): every run of any design on that cycle and
     schedule shares it (read-only arrays)."""
-    kept = memo(schedule, "inverse_trajectories", lambda _: {})
-    hit = kept.get(a)
-    if hit is not None and hit[0] is time_s and hit[1] is speed:
-        return hit[2]
+    hit = _kept_trajectory(time_s, speed, schedule, a)
+    if hit is not None:
+        return hit
+    kept = memo(schedule, "inverse_trajectories", _no_trajectories)
     taps = _sample_taps(a, float(time_s[1] - time_s[0]))
     F, I = _grid_and_smoothing(time_s, speed, schedule.time_s, schedule.gear, *taps)
     x108 = np.empty(F.shape[1])
@@ -260,6 +260,24 @@ def _trajectory(time_s, speed, schedule: GearSchedule, a: float):
     if len(kept) < 8:  # (a few drivers' half-widths; beyond, computed each run)
         kept[a] = (time_s, speed, out)
     return out
+
+
+def _no_trajectories(schedule) -> dict:
+    return {}
+
+
+def _zeros(cycle) -> np.ndarray:
+    """Zeros at the cycle's samples, read-only (kept on the cycle: a series every run reports as zero)."""
+    (z,) = readonly((np.zeros(cycle.time_s.size),))
+    return z
+
+
+def _kept_trajectory(time_s, speed, schedule: GearSchedule, a: float):
+    """What :func:`_trajectory` keeps for these samples, schedule and half-width, or None."""
+    hit = memo(schedule, "inverse_trajectories", _no_trajectories).get(a)
+    if hit is not None and hit[0] is time_s and hit[1] is speed:
+        return hit[2]
+    return None
 
 
 def _is_uniform(t) -> bool:
@@ -620,8 +638,9 @@ def run(
     def passes(time_s, speed, keep):
         # on a uniform grid the smoothing is a discrete convolution with 2a/dt + 1 taps; past MAX_TAPS (a very
         # fine grid or a very wide kernel) the window-by-window evaluation keeps the memory bounded
-        if _is_uniform_compiled(time_s) and a / (time_s[1] - time_s[0]) <= MAX_TAPS / 2:
-            F, I, x108 = _trajectory(time_s, speed, schedule, a)
+        kept = _kept_trajectory(time_s, speed, schedule, a)  # (a uniform grid's, as below)
+        if kept is not None or (_is_uniform_compiled(time_s) and a / (time_s[1] - time_s[0]) <= MAX_TAPS / 2):
+            F, I, x108 = kept or _trajectory(time_s, speed, schedule, a)
             n = time_s.size - 1
             t, v, dv, ddv, gear = F[0], F[1], F[2], F[3], I[0]
             left, right, gear_s, dt, v_c = I[1, :n], I[2, :n], I[4, : n + 1], F[5, :n], F[4]
@@ -706,7 +725,8 @@ def run(
             "fuel_flow_kgps": rows[R_MDOT, k],
             "fuel_flow_used_kgps": extra[2],
             "brake_force_n": rows[R_BRAKE, k],
-            "torque_shortfall_nm": np.zeros(n_s),
+            "torque_shortfall_nm": memo(cycle, "zeros", _zeros),  # (read-only: the inverse method meets
+            # the max-torque line as a throttle demand beyond A_max, above)
             "clutch_engaged": rows[R_CLUTCH, k] == rules.CLUTCH_ENGAGED,
         }
         if stop_start:  # the standing engine's samples (as the backward method's)
