@@ -498,22 +498,30 @@ def _generated_arrays(engine_map) -> tuple:
     return (kind, engine_map.speed, engine_map.torque, engine_map.table, w, l_max, l_min, s_max, s_min)
 
 
-NO_GEARS = np.empty(0, dtype=np.int64)
+(NO_GEARS,) = readonly((np.empty(0, dtype=np.int64),))  # (read-only, as the kept gears: one kernel signature)
 
 
 def _interval_gears(schedule, cycle) -> np.ndarray:
     """The gear index (0-based) of each of ``cycle``'s intervals where ``schedule`` was made on the cycle's
-    own samples (the same time array: a schedule from :func:`vpsim.gears.schedule_for` or
-    :func:`vpsim.gears.default_schedule`), kept on the schedule; else empty: the kernel then looks each up
-    (:func:`vpsim.model.tables.gear_index`, the same gear)."""
-    if schedule.time_s is not cycle.time_s:
-        return NO_GEARS
-    return memo(schedule, "interval_gears", _gears_of_intervals)
+    own samples (a schedule from :func:`vpsim.gears.schedule_for` or :func:`vpsim.gears.default_schedule`:
+    equal times, compared once per cycle object), kept on the schedule; else empty: the kernel then looks
+    each up (:func:`vpsim.model.tables.gear_index`, the same gear). Read-only either way."""
+    kept = memo(schedule, "interval_gears", _no_interval_gears)
+    time_s = cycle.time_s
+    hit = kept.get(id(time_s))
+    if hit is not None and hit[0] is time_s:
+        return hit[1]
+    same = schedule.time_s.shape == time_s.shape and bool(np.array_equal(schedule.time_s, time_s))
+    gears = NO_GEARS
+    if same:
+        (gears,) = readonly((schedule.gear[:-1] - 1,))
+    if len(kept) < 16:  # (the cycles a schedule is run on: normally one)
+        kept[id(time_s)] = (time_s, gears)
+    return gears
 
 
-def _gears_of_intervals(schedule) -> np.ndarray:
-    (g,) = readonly((schedule.gear[:-1] - 1,))
-    return g
+def _no_interval_gears(schedule) -> dict:
+    return {}
 
 
 def run(

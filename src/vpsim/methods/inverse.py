@@ -262,6 +262,18 @@ def _trajectory(time_s, speed, schedule: GearSchedule, a: float):
     return out
 
 
+def _read_only(*arrays) -> tuple:
+    """Read-only views of ``arrays`` (theirs left writable): what the kernels are compiled for, the kept
+    trajectory's arrays being read-only (:func:`_trajectory`); Numba compiles a kernel anew for each
+    writability of an argument."""
+    out = []
+    for x in arrays:
+        view = x.view()
+        view.flags.writeable = False
+        out.append(view)
+    return tuple(out)
+
+
 def _no_trajectories(schedule) -> dict:
     return {}
 
@@ -472,6 +484,7 @@ def invert(v, dv, ddv, gear, params, mode: str = "paper") -> dict[str, np.ndarra
     rows = np.empty((N_ROWS, v.size))
     x108 = np.empty(v.size)
     speed_powers(v, x108)
+    v, dv, ddv, x108, gear = _read_only(v, dv, ddv, x108, gear)  # (the kernels' one signature)
     ok = invert_points(
         v,
         dv,
@@ -651,6 +664,10 @@ def run(
             dt, v_c = np.diff(time_s), speed[sample]
             x108 = np.empty(v.size)
             speed_powers(v, x108)
+            # read-only views, as the kept trajectory's: the kernels compiled for one signature
+            t, v, dv, ddv, x108, gear, left, right, dt, v_c = _read_only(
+                t, v, dv, ddv, x108, np.ascontiguousarray(gear, dtype=np.int64), left, right, dt, v_c
+            )
         rows = np.empty((N_ROWS, t.size))
         gear = gear.astype(np.int64, copy=False)
         if not invert_points(v, dv, ddv, x108, gear, ratios, coef, extended, c, rows):
