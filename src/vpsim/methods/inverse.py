@@ -742,8 +742,8 @@ def run(
             "fuel_flow_kgps": rows[R_MDOT, k],
             "fuel_flow_used_kgps": extra[2],
             "brake_force_n": rows[R_BRAKE, k],
-            "torque_shortfall_nm": memo(cycle, "zeros", _zeros),  # (read-only: the inverse method meets
-            # the max-torque line as a throttle demand beyond A_max, above)
+            # (read-only zeros: the method meets the max-torque line as a throttle demand beyond A_max)
+            "torque_shortfall_nm": memo(cycle, "inverse_zero_series", _zeros),
             "clutch_engaged": rows[R_CLUTCH, k] == rules.CLUTCH_ENGAGED,
         }
         if stop_start:  # the standing engine's samples (as the backward method's)
