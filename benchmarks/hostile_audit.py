@@ -1359,7 +1359,10 @@ def kill_cases(base: Path) -> list[Outcome]:
                             break
                         time.sleep(0.002)
             finished_anyway = proc.poll() is not None
-            os.killpg(proc.pid, signal.SIGKILL)
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except ProcessLookupError:  # it finished (and poll() reaped it) before the kill: a finished run
+                pass
             proc.wait()
             unfinished = marker.exists()
             r = _vpsim(read, d, 60)
