@@ -171,9 +171,6 @@ def with_bev_technology(d: dict, technology: dict | None) -> dict:
     return out
 
 
-_CYCLES: dict = {}
-
-
 def _sim_params():
     """The conventional peer's simulation parameters (a trace miss is reported, not an error)."""
     from .peer import _sim_params as conventional
@@ -181,19 +178,20 @@ def _sim_params():
     return conventional()
 
 
-def _fastsim_cycle(cycle_name: str):
-    import fastsim as fsim
-
+def _bev_cycle(cycle_name: str):
+    """The vpsim cycle of a BEV test (:data:`BEV_CYCLES`), or ValueError."""
     from ..cycles import load_cycle
 
     if cycle_name not in BEV_CYCLES:
         raise ValueError(f"unknown BEV test cycle {cycle_name!r}; expected one of {', '.join(BEV_CYCLES)}")
-    if cycle_name not in _CYCLES:
-        cyc = load_cycle(cycle_name)
-        _CYCLES[cycle_name] = fsim.Cycle.from_dict(
-            {"time_seconds": cyc.time_s.tolist(), "speed_meters_per_second": cyc.speed_mps.tolist()}
-        )
-    return _CYCLES[cycle_name]
+    return load_cycle(cycle_name)
+
+
+def _fastsim_cycle(cycle_name: str):
+    """FASTSim's cycle of a BEV test (one per process: :func:`vpsim.fleet.peer_cache._fastsim_cycle`)."""
+    from .peer_cache import _fastsim_cycle
+
+    return _fastsim_cycle(_bev_cycle(cycle_name))
 
 
 def run_bev_peer(vehicle_dict: dict, cycle_name: str) -> dict:
@@ -203,12 +201,9 @@ def run_bev_peer(vehicle_dict: dict, cycle_name: str) -> dict:
     ``terminal_wh_per_km`` (net at the battery's terminals), ``distance_m``, ``trace_miss`` (True when the
     car fell behind the trace), ``trace_miss_m`` (distance short of the trace's), the wheel's road-load
     energies ``rolling_wh`` and ``drag_wh``, ``friction_brake_wh`` and ``aux_wh``."""
-    from ..cycles import load_cycle
     from . import peer_cache
 
-    if cycle_name not in BEV_CYCLES:
-        raise ValueError(f"unknown BEV test cycle {cycle_name!r}; expected one of {', '.join(BEV_CYCLES)}")
-    o = peer_cache.run(vehicle_dict, load_cycle(cycle_name))  # (remembered: vpsim.fleet.peer_cache)
+    o = peer_cache.run(vehicle_dict, _bev_cycle(cycle_name))  # (remembered: vpsim.fleet.peer_cache)
     state = o["veh"]["state"]
     res = o["veh"]["pt_type"]["BEV"]["res"]["state"]
     dist_m = float(state["dist_meters"])

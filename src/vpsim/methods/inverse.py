@@ -247,10 +247,7 @@ def _trajectory(time_s, speed, schedule: GearSchedule, a: float):
     driver's trajectory on the cycle's samples ``time_s``, ``speed`` in ``schedule``'s gears, which no
     parameter of the car changes. Kept on the (frozen) schedule per half-width a for the samples last
     given (as the backward method keeps a cycle's intervals): every run of any design on that cycle and
-    schedule shares it (read-only arrays)."""
-    hit = _kept_trajectory(time_s, speed, schedule, a)
-    if hit is not None:
-        return hit
+    schedule shares it (read-only arrays; :func:`_kept_trajectory` reads it back)."""
     kept = memo(schedule, "inverse_trajectories", _no_trajectories)
     taps = _sample_taps(a, float(time_s[1] - time_s[0]))
     F, I = _grid_and_smoothing(time_s, speed, schedule.time_s, schedule.gear, *taps)
