@@ -48,6 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vpsim.fleet import calibrate as cal
 from vpsim.fleet import ev
 from vpsim.fleet import run as fleet_run
 from vpsim.fleet.epa import read_test_car_list
@@ -115,7 +116,7 @@ def run_variant(cars, variant: str) -> list[dict]:
             ev.TECH_PARAMS = ev.TECH_PARAMS[:2]
             ev.grid_chunk = _two_parameter_grid_chunk
             ev.fit, ev.on_bounds = ev.GRID.fit, ev.GRID.on_bounds
-        out = fleet_run._run_evs(cars.ev_vehicles, 5, "family", fleet_run._Serial(), {}, False, {})
+        out = fleet_run._run_evs(cars.ev_vehicles, cal.FoldSpec(5), fleet_run._Serial(), {}, False, {})
     finally:
         ev.ev_parameters = shipped_params
         mc.DEFAULT_COEFFICIENTS.update(shipped_coeff)

@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from vpsim.fleet import calibrate as cal
 from vpsim.fleet import hev
 from vpsim.fleet import run as fleet_run
 from vpsim.fleet.epa import read_test_car_list
@@ -60,7 +61,7 @@ def main() -> None:
     hev.hev_parameters = build
     t0 = time.process_time()
     try:
-        out = fleet_run._run_hevs(recs, a.folds, "family", fleet_run._Serial(), {}, False, {})
+        out = fleet_run._run_hevs(recs, cal.FoldSpec(a.folds), fleet_run._Serial(), {}, False, {})
     finally:
         hev.hev_parameters = shipped
     cpu = time.process_time() - t0

@@ -52,7 +52,9 @@ def run_mhev(cars, folds: int = 5, group_by: str = "family", changes: dict | Non
 
     try:
         mm.mhev_parameters = build
-        return fleet_run._run_mhevs(cars.mhev_vehicles, folds, group_by, fleet_run._Serial(), {}, False, {})
+        return fleet_run._run_mhevs(
+            cars.mhev_vehicles, cal.FoldSpec(folds, group_by), fleet_run._Serial(), {}, False, {}
+        )
     finally:
         mm.mhev_parameters = shipped
 

@@ -19,11 +19,16 @@ from vpsim.errors import VpsimError
 from vpsim.fleet.deals import compare_deals
 
 
-def _folder(path: Path, seed, vp, peer, families=None, cycle="hwy", grouping="family", folds=5, ev=None):
+def _folder(
+    path: Path, seed, vp, peer, families=None, cycle="hwy", grouping="family", folds=5, ev=None, deal=None
+):
     """A made-up `vpsim fleet --out` folder: a summary with the deal, and vehicles.csv with one row per
-    error of ``vp`` (vpsim) and ``peer`` (the calibrated FASTSim; None: not run)."""
+    error of ``vp`` (vpsim) and ``peer`` (the calibrated FASTSim; None: not run). ``deal``: written as
+    validation.deal when given (folders of earlier versions have none)."""
     path.mkdir(parents=True)
     summary = {"n_vehicles": len(vp), "validation": {"grouping": grouping, "folds": folds, "seed": seed}}
+    if deal is not None:
+        summary["validation"]["deal"] = deal
     (path / "summary.json").write_text(json.dumps(summary))
     n = len(vp)
     rows = {
@@ -113,6 +118,22 @@ def test_a_behind_verdict_and_a_part_without_its_peer(tmp_path):
     assert e["families"] == 3 and e["n"] == 3
     assert e["difference_pts"]["mean"] is None
     assert "no peer" in str(r)
+
+
+def test_a_hash_deal_and_a_shuffle_of_one_seed_are_two_deals(tmp_path):
+    """validation.deal tells deals apart: seed 0 shuffled (no key: an earlier version's folder) and seed 0
+    hashed are two deals, labelled so; the same hash deal twice is refused."""
+    a = _folder(tmp_path / "a", 0, [1, 2, 3], [4, 5, 6])
+    b = _folder(tmp_path / "b", 0, [1, 2, 4], [4, 5, 6], deal="hash")
+    r = compare_deals([a, b])
+    assert [(d["seed"], d["deal"]) for d in r.as_dict()["deals"]] == [(0, "shuffle"), (0, "hash")]
+    assert list(r.to_frame()["deal"]) == ["shuffle", "hash"]
+    assert "2 deals of family folds (5 folds), seeds 0, hash seed 0" in str(r)
+    assert r.tests["conventional"]["hwy"]["vpsim_median_abs_error_pct"]["by_deal"] == [2.0, 2.0]
+    with pytest.raises(VpsimError, match="same deal \\(hash seed 0\\)"):
+        compare_deals([a, b, _folder(tmp_path / "c", 0, [1, 2, 3], [4, 5, 6], deal="hash")])
+    with pytest.raises(VpsimError, match="validation.deal 'deck': expected shuffle or hash"):
+        compare_deals([a, _folder(tmp_path / "d", 1, [1, 2, 3], [4, 5, 6], deal="deck")])
 
 
 def test_folders_that_cannot_be_compared_are_one_line(tmp_path, capsys):

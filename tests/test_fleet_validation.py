@@ -3,6 +3,7 @@ on the list declared, fitted values on their bounds reported, and a peer calibra
 
 from __future__ import annotations
 
+import hashlib
 import importlib
 import json
 import math
@@ -11,7 +12,10 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fleet_csv import write_list
 from vpsim.cli.main import main
@@ -68,6 +72,64 @@ def test_a_group_always_shares_a_fold_and_record_folds_are_as_before():
     assert cal.assign_folds(keys, 5) == {order[j]: i % 5 for i, j in enumerate(perm)}
     with pytest.raises(ValueError, match="cannot fill"):
         cal.assign_folds(keys[:6], 4, groups={k: "one" if i < 4 else "two" for i, k in enumerate(keys[:6])})
+
+
+def _sha_fold(label: str, k: int, seed: int) -> int:
+    """The hash deal's fold by hand: SHA-256 of "<seed>:<label>", first 8 bytes big-endian, mod k."""
+    return int.from_bytes(hashlib.sha256(f"{seed}:{label}".encode()).digest()[:8], "big") % k
+
+
+def test_the_hash_deal_keeps_every_familys_fold_when_others_come_or_go():
+    """deal="hash": each group's fold is the hand formula's, its records together, whatever the input order;
+    three groups fewer move no other group, where the shuffle deal moves most of them."""
+    keys = [f"V{i}#0" for i in range(300)]
+    groups = {k: f"G{i // 3}" for i, k in enumerate(keys)}
+    full = cal.assign_folds(keys, 5, groups=groups, deal="hash")
+    assert full == {k: _sha_fold(groups[k], 5, cal.SEED) for k in keys}
+    assert cal.assign_folds(list(reversed(keys)), 5, groups=groups, deal="hash") == full
+    assert cal.assign_folds(keys, 5, seed=7, groups=groups, deal="hash") == {
+        k: _sha_fold(groups[k], 5, 7) for k in keys
+    }
+    fewer = [k for k in keys if groups[k] not in {"G0", "G50", "G99"}]
+    assert {k: full[k] for k in fewer} == cal.assign_folds(fewer, 5, groups=groups, deal="hash")
+    shuffled, shuffled_fewer = (
+        cal.assign_folds(keys, 5, groups=groups),
+        cal.assign_folds(fewer, 5, groups=groups),
+    )
+    assert sum(shuffled[k] != shuffled_fewer[k] for k in fewer) > len(fewer) / 2
+    sizes = np.bincount(list(full.values()), minlength=5)
+    assert sizes.min() > 0 and sizes.sum() == 300  # balanced on average only: 100 groups of 3 in 5 folds
+    with pytest.raises(ValueError, match="deal 'deck': expected one of shuffle, hash"):
+        cal.assign_folds(keys, 5, groups=groups, deal="deck")
+
+
+def test_a_hash_deal_that_leaves_a_fold_empty_is_refused():
+    labels = ["A", "B", "C", "D", "E"]
+    seed = next(s for s in range(100) if len({_sha_fold(x, 5, s) for x in labels}) < 5)
+    empty = sorted(set(range(5)) - {_sha_fold(x, 5, seed) for x in labels})
+    with pytest.raises(ValueError, match=f"leaves fold\\(s\\) {', '.join(map(str, empty))} of 5 empty"):
+        cal.assign_folds(labels, 5, seed=seed, deal="hash")
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.sets(st.text(min_size=1, max_size=12), min_size=12, max_size=60),
+    st.integers(min_value=0, max_value=2**31),
+    st.data(),
+)
+def test_hash_folds_depend_on_the_group_alone(labels, seed, data):
+    labels = sorted(labels)
+    keep = data.draw(st.lists(st.sampled_from(labels), min_size=3, unique=True))
+    k = 3
+    try:
+        full = cal.assign_folds(labels, k, seed=seed, deal="hash")
+    except ValueError:  # a fold left empty by this draw: refused, as tested above
+        return
+    try:
+        part = cal.assign_folds(keep, k, seed=seed, deal="hash")
+    except ValueError:
+        return
+    assert part == {x: full[x] for x in keep}
 
 
 def test_leave_one_manufacturer_out_predicts_each_maker_from_the_others(tmp_path):
@@ -148,6 +210,26 @@ def test_another_seed_deals_the_families_anew_and_says_so(tmp_path, capsys):
     assert "--seed" in capsys.readouterr().err
     with pytest.raises(VpsimError, match="--seed 1.5: expected a whole number"):
         run_fleet(lst, cycles=("hwy",), folds=3, peer=False, workers=1, seed=1.5)
+
+
+def test_fleet_with_the_hash_deal_says_so_and_keeps_whole_families(tmp_path, capsys):
+    """``vpsim fleet --deal hash``: every row's fold is its family's hash fold, the deal in summary.json and
+    on the screen; with --group-by manufacturer (a fold per maker) it is one line, exit 2."""
+    lst = write_list(tmp_path / "list.csv", bad_rows=False)
+    out = tmp_path / "o"
+    args = ["fleet", str(lst), "--out", str(out), "--folds", "3", "--cycles", "hwy", "--no-peer", "--quiet"]
+    assert main([*args, "--deal", "hash"]) == 0
+    assert "hash deal (the headline's: shuffle)" in capsys.readouterr().out
+    v = json.loads((out / "summary.json").read_text())["validation"]
+    assert v["deal"] == "hash" and v["seed"] == cal.SEED
+    rows = pd.read_csv(out / "vehicles.csv")
+    assert len(rows) > 0
+    assert list(rows["fold"]) == [_sha_fold(f, 3, cal.SEED) for f in rows["family"]]
+    assert main([*args, "--deal", "hash", "--group-by", "manufacturer"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "each manufacturer is its own fold" in err
+    assert main([*args, "--deal", "deck"]) == 2
+    assert "'deck' is not one of" in capsys.readouterr().err
 
 
 def test_on_bounds_sees_a_value_on_its_bound():

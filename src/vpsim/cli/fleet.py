@@ -49,6 +49,16 @@ from .main import cli
     "Given several times, each deal is written to OUT/seed_<N>/ (the technology grids and FASTSim's "
     "deal-independent runs computed once) and `vpsim fleet-deals` of them to OUT/deals.json and deals.png.",
 )
+@click.option(
+    "--deal",
+    type=click.Choice(["shuffle", "hash"]),
+    default="shuffle",
+    show_default=True,
+    help="How the groups are dealt into folds: shuffled with the seed and dealt to the emptiest fold (the "
+    "headline's: balanced folds), or each group to the fold a hash of the seed and its own name gives (folds "
+    'balanced on average; a family the list gains or loses moves no other family). docs/fleet.md, "How sure '
+    'the comparison is".',
+)
 @click.option("--method", type=click.Choice(["backward", "forward"]), default="backward", show_default=True)
 @click.option("--local-cluster", "local_cluster", type=int, default=None, help="Run on N local Dask workers.")
 @click.option("--scheduler", default=None, help="Run on the Dask scheduler at this address.")
@@ -80,6 +90,7 @@ def fleet(
     folds,
     group_by,
     seeds,
+    deal,
     method,
     local_cluster,
     scheduler,
@@ -119,6 +130,7 @@ def fleet(
         peer=not no_peer,
         workers=workers,
         group_by=group_by,
+        deal=deal,
     )
     if len(seeds) > 1:
         return _several_deals(file, out, seeds, options)

@@ -32,10 +32,14 @@ Folds are deterministic and hold out whole groups (:func:`vehicle_groups`): by d
 (the same test vehicle, the same manufacturer, model and engine, or the same inputs to the model), so no
 car is predicted from its sibling configuration or its twin; ``manufacturer`` leaves each manufacturer out
 in turn; ``record`` (earlier versions) deals single records. Groups are shuffled with a fixed seed and dealt
-to the emptiest fold.
+to the emptiest fold, or (``deal="hash"``) each sent to the fold a hash of the seed and its label names, which
+no other group's presence changes (:func:`assign_folds`).
 """
 
 from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -67,6 +71,9 @@ ACCESSORY_AXIS = np.arange(0.0, ACCESSORY_MAX_W + 0.1, ACCESSORY_STEP_W)
 ACCESSORY_COARSE = 4  # the first pass takes every 4th of them, on every 4th point of the fine grid
 FUEL_FLOOR = 1e-3  # L/100 km: a cycle's fuel the linear accessory term may not take below (a lower bound)
 SEED = 20220
+# how groups are dealt into folds (:func:`assign_folds`); the fleet's headline is the first
+DEALS = ("shuffle", "hash")
+DEFAULT_DEAL = "shuffle"
 
 
 # why a fitted value may sit on a bound of its search, and the bound stays (reported with the fit)
@@ -169,16 +176,30 @@ def vehicle_groups(vehicles, by: str = DEFAULT_GROUPING, labels=None) -> dict[st
 
 
 def assign_folds(
-    keys: list[str], k: int, seed: int = SEED, groups: dict[str, str] | None = None
+    keys: list[str],
+    k: int,
+    seed: int = SEED,
+    groups: dict[str, str] | None = None,
+    deal: str = DEFAULT_DEAL,
 ) -> dict[str, int]:
     """Fold (0..k-1) of each vehicle key; deterministic, independent of the input order.
 
-    ``groups`` (key -> label, :func:`vehicle_groups`): records of one group share a fold. Groups are taken
-    in a fixed shuffled order, each to the fold with the fewest records so far (the lowest such fold): with
-    one record per group this is a round-robin deal.
+    ``groups`` (key -> label, :func:`vehicle_groups`): records of one group share a fold. ``deal``
+    (:data:`DEALS`):
+
+    * ``shuffle`` (the fleet's headline): groups are taken in an order shuffled with ``seed``, each to the
+      fold with the fewest records so far (the lowest such fold); with one record per group this is a
+      round-robin deal. The folds are balanced, but one group more or less reshuffles nearly every group,
+      so a list the reader learns to read one more family of is dealt anew.
+    * ``hash``: a group's fold is the SHA-256 of the seed and its label, modulo ``k``, so a group keeps its
+      fold whatever other groups the list holds: a new family moves only its own records. The folds are
+      balanced only on average (their sizes vary as a binomial draw's); a deal that leaves a fold empty is
+      refused.
     """
     if k < 2:
         raise ValueError(f"cross-validation needs at least 2 folds, got {k}")
+    if deal not in DEALS:
+        raise ValueError(f"deal {deal!r}: expected one of {', '.join(DEALS)}")
     ordered = sorted(set(keys))
     label = {key: key for key in ordered} if groups is None else {key: groups[key] for key in ordered}
     members: dict[str, list[str]] = {}
@@ -187,15 +208,56 @@ def assign_folds(
     names = sorted(members)
     if len(names) < k:
         raise ValueError(f"{len(names)} group(s) cannot fill {k} folds; use fewer folds")
+    out: dict[str, int] = {}
+    if deal == "hash":
+        fold_of_group = {name: hash_fold(name, k, seed) for name in names}
+        empty = sorted(set(range(k)) - set(fold_of_group.values()))
+        if empty:
+            raise ValueError(
+                f"the hash deal with seed {seed} leaves fold(s) {', '.join(map(str, empty))} of {k} empty "
+                f"({len(names)} groups); use fewer folds, another seed or the shuffle deal"
+            )
+        for name in names:
+            for key in members[name]:
+                out[key] = fold_of_group[name]
+        return out
     perm = np.random.default_rng(seed).permutation(len(names))
     size = [0] * k
-    out: dict[str, int] = {}
     for j in perm:
         f = min(range(k), key=lambda i: (size[i], i))
         for key in members[names[j]]:
             out[key] = f
         size[f] += len(members[names[j]])
     return out
+
+
+@dataclass(frozen=True)
+class FoldSpec:
+    """How a fleet run holds out: ``folds`` folds of the groups :func:`vehicle_groups` forms by
+    ``group_by``, dealt with ``seed`` by ``deal`` (:func:`assign_folds`); every part of the fleet deals its
+    own records by the same spec."""
+
+    folds: int = 5
+    group_by: str = DEFAULT_GROUPING
+    seed: int = SEED
+    deal: str = DEFAULT_DEAL
+
+    def n_folds(self, n_groups: int) -> int:
+        """The folds for ``n_groups`` groups: one per manufacturer when held out by manufacturer."""
+        return n_groups if self.group_by == "manufacturer" else self.folds
+
+    def assign(self, keys: list[str], groups: dict[str, str]) -> dict[str, int]:
+        """:func:`assign_folds` of ``keys`` in their ``groups`` by this spec (a ValueError says why not)."""
+        k = self.n_folds(len(set(groups[key] for key in keys)))
+        return assign_folds(keys, k, seed=self.seed, groups=groups, deal=self.deal)
+
+
+def hash_fold(label: str, k: int, seed: int = SEED) -> int:
+    """The ``hash`` deal's fold of a group: SHA-256 of ``"<seed>:<label>"`` (UTF-8), its first 8 bytes as an
+    unsigned big-endian integer, modulo ``k``. Depends on nothing but these three, on every platform and
+    Python version (unlike :func:`hash`, which is salted per process)."""
+    digest = hashlib.sha256(f"{int(seed)}:{label}".encode()).digest()
+    return int.from_bytes(digest[:8], "big") % k
 
 
 def _fine_axes():
@@ -342,7 +404,10 @@ __all__ = [
     "SIMULATED",
     "TECH_PARAMS",
     "GROUPINGS",
+    "DEALS",
+    "FoldSpec",
     "assign_folds",
+    "hash_fold",
     "cross_validate",
     "per_fold_and_class",
     "fit",

@@ -68,6 +68,12 @@ class Deal:
     folds: int
     n_vehicles: int | None  # as its summary.json says
     tables: dict  # powertrain -> DataFrame of the rows with a test of that part
+    deal: str = "shuffle"  # validation.deal (calibrate.DEALS; folders written before it: the shuffle)
+
+    @property
+    def label(self) -> str:
+        """``seed N``, or ``<deal> seed N`` for a deal other than the headline's shuffle."""
+        return f"seed {self.seed}" if self.deal == "shuffle" else f"{self.deal} seed {self.seed}"
 
 
 def read_deal(folder) -> Deal:
@@ -92,6 +98,9 @@ def read_deal(folder) -> Deal:
         or not isinstance(folds, int)
     ):
         raise VpsimError(f"{path}: validation.seed {seed!r} and .folds {folds!r}: expected whole numbers")
+    deal = v.get("deal", "shuffle")
+    if deal not in ("shuffle", "hash"):
+        raise VpsimError(f"{path}: validation.deal {str(deal)[:40]!r}: expected shuffle or hash")
     tables = {}
     for pt, (name, _) in PARTS.items():
         f = folder / name
@@ -124,7 +133,7 @@ def read_deal(folder) -> Deal:
         tables[pt] = df
     n = s.get("n_vehicles")
     n = n if isinstance(n, int) and not isinstance(n, bool) else None
-    return Deal(folder, seed, str(v["grouping"]), folds, n, tables)
+    return Deal(folder, seed, str(v["grouping"]), folds, n, tables, deal)
 
 
 def _part_tests(deal: Deal, pt: str) -> tuple[str, ...]:
@@ -144,11 +153,11 @@ def _check_same_validation(deals: Sequence[Deal]) -> None:
                 f"{d.folder} holds out by {d.grouping} in {d.folds} folds, {first.folder} by "
                 f"{first.grouping} in {first.folds}: compare deals of one validation"
             )
-        if d.seed in seen:
+        if (d.deal, d.seed) in seen:
             raise VpsimError(
-                f"{seen[d.seed]} and {d.folder} are the same deal (seed {d.seed}): give each deal once"
+                f"{seen[d.deal, d.seed]} and {d.folder} are the same deal ({d.label}): give each deal once"
             )
-        seen[d.seed] = d.folder
+        seen[d.deal, d.seed] = d.folder
 
 
 def _rows(deal: Deal, pt: str, test: str, reference: pd.DataFrame | None) -> pd.DataFrame:
@@ -248,7 +257,8 @@ class DealComparison:
         d0 = self.deals[0]
         return {
             "deals": [
-                {"folder": str(d.folder), "seed": d.seed, "n_vehicles": d.n_vehicles} for d in self.deals
+                {"folder": str(d.folder), "seed": d.seed, "deal": d.deal, "n_vehicles": d.n_vehicles}
+                for d in self.deals
             ],
             "grouping": d0.grouping,
             "folds": d0.folds,
@@ -267,6 +277,7 @@ class DealComparison:
                             "powertrain": pt,
                             "test": test,
                             "seed": d.seed,
+                            "deal": d.deal,
                             "folder": str(d.folder),
                             "n": f["n"],
                             "vpsim_median_abs_error_pct": f["vpsim_median_abs_error_pct"]["by_deal"][i],
@@ -281,7 +292,7 @@ class DealComparison:
 
     def __str__(self) -> str:
         d0 = self.deals[0]
-        seeds = ", ".join(str(d.seed) for d in self.deals)
+        seeds = ", ".join(d.label.removeprefix("seed ") for d in self.deals)
         L = [
             f"{len(self.deals)} deals of {d0.grouping} folds ({d0.folds} folds), seeds {seeds}",
             "median |error| %: mean over the deals [lowest-highest]; vpsim minus the calibrated FASTSim, "
@@ -339,7 +350,7 @@ class DealComparison:
                     lw=0.7,
                     alpha=0.8,
                     color=f"C{i % 10}",
-                    label=f"seed {d.seed}" if y == 0 else None,
+                    label=d.label if y == 0 else None,
                 )
             lo, hi = f["pooled_ci95_pts"]
             ax.plot(

@@ -281,6 +281,7 @@ def validation(run) -> dict:
         "folds": run.folds,
         "groups": run.n_groups,
         "seed": run.seed,
+        "deal": run.deal,
         "tuned_on_this_list": [dict(t) for t in TUNED_ON_THIS_LIST],
     }
 
@@ -355,7 +356,7 @@ def summary_lines(s: dict, info: dict, names) -> list[str]:
     differences from the calibrated FASTSim with their intervals, the record's repeatability, what a
     correction per manufacturer leaves, and the runtime. ``s``: :func:`summary`; ``info``:
     :func:`run_info`; ``names``: the engine cars' cycles, in order."""
-    from .calibrate import SEED
+    from .calibrate import DEFAULT_DEAL, SEED
 
     out: list[str] = []
     excl = sum(s["excluded"].values())
@@ -367,7 +368,10 @@ def summary_lines(s: dict, info: dict, names) -> list[str]:
     fc = s["peer"]["fastsim_calibrated"]
     measured = fs.get("measured", True)
     v = s["validation"]
+    scheme = v.get("deal", DEFAULT_DEAL)
     deal = "" if v["seed"] == SEED else f", dealt with seed {v['seed']} (the fleet's: {SEED})"
+    if scheme != DEFAULT_DEAL:  # (not the headline's deal: say so on the line)
+        deal += f", {scheme} deal (the headline's: {DEFAULT_DEAL})"
     out.append(f"held out by {v['grouping']}: {v['folds']} folds of {v['groups']} groups{deal}")
     out.append(
         f"{'cycle':10s} {'n':>5s} {'median':>8s} {'med|e|':>8s} {'p90|e|':>8s}"

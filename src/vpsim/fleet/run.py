@@ -126,6 +126,7 @@ class FleetRun:
     grouping: str = cal.DEFAULT_GROUPING  # what cross-validation holds out together (calibrate.GROUPINGS)
     n_groups: int = 0
     seed: int = cal.SEED  # the deal of groups into folds (calibrate.assign_folds)
+    deal: str = cal.DEFAULT_DEAL  # how the groups are dealt (calibrate.DEALS)
     peer_technology: dict = field(default_factory=dict)  # the calibrated FASTSim's, "fold<k>.<class>"
     # the battery-electric records (vpsim.fleet.ev): rows, their technology and folds (_run_evs)
     ev: dict = field(default_factory=dict)
@@ -428,6 +429,7 @@ def run_fleet(
     group_by: str = cal.DEFAULT_GROUPING,
     seed: int = cal.SEED,
     memory: dict | None = None,
+    deal: str = cal.DEFAULT_DEAL,
 ) -> FleetRun:
     """Run every usable vehicle of ``source`` (a path or a :class:`TestCarList`) on the cycles it measured.
 
@@ -438,6 +440,9 @@ def run_fleet(
     (default), ``record``, or ``manufacturer`` (one fold per manufacturer; ``folds`` is then not used).
     ``seed``: the order the groups are dealt into folds in (:func:`vpsim.fleet.calibrate.assign_folds`; every
     part of the fleet, and its peer's calibration, on the same deal); another seed is an equally valid deal.
+    ``deal``: ``shuffle`` (the default and the headline's) or ``hash``, where a family's fold depends on the
+    seed and its own label alone, so families the list gains or loses move no other family
+    (:func:`vpsim.fleet.calibrate.assign_folds`).
     ``memory``: a dict kept between calls (empty at first) in which the runs' chunk results are remembered
     (:class:`_Remembering`), so that runs of one list on several seeds compute the deal-independent grids
     and peer runs once; the figures are those of separate runs.
@@ -467,6 +472,12 @@ def run_fleet(
         raise VpsimError(f"--folds must be at least 2 (cross-validation), got {folds}")
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise VpsimError(f"--seed {seed!r}: expected a whole number, 0 or more")
+    if deal not in cal.DEALS:
+        raise VpsimError(f"--deal {deal!r}: expected one of {', '.join(cal.DEALS)}")
+    if deal != cal.DEFAULT_DEAL and group_by == "manufacturer":
+        raise VpsimError(
+            f"--deal {deal} with --group-by manufacturer: each manufacturer is its own fold, no deal"
+        )
     cars = source if isinstance(source, TestCarList) else read_test_car_list(source)
     vehicles = [v for v in cars.vehicles if any(c in v.measured_mpg for c in cycles)]
     if limit is not None:
@@ -480,7 +491,11 @@ def run_fleet(
             f"{len(vehicles)} usable vehicle(s) in {n_groups} {group_by} group(s) with a test on "
             f"{', '.join(cycles)}: too few for {max(folds, 2)} folds"
         )
-    fold_of = cal.assign_folds([v.key for v in vehicles], folds, seed=seed, groups=groups)
+    spec = cal.FoldSpec(folds, group_by, seed, deal)  # (every part deals its records by it)
+    try:
+        fold_of = spec.assign([v.key for v in vehicles], groups)
+    except ValueError as exc:
+        raise VpsimError(f"{len(vehicles)} usable vehicle(s): {exc}") from None
     timings = {"read_s": time.perf_counter() - t_start}
     work = [(v, tuple(c for c in cycles if c in v.measured_mpg)) for v in vehicles]
     chunks = [work[i : i + CHUNK] for i in range(0, len(work), CHUNK)]
@@ -588,17 +603,17 @@ def run_fleet(
         # 6. the battery-electric records: the same procedure with the class "bev" (vpsim.fleet.ev)
         t0 = time.perf_counter()
         evs = cars.ev_vehicles if limit is None else cars.ev_vehicles[:limit]
-        ev_out = _run_evs(evs, folds, group_by, executor, peer_state, progress, timings, seed)
+        ev_out = _run_evs(evs, spec, executor, peer_state, progress, timings)
         timings["ev_s"] = time.perf_counter() - t0
         # 7. the full hybrids: the same procedure with the classes hev_split, hev_p2 (vpsim.fleet.hev)
         t0 = time.perf_counter()
         hevs = cars.hev_vehicles if limit is None else cars.hev_vehicles[:limit]
-        hev_out = _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings, seed)
+        hev_out = _run_hevs(hevs, spec, executor, peer_state, progress, timings)
         timings["hev_s"] = time.perf_counter() - t0
         # 8. the mild hybrids: the same procedure with the classes mhev_p0, mhev_p1 (vpsim.fleet.mhev)
         t0 = time.perf_counter()
         mhevs = cars.mhev_vehicles if limit is None else cars.mhev_vehicles[:limit]
-        mhev_out = _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings, seed)
+        mhev_out = _run_mhevs(mhevs, spec, executor, peer_state, progress, timings)
         timings["mhev_s"] = time.perf_counter() - t0
     rows = []
     for v, cs in work:
@@ -645,6 +660,7 @@ def run_fleet(
         grouping=group_by,
         n_groups=n_groups,
         seed=seed,
+        deal=deal,
         peer_technology=peer_technology,
         ev=ev_out,
         hev=hev_out,

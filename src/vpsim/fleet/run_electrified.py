@@ -64,7 +64,7 @@ def _predict(executor, predict_chunk, work, failed, tech, fold_of, class_of, chu
     return preds
 
 
-def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings, seed: int = cal.SEED) -> dict:
+def _run_evs(evs, spec: cal.FoldSpec, executor, peer_state, progress, timings) -> dict:
     """The battery-electric records on their two tests: technology of the class ``bev`` fitted out of fold
     exactly as the conventional classes' (folds of :func:`vpsim.fleet.calibrate.assign_folds` over the EV
     families, :func:`~vpsim.fleet.calibrate.per_fold_and_class`), then one backward run per vehicle and
@@ -81,15 +81,19 @@ def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings, seed
     if not evs:
         out["status"] = "no battery-electric record with a charge-depleting UDDS or highway test"
         return out
-    groups = cal.vehicle_groups(evs, group_by, labels=evm.family_labels)
+    groups = cal.vehicle_groups(evs, spec.group_by, labels=evm.family_labels)
     n_groups = len(set(groups.values()))
-    k = n_groups if group_by == "manufacturer" else folds
+    k = spec.n_folds(n_groups)
     if n_groups < max(k, 2):
         out["status"] = (
             f"{len(evs)} battery-electric vehicle(s) in {n_groups} group(s): too few for {k} folds"
         )
         return out
-    fold_of = cal.assign_folds([v.key for v in evs], k, seed=seed, groups=groups)
+    try:
+        fold_of = spec.assign([v.key for v in evs], groups)
+    except ValueError as exc:  # (the hash deal left a fold of a small part empty)
+        out["status"] = f"{len(evs)} battery-electric vehicle(s): {exc}"
+        return out
     out.update(folds=k, groups=n_groups, fold_of=fold_of, group_of=groups)
     work = [(v, tuple(c for c in evm.EV_CYCLES if c in v.measured_mpge)) for v in evs]
     chunks = [work[i : i + EV_CHUNK] for i in range(0, len(work), EV_CHUNK)]
@@ -223,7 +227,7 @@ def _run_evs(evs, folds, group_by, executor, peer_state, progress, timings, seed
     return out
 
 
-def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings, seed: int = cal.SEED) -> dict:
+def _run_hevs(hevs, spec: cal.FoldSpec, executor, peer_state, progress, timings) -> dict:
     """The full hybrids on their tests: technology per layout class (:data:`vpsim.fleet.hev.CLASSES`) fitted
     out of fold as the other classes' (folds over the hybrid families), then one backward ECMS run per
     vehicle and test at its fold's technology, the charge-sustaining figure compared; FASTSim's hybrid
@@ -242,10 +246,10 @@ def _run_hevs(hevs, folds, group_by, executor, peer_state, progress, timings, se
         ph.hev_calibration_chunk, ph.calibrate_hev_peer, ph.hev_peer_chunk, ph.HEV_PEER_PARAMS, "hybrid"
     )
     part = HybridFleet(hm, hm.hev_class, ph.hev_peer_chunk, calibrated, what)
-    return _run_hybrids(hevs, part, folds, group_by, executor, peer_state, progress, timings, seed)
+    return _run_hybrids(hevs, part, spec, executor, peer_state, progress, timings)
 
 
-def _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings, seed: int = cal.SEED) -> dict:
+def _run_mhevs(mhevs, spec: cal.FoldSpec, executor, peer_state, progress, timings) -> dict:
     """The mild hybrids (:mod:`vpsim.fleet.mhev`) as the full hybrids (:func:`_run_hevs`), classes
     :data:`vpsim.fleet.mhev.CLASSES`; the peer is FASTSim's conventional car of the same record
     (:mod:`vpsim.fleet.peer`: FASTSim 3.1 has no mild-hybrid resource), with its defaults and calibrated
@@ -267,7 +271,7 @@ def _run_mhevs(mhevs, folds, group_by, executor, peer_state, progress, timings, 
         "conventional car",
     )
     part = HybridFleet(mm, mm.mhev_class, peer_mod.peer_chunk, calibrated, what)
-    return _run_hybrids(mhevs, part, folds, group_by, executor, peer_state, progress, timings, seed)
+    return _run_hybrids(mhevs, part, spec, executor, peer_state, progress, timings)
 
 
 # a hybrid part's third technology parameter in its rows, under the column name the other parts give it
@@ -291,9 +295,7 @@ class HybridFleet(NamedTuple):
     what: dict
 
 
-def _run_hybrids(
-    recs, part: HybridFleet, folds, group_by, executor, peer_state, progress, timings, seed: int = cal.SEED
-):
+def _run_hybrids(recs, part: HybridFleet, spec: cal.FoldSpec, executor, peer_state, progress, timings):
     """The hybrids ``recs`` of the fleet part ``part`` (:class:`HybridFleet`) on their tests
     ``part.what["cycles"]``."""
     from .run import _log_l100, _progress
@@ -306,13 +308,17 @@ def _run_hybrids(
     if not recs:
         out["status"] = f"no {name} with a {what['tests']} test"
         return out
-    groups = cal.vehicle_groups(recs, group_by, labels=hm.family_labels)
+    groups = cal.vehicle_groups(recs, spec.group_by, labels=hm.family_labels)
     n_groups = len(set(groups.values()))
-    k = n_groups if group_by == "manufacturer" else folds
+    k = spec.n_folds(n_groups)
     if n_groups < max(k, 2):
         out["status"] = f"{len(recs)} {name}(s) in {n_groups} group(s): too few for {k} folds"
         return out
-    fold_of = cal.assign_folds([v.key for v in recs], k, seed=seed, groups=groups)
+    try:
+        fold_of = spec.assign([v.key for v in recs], groups)
+    except ValueError as exc:  # (the hash deal left a fold of a small part empty)
+        out["status"] = f"{len(recs)} {name}(s): {exc}"
+        return out
     out.update(folds=k, groups=n_groups, fold_of=fold_of, group_of=groups)
     work = [(v, tuple(c for c in what["cycles"] if c in v.measured_mpg)) for v in recs]
     chunks = [work[i : i + HEV_CHUNK] for i in range(0, len(work), HEV_CHUNK)]
