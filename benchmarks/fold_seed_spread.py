@@ -3,6 +3,8 @@
     python benchmarks/fold_seed_spread.py ../shared/data/epa/22-tstcar.csv            # seeds 0-9
     python benchmarks/fold_seed_spread.py LIST --seeds 20 --workers 2
     python benchmarks/fold_seed_spread.py LIST --part mhev     # the mild hybrids (also: hev, bev)
+    python benchmarks/fold_seed_spread.py LIST --deal hash     # the hash deal (calibrate.assign_folds)
+    python benchmarks/fold_seed_spread.py LIST --drop-families 3 --draws 5   # a list with fewer families
 
 ``vpsim fleet`` deals the vehicle families into 5 folds in an order shuffled with one fixed seed
 (:data:`vpsim.fleet.calibrate.SEED`), fits each class's technology without the fold and predicts the fold.
@@ -17,6 +19,13 @@ fleet's seed, and their range and standard deviation over all seeds.
 battery-electric part (:mod:`vpsim.fleet.run_electrified`: its grid once, then per seed its folds over its
 own families, the fit per class out of fold and one real run per vehicle and test; MPGe for the EVs). The
 small parts have 39-61 families in 5 folds, so a deal moves them more than the engine cars' 488.
+
+``--drop-families N`` (engine cars): how far the headline moves when the list holds N families fewer (as
+when the reader learns, or stops, to read a family), the rest unchanged. For each of ``--draws`` random
+choices of N families (a fixed generator), the fleet's seed deals the smaller list and the fit and
+predictions are made again; printed is the change of each test's median |error| *on the vehicles both lists
+hold*, for the shuffle deal and the hash deal side by side. Under the shuffle most families change fold;
+under the hash none does, so what moves there is the fit's loss of the dropped families alone.
 """
 
 from __future__ import annotations
@@ -47,12 +56,21 @@ def main() -> None:
     ap.add_argument(
         "--part", choices=("conventional", "mhev", "hev", "bev"), default="conventional", help="fleet part"
     )
+    ap.add_argument("--deal", choices=cal.DEALS, default=cal.DEFAULT_DEAL, help="how families are dealt")
+    ap.add_argument("--drop-families", type=int, default=0, help="engine cars: N families fewer (see above)")
+    ap.add_argument("--draws", type=int, default=5, help="random choices of the dropped families (default 5)")
     a = ap.parse_args()
     if a.seeds < 1 or a.workers < 1:
         ap.error("--seeds and --workers must be at least 1")
+    if a.drop_families < 0 or a.draws < 1:
+        ap.error("--drop-families must be 0 or more and --draws at least 1")
+    global DEAL
+    DEAL = a.deal
     t0 = time.perf_counter()
     cars = read_test_car_list(a.list)
     if a.part != "conventional":
+        if a.drop_families:
+            ap.error("--drop-families is measured on the engine cars (the default --part)")
         electrified(cars, a.part, [cal.SEED, *range(a.seeds)], a.workers, t0)
         return
     vehicles = [v for v in cars.vehicles if any(c in v.measured_mpg for c in FLEET_CYCLES)]
@@ -69,33 +87,88 @@ def main() -> None:
         lg, meas, vclass, per_watt = fleet_run.fit_inputs(ok, by_key, FLEET_CYCLES)
         gears = {(r["key"], r["cycle"]): r["gear"] for r in ok}
         header("conventional", vehicles, groups, ok, t0)
+        if a.drop_families:
+            dropped(vehicles, groups, ok, lg, meas, vclass, per_watt, gears, executor, a, t0)
+            return
         for seed in seeds:
-            fold_of, vfold = deal(vehicles, seed, groups, ok)
-            tech = cal.cross_validate(lg, meas, vfold, vclass, 5, per_watt)
-            items = [
-                (
-                    by_key[r["key"]],
-                    r["cycle"],
-                    tech[(fold_of[r["key"]], vclass[i])],
-                    gears[(r["key"], r["cycle"])],
-                )
-                for i, r in enumerate(ok)
-            ]
-            step = fleet_run.CHUNK * 2
-            pch = [items[i : i + step] for i in range(0, len(items), step)]
-            preds = [p for part in executor.map(fleet_run.predict_chunk, pch, "backward") for p in part]
-            errs: dict[str, list[float]] = {c: [] for c in FLEET_CYCLES}
-            for (v, c, _, _), p in zip(items, preds, strict=True):
-                if not p["error"]:
-                    mpg = mpg_from_l_per_100km(p["predicted_l_per_100km"])
-                    errs[c].append(100.0 * (mpg / v.measured_mpg[c] - 1.0))
+            errs = conventional_errors(
+                vehicles, seed, groups, ok, lg, meas, vclass, per_watt, gears, executor
+            )
             line = []
             for c in FLEET_CYCLES:
-                f = figures(np.array(errs[c]))
+                f = figures(np.array(list(errs[c].values())))
                 table[c].append(f)
                 line.append(f"{c} {f[0]:+.2f} / {f[1]:.2f} / {f[2]:.2f}")
             print(f"  seed {seed:>5}: " + "; ".join(line))
     summary(table, {c: sum(1 for r in ok if r["cycle"] == c) for c in FLEET_CYCLES}, len(seeds), t0)
+
+
+def conventional_errors(vehicles, seed, groups, ok, lg, meas, vclass, per_watt, gears, executor, deal_=None):
+    """The engine cars' out-of-fold errors (% of mpg) dealt with ``seed``: {test: {key: error}}. ``vehicles``
+    may be a part of the list: the grid rows of the others are left out of the fit."""
+    keys = {v.key for v in vehicles}
+    take = np.array([r["key"] in keys for r in ok])
+    rows = [r for r, t in zip(ok, take, strict=True) if t]
+    by_key = {v.key: v for v in vehicles}
+    fold_of, vfold = deal(vehicles, seed, groups, rows, deal_)
+    sub_class = vclass[take]
+    tech = cal.cross_validate(lg[take], meas[take], vfold, sub_class, 5, per_watt[take])
+    items = [
+        (by_key[r["key"]], r["cycle"], tech[(fold_of[r["key"]], sub_class[i])], gears[(r["key"], r["cycle"])])
+        for i, r in enumerate(rows)
+    ]
+    step = fleet_run.CHUNK * 2
+    pch = [items[i : i + step] for i in range(0, len(items), step)]
+    preds = [p for part in executor.map(fleet_run.predict_chunk, pch, "backward") for p in part]
+    errs: dict[str, dict[str, float]] = {c: {} for c in FLEET_CYCLES}
+    for (v, c, _, _), p in zip(items, preds, strict=True):
+        if not p["error"]:
+            mpg = mpg_from_l_per_100km(p["predicted_l_per_100km"])
+            errs[c][v.key] = 100.0 * (mpg / v.measured_mpg[c] - 1.0)
+    return errs
+
+
+def dropped(vehicles, groups, ok, lg, meas, vclass, per_watt, gears, executor, a, t0) -> None:
+    """``--drop-families``: the change of each test's median |error| on the common vehicles, per deal."""
+    families = sorted(set(groups.values()))
+    rng = np.random.default_rng(0)
+    args = (ok, lg, meas, vclass, per_watt, gears, executor)
+    full = {d: conventional_errors(vehicles, cal.SEED, groups, *args, d) for d in cal.DEALS}
+    print(f"  {a.drop_families} of {len(families)} families dropped, {a.draws} draws; the fleet's seed")
+    print(
+        "  change of median |error| on the vehicles both lists hold (points), per test: "
+        + ", ".join(FLEET_CYCLES)
+    )
+    moved = {d: [] for d in cal.DEALS}
+    for draw in range(a.draws):
+        gone = set(rng.choice(families, size=a.drop_families, replace=False))
+        rest = [v for v in vehicles if groups[v.key] not in gone]
+        line = []
+        for d in cal.DEALS:
+            errs = conventional_errors(rest, cal.SEED, groups, *args, d)
+            deltas = []
+            for c in FLEET_CYCLES:
+                common = sorted(errs[c])
+                before = np.median(np.abs([full[d][c][k] for k in common]))
+                after = np.median(np.abs([errs[c][k] for k in common]))
+                deltas.append(after - before)
+            moved[d].append(deltas)
+            before_f = cal.assign_folds([v.key for v in vehicles], 5, cal.SEED, groups, d)
+            after_f = cal.assign_folds([v.key for v in rest], 5, cal.SEED, groups, d)
+            fams = {groups[v.key] for v in rest}
+            moved_fams = {groups[v.key] for v in rest if before_f[v.key] != after_f[v.key]}
+            line.append(
+                f"{d} " + " ".join(f"{x:+.3f}" for x in deltas) + f" ({len(moved_fams)}/{len(fams)} moved)"
+            )
+        print(f"  draw {draw}: " + "   ".join(line), flush=True)
+    for d in cal.DEALS:
+        x = np.abs(np.array(moved[d]))
+        print(
+            f"  {d:8s} largest |change| per test: "
+            + " ".join(f"{m:.3f}" for m in x.max(axis=0))
+            + f"; mean over tests and draws {x.mean():.3f} points"
+        )
+    print(f"{time.perf_counter() - t0:.0f} s wall")
 
 
 def header(part: str, recs, groups: dict, ok: list, t0: float) -> None:
@@ -105,9 +178,12 @@ def header(part: str, recs, groups: dict, ok: list, t0: float) -> None:
     )
 
 
-def deal(recs, seed: int, groups: dict, ok: list) -> tuple[dict, np.ndarray]:
+DEAL = cal.DEFAULT_DEAL  # --deal
+
+
+def deal(recs, seed: int, groups: dict, ok: list, scheme: str | None = None) -> tuple[dict, np.ndarray]:
     """The fleet's 5 folds dealt with ``seed``: (fold of each record's key, fold of each grid row)."""
-    fold_of = cal.assign_folds([v.key for v in recs], 5, seed=seed, groups=groups)
+    fold_of = cal.assign_folds([v.key for v in recs], 5, seed=seed, groups=groups, deal=scheme or DEAL)
     return fold_of, np.array([fold_of[r["key"]] for r in ok])
 
 
