@@ -132,30 +132,31 @@ def _peer_udds_us():
 def profile_forward(p, cyc, schedule):
     from vpsim.methods import forward
 
-    r = simulate(cyc, "forward", p, gears=schedule)
-    run = median_us(lambda: simulate(cyc, "forward", p, gears=schedule), 40)
+    r = simulate(cyc, "forward", p, driver=1, gears=schedule)
+    run = median_us(lambda: simulate(cyc, "forward", p, driver=1, gears=schedule), 40)
     info = r.solver if hasattr(r, "solver") else {}
     nfev = info.get("rhs_evaluations")
     pr = cProfile.Profile()
     pr.enable()
     for _ in range(20):
-        simulate(cyc, "forward", p, gears=schedule)
+        simulate(cyc, "forward", p, driver=1, gears=schedule)
     pr.disable()
     st = pstats.Stats(pr)
-    kernel = sum(v[2] for k, v in st.stats.items() if k[2] == "_integrate") / 20 * 1e6
+    # the integrator's kernel, whichever solver ran (_integrate_ros: RODAS3, the default; _integrate: DOPRI5)
+    kernel = sum(v[2] for k, v in st.stats.items() if k[2] in ("_integrate_ros", "_integrate")) / 20 * 1e6
     per = f", {kernel * 1e3 / nfev:.0f} ns per right-side evaluation" if nfev else ""
     print(
         f"forward udds driver 1: run {run:.0f} us, kernel {kernel:.0f} us; {r.steps} steps, "
         f"{nfev} right-side evaluations{per}"
     )
-    print(f"  forward kernel cache: {forward._integrate._cache._cache_path}")
-    print(top(lambda: simulate(cyc, "forward", p, gears=schedule), 20))
+    print(f"  forward kernel cache: {forward._integrate_ros._cache._cache_path}")
+    print(top(lambda: simulate(cyc, "forward", p, driver=1, gears=schedule), 20))
 
 
 def profile_inverse(p, cyc, schedule):
-    run = median_us(lambda: simulate(cyc, "inverse", p, gears=schedule), 200)
+    run = median_us(lambda: simulate(cyc, "inverse", p, driver=1, gears=schedule), 200)
     print(f"inverse udds driver 1: run {run:.1f} us")
-    print(top(lambda: simulate(cyc, "inverse", p, gears=schedule), 500))
+    print(top(lambda: simulate(cyc, "inverse", p, driver=1, gears=schedule), 500))
 
 
 def profile_linearity(p, em):
