@@ -649,6 +649,19 @@ def cases() -> list[Case]:
         Case(
             S, "--seed -1 among several", [*fl, "--out", "o", "--seed", "3", "--seed", "-1"], match="--seed"
         ),
+        Case(S, "--deal unknown", [*fl, "--out", "o", "--deal", "deck"], match="deck"),
+        Case(
+            S,
+            "--deal hash by manufacturer",
+            [*fl, "--out", "o", "--deal", "hash", "--group-by", "manufacturer"],
+            match="each manufacturer is its own fold",
+        ),
+        Case(
+            S,
+            "--deal hash on too few families",
+            [*fl, "--out", "o", "--deal", "hash", "--limit", "6"],
+            match="empty",
+        ),
         Case(S, "--out under a file", [*fl, "--out", "car.toml/sub"], match="cannot write there"),
         Case(S, "--out holds the list", [*fl, "--out", "."], match="holds an input"),
         Case(S, "--out is the list", [*fl, "--out", "list.csv"], match="list.csv"),
@@ -720,6 +733,20 @@ def cases() -> list[Case]:
             setup=both(
                 deal("a"),
                 deal("b", 1, summary=('{"validation": {"grouping": "family", "folds": 5, "seed": NaN}}')),
+            ),
+        ),
+        Case(
+            S,
+            "summary.json deal not a name",
+            fd,
+            match="validation.deal",
+            setup=both(
+                deal("a"),
+                deal(
+                    "b",
+                    1,
+                    summary='{"validation": {"grouping": "family", "folds": 5, "seed": 1, "deal": [1]}}',
+                ),
             ),
         ),
         Case(
