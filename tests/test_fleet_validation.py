@@ -178,6 +178,7 @@ def test_summary_declares_the_validation(tmp_path, capsys):
     report = (out / "report.md").read_text()
     assert "Constants chosen while looking at this list" in report
     assert "holding out whole vehicle families" in report
+    assert f"shuffled with seed {cal.SEED} and dealt to the emptiest fold" in report
     tech = json.loads((out / "technology.json").read_text())
     assert set(tech["search_bounds"]) == set(cal.TECH_PARAMS)
     for fit, hits in tech["on_search_bound"].items():
@@ -222,6 +223,7 @@ def test_fleet_with_the_hash_deal_says_so_and_keeps_whole_families(tmp_path, cap
     assert "hash deal (the headline's: shuffle)" in capsys.readouterr().out
     v = json.loads((out / "summary.json").read_text())["validation"]
     assert v["deal"] == "hash" and v["seed"] == cal.SEED
+    assert f"each to the fold a hash of seed {cal.SEED} and its name picks" in (out / "report.md").read_text()
     rows = pd.read_csv(out / "vehicles.csv")
     assert len(rows) > 0
     assert list(rows["fold"]) == [_sha_fold(f, 3, cal.SEED) for f in rows["family"]]

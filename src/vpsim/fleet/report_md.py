@@ -170,8 +170,8 @@ def _differences_md(d: dict) -> list[str]:
         "vpsim closer to the measurement), and a 95 % interval from a paired bootstrap that draws whole "
         f"families (the groups the folds hold out together), {BOOTSTRAP_RESAMPLES:,} draws. "
         "An interval that straddles 0 does not tell the two apart on this list. These figures are of one "
-        "deal of families into folds (`validation.seed`); `vpsim fleet FILE --out DIR --seed N` runs "
-        "another, and `vpsim fleet-deals DIR DIR ...` sets several side by side.",
+        "deal of families into folds (`validation.seed`, `validation.deal`); `vpsim fleet FILE --out DIR "
+        "--seed N` runs another, and `vpsim fleet-deals DIR DIR ...` sets several side by side.",
         "",
         "| powertrain | test | n | families | vpsim | FASTSim calibrated | difference | 95 % interval "
         "| share of draws with vpsim lower |",
@@ -288,6 +288,17 @@ def _hybrid_md(part: dict, hm, text: str, what: str) -> list[str]:
     return L
 
 
+def _deal_words(run) -> str:
+    """How the groups were dealt into folds, in words (``validation.seed``, ``validation.deal``)."""
+    if run.grouping == "manufacturer":
+        return "a fold per manufacturer"
+    how = {
+        "shuffle": "shuffled with seed {} and dealt to the emptiest fold",
+        "hash": "each to the fold a hash of seed {} and its name picks (folds balanced on average only)",
+    }[run.deal]
+    return how.format(run.seed) + ("" if run.seed == cal.SEED else f"; the fleet's seed is {cal.SEED}")
+
+
 def markdown(run, s, info, df, w, command: str) -> str:
     L = [
         "# Fleet: predicted against measured fuel economy",
@@ -303,8 +314,8 @@ def markdown(run, s, info, df, w, command: str) -> str:
             "manufacturer": ", one manufacturer held out at a time",
             "record": " by single records (a vehicle's twin or sibling configuration may be in another fold)",
         }[run.grouping]
-        + f" ({run.n_groups} groups): **every error below is out of fold**. Constants chosen while looking "
-        "at this list's errors are listed at the end of this report.",
+        + f" ({run.n_groups} groups, {_deal_words(run)}): **every error below is out of fold**. Constants "
+        "chosen while looking at this list's errors are listed at the end of this report.",
     ]
     if command:
         L += ["", f"Command: `{command}`"]
