@@ -35,6 +35,7 @@ import pandas as pd
 
 from ..errors import VpsimError
 from ..textio import printable, read_json, read_text
+from .calibrate import DEALS, DEFAULT_DEAL
 from .report import (
     BOOTSTRAP_RESAMPLES,
     BOOTSTRAP_SEED,
@@ -68,12 +69,12 @@ class Deal:
     folds: int
     n_vehicles: int | None  # as its summary.json says
     tables: dict  # powertrain -> DataFrame of the rows with a test of that part
-    deal: str = "shuffle"  # validation.deal (calibrate.DEALS; folders written before it: the shuffle)
+    deal: str = DEFAULT_DEAL  # validation.deal (calibrate.DEALS; folders written before it: the shuffle)
 
     @property
     def label(self) -> str:
         """``seed N``, or ``<deal> seed N`` for a deal other than the headline's shuffle."""
-        return f"seed {self.seed}" if self.deal == "shuffle" else f"{self.deal} seed {self.seed}"
+        return f"seed {self.seed}" if self.deal == DEFAULT_DEAL else f"{self.deal} seed {self.seed}"
 
 
 def read_deal(folder) -> Deal:
@@ -98,9 +99,9 @@ def read_deal(folder) -> Deal:
         or not isinstance(folds, int)
     ):
         raise VpsimError(f"{path}: validation.seed {seed!r} and .folds {folds!r}: expected whole numbers")
-    deal = v.get("deal", "shuffle")
-    if deal not in ("shuffle", "hash"):
-        raise VpsimError(f"{path}: validation.deal {str(deal)[:40]!r}: expected shuffle or hash")
+    deal = v.get("deal", DEFAULT_DEAL)
+    if not isinstance(deal, str) or deal not in DEALS:
+        raise VpsimError(f"{path}: validation.deal {str(deal)[:40]!r}: expected {' or '.join(DEALS)}")
     tables = {}
     for pt, (name, _) in PARTS.items():
         f = folder / name
