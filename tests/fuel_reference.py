@@ -8,17 +8,18 @@ A change that moves a fuel on purpose (new physics, a corrected equation) rewrit
 commit and says there by how much and why. ``tests/test_fuel_reference.py`` compares; this is a regression
 guard, not a check of the physics (those compare with independent values elsewhere).
 
-Tolerances (relative), each from what the method can do (measured 2026-12-07 on 207 cases, the vehicle's
-mass moved by one and three ulps):
+Tolerances (relative), each about four times the largest effect measured of rounding in the inputs: every
+forward case run with the vehicle's mass moved by 1 to 16 ulps up and 1 to 8 down and the fuel's density by
+one (25 runs each), every other case with the mass moved by 1, 2, 5 and 8 ulps (2026-12-07):
 
 * :data:`TOL`, 1e-9: the quasi-static methods, the inverse method and the electric and hybrid cars'
-  fixed-step forward runs move by 1e-15 with an ulp of the input; 1e-9 is issue 27's "same fuel".
-* :data:`TOL_ADAPTIVE`, 2e-6: the engine car's forward method integrates with adaptive steps (RODAS3), which
-  move with the last bit of any input: one to three ulps of the mass moved its fuel by up to 5.7e-7
-  (saturn_1_9l, WLTC 3b, realistic mode; the median 5e-15), so no reordering of its arithmetic can be held to
-  1e-9.
-* :data:`TOL_SPLIT_US06_ECMS`, 1e-4: the power split's forward ECMS on US06, where the car cannot follow the
-  trace (MG1 at its limit) and one ulp of the mass flips a discrete choice of the management: 2.4e-5.
+  fixed-step forward runs moved by at most 2e-15 (issue 27 asks for the same fuel to 1e-9).
+* :data:`TOL_ADAPTIVE`, 2e-5: the engine car's forward method integrates with adaptive steps (RODAS3), which
+  move with the last bit of any input: up to 5.4e-6 (hofman2011, UDDS, paper mode; the median over the 72
+  cases 3e-11), so no reordering of its arithmetic can be held to 1e-9.
+* :data:`TOL_SPLIT_US06`, 2e-3: the power split's forward runs on US06, where the car cannot follow the
+  trace (MG1 at its limit) and a last bit flips a discrete choice of the management: up to 5.4e-4 (rules)
+  and 2.4e-5 (ECMS).
 """
 
 from __future__ import annotations
@@ -32,8 +33,8 @@ HERE = Path(__file__).resolve().parent
 REFERENCE = HERE / "fuel_reference.json"
 
 TOL = 1e-9
-TOL_ADAPTIVE = 2e-6
-TOL_SPLIT_US06_ECMS = 1e-4
+TOL_ADAPTIVE = 2e-5
+TOL_SPLIT_US06 = 2e-3
 
 ENGINE_PRESETS = ("hofman2011", "geo_metro_1l", "saturn_1_9l")
 ENGINE_CYCLES = ("nedc", "ftp75", "udds", "hwfet", "us06", "wltc3b")
@@ -57,8 +58,8 @@ def cases():
             for method in ("backward", "forward", "inverse"):
                 for ems in ("rule", "ecms") if preset != "bev" else (None,):
                     kw = {} if ems is None else {"ems": ems}
-                    split_miss = (preset, cycle, method, ems) == ("hev_split", "us06", "forward", "ecms")
-                    tol = TOL_SPLIT_US06_ECMS if split_miss else TOL
+                    split_miss = (preset, cycle, method) == ("hev_split", "us06", "forward")
+                    tol = TOL_SPLIT_US06 if split_miss else TOL
                     yield f"{preset}/{cycle}/{method}/{ems}", preset, cycle, method, kw, tol
 
 
