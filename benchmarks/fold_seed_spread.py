@@ -64,14 +64,12 @@ def main() -> None:
         ap.error("--seeds and --workers must be at least 1")
     if a.drop_families < 0 or a.draws < 1:
         ap.error("--drop-families must be 0 or more and --draws at least 1")
-    global DEAL
-    DEAL = a.deal
     t0 = time.perf_counter()
     cars = read_test_car_list(a.list)
     if a.part != "conventional":
         if a.drop_families:
             ap.error("--drop-families is measured on the engine cars (the default --part)")
-        electrified(cars, a.part, [cal.SEED, *range(a.seeds)], a.workers, t0)
+        electrified(cars, a.part, [cal.SEED, *range(a.seeds)], a.workers, t0, a.deal)
         return
     vehicles = [v for v in cars.vehicles if any(c in v.measured_mpg for c in FLEET_CYCLES)]
     groups = cal.vehicle_groups(vehicles, "family")
@@ -92,7 +90,7 @@ def main() -> None:
             return
         for seed in seeds:
             errs = conventional_errors(
-                vehicles, seed, groups, ok, lg, meas, vclass, per_watt, gears, executor
+                vehicles, seed, groups, ok, lg, meas, vclass, per_watt, gears, executor, a.deal
             )
             line = []
             for c in FLEET_CYCLES:
@@ -103,14 +101,14 @@ def main() -> None:
     summary(table, {c: sum(1 for r in ok if r["cycle"] == c) for c in FLEET_CYCLES}, len(seeds), t0)
 
 
-def conventional_errors(vehicles, seed, groups, ok, lg, meas, vclass, per_watt, gears, executor, deal_=None):
+def conventional_errors(vehicles, seed, groups, ok, lg, meas, vclass, per_watt, gears, executor, scheme):
     """The engine cars' out-of-fold errors (% of mpg) dealt with ``seed``: {test: {key: error}}. ``vehicles``
     may be a part of the list: the grid rows of the others are left out of the fit."""
     keys = {v.key for v in vehicles}
     take = np.array([r["key"] in keys for r in ok])
     rows = [r for r, t in zip(ok, take, strict=True) if t]
     by_key = {v.key: v for v in vehicles}
-    fold_of, vfold = deal(vehicles, seed, groups, rows, deal_)
+    fold_of, vfold = deal(vehicles, seed, groups, rows, scheme)
     sub_class = vclass[take]
     tech = cal.cross_validate(lg[take], meas[take], vfold, sub_class, 5, per_watt[take])
     items = [
@@ -178,12 +176,9 @@ def header(part: str, recs, groups: dict, ok: list, t0: float) -> None:
     )
 
 
-DEAL = cal.DEFAULT_DEAL  # --deal
-
-
-def deal(recs, seed: int, groups: dict, ok: list, scheme: str | None = None) -> tuple[dict, np.ndarray]:
+def deal(recs, seed: int, groups: dict, ok: list, scheme: str = cal.DEFAULT_DEAL) -> tuple[dict, np.ndarray]:
     """The fleet's 5 folds dealt with ``seed``: (fold of each record's key, fold of each grid row)."""
-    fold_of = cal.assign_folds([v.key for v in recs], 5, seed=seed, groups=groups, deal=scheme or DEAL)
+    fold_of = cal.assign_folds([v.key for v in recs], 5, seed=seed, groups=groups, deal=scheme)
     return fold_of, np.array([fold_of[r["key"]] for r in ok])
 
 
@@ -199,7 +194,9 @@ def summary(table: dict, n: dict, n_seeds: int, t0: float) -> None:
     print(f"{n_seeds} deals, {time.perf_counter() - t0:.0f} s wall")
 
 
-def electrified(cars, part: str, seeds: list[int], workers: int, t0: float) -> dict:
+def electrified(
+    cars, part: str, seeds: list[int], workers: int, t0: float, scheme: str = cal.DEFAULT_DEAL
+) -> dict:
     """The fleet's ``part`` (``mhev``, ``hev`` or ``bev``) as :func:`vpsim.fleet.run_electrified` runs it,
     dealt with each seed: the figures its ``by_powertrain`` block reports (vpsim's, without the peer).
     Returns {test: [(median, median |error|, p90 |error|) per seed]}."""
@@ -249,7 +246,7 @@ def electrified(cars, part: str, seeds: list[int], workers: int, t0: float) -> d
         meas = np.array([log_measured(by_key[r["key"]], r["cycle"]) for r in ok])
         header(part, recs, groups, ok, t0)
         for seed in seeds:
-            fold_of, _ = deal(recs, seed, groups, ok)
+            fold_of, _ = deal(recs, seed, groups, ok, scheme)
             tech = _fit_classes(hm, grid, meas, ok, class_of, fold_of, 5, {})  # the fleet part's own fit
             preds = _predict(executor, hm.predict_chunk, work, failed, tech, fold_of, class_of, 4 * chunk)
             line = []

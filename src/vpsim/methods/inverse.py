@@ -666,7 +666,6 @@ def run(
                 t, v, dv, ddv, x108, np.ascontiguousarray(gear, dtype=np.int64), left, right, dt, v_c
             )
         rows = np.empty((N_ROWS, t.size))
-        gear = gear.astype(np.int64, copy=False)
         if not invert_points(v, dv, ddv, x108, gear, ratios, coef, extended, c, rows):
             raise VpsimError(f"gear numbers must be 1..{params.transmission.n_gears}")
         stopped, starts = _stop_engine_at_rest(t, v, dv, rows) if stop_start else (None, 0)
