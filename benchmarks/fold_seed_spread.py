@@ -4,6 +4,7 @@
     python benchmarks/fold_seed_spread.py LIST --seeds 20 --workers 2
     python benchmarks/fold_seed_spread.py LIST --part mhev     # the mild hybrids (also: hev, bev)
     python benchmarks/fold_seed_spread.py LIST --deal hash     # the hash deal (calibrate.assign_folds)
+    python benchmarks/fold_seed_spread.py LIST --deal blocks   # the hash order cut into equal blocks
     python benchmarks/fold_seed_spread.py LIST --drop-families 3 --draws 5   # a list with fewer families
 
 ``vpsim fleet`` deals the vehicle families into 5 folds in an order shuffled with one fixed seed
@@ -24,8 +25,9 @@ small parts have 39-61 families in 5 folds, so a deal moves them more than the e
 when the reader learns, or stops, to read a family), the rest unchanged. For each of ``--draws`` random
 choices of N families (a fixed generator), the fleet's seed deals the smaller list and the fit and
 predictions are made again; printed is the change of each test's median |error| *on the vehicles both lists
-hold*, for the shuffle deal and the hash deal side by side. Under the shuffle most families change fold;
-under the hash none does, so what moves there is the fit's loss of the dropped families alone.
+hold*, for every deal side by side (shuffle, hash, blocks). Under the shuffle most families change fold;
+under the hash none does, so what moves there is the fit's loss of the dropped families alone; under the
+blocks a few at the blocks' edges do.
 """
 
 from __future__ import annotations

@@ -132,6 +132,84 @@ def test_hash_folds_depend_on_the_group_alone(labels, seed, data):
     assert part == {x: full[x] for x in keep}
 
 
+def _blocks_by_hand(sizes: dict[str, int], k: int, seed: int) -> dict[str, int]:
+    """The blocks deal by hand: groups sorted by the 8-byte SHA-256 integer of "<seed>:<label>", each to the
+    block of ``k`` equal shares of the records its middle record falls in (exact fractions)."""
+    from fractions import Fraction
+
+    def place(label):
+        return int.from_bytes(hashlib.sha256(f"{seed}:{label}".encode()).digest()[:8], "big"), label
+
+    total, before, out = sum(sizes.values()), 0, {}
+    for label in sorted(sizes, key=place):
+        middle = Fraction(before) + Fraction(sizes[label], 2)
+        out[label] = math.floor(middle * k / total)
+        before += sizes[label]
+    return out
+
+
+def test_the_blocks_deal_cuts_the_hash_order_into_folds_of_equal_records():
+    """deal="blocks": the hand formula's folds, whole groups, whatever the input order; the folds within one
+    group's records of a fifth of the list, where the hash deal's are not; three groups fewer move only a
+    few groups at the blocks' edges, where the shuffle deal moves most of them."""
+    keys = [f"V{i}#0" for i in range(300)]
+    groups = {k: f"G{i // 3}" if i < 240 else f"H{i}" for i, k in enumerate(keys)}  # 80 of 3, 60 of 1
+    sizes = {g: sum(1 for k in keys if groups[k] == g) for g in set(groups.values())}
+    full = cal.assign_folds(keys, 5, groups=groups, deal="blocks")
+    hand = _blocks_by_hand(sizes, 5, cal.SEED)
+    assert full == {k: hand[groups[k]] for k in keys}
+    assert cal.assign_folds(list(reversed(keys)), 5, groups=groups, deal="blocks") == full
+    assert np.all(np.abs(np.bincount(list(full.values()), minlength=5) - 60) <= 3)
+    hashed = np.bincount(list(cal.assign_folds(keys, 5, groups=groups, deal="hash").values()), minlength=5)
+    assert np.abs(hashed - 60).max() > 3  # (this list's hash deal: a fold 4 or more records off its share)
+    fewer = [k for k in keys if groups[k] not in {"G0", "G50", "H299"}]
+    after = cal.assign_folds(fewer, 5, groups=groups, deal="blocks")
+    moved = {groups[k] for k in fewer if after[k] != full[k]}
+    assert 0 < len(moved) <= 4 * (7 + 1)  # 7 records fewer: at most 8 groups at each of the 4 edges
+    shuffled, shuffled_fewer = (
+        cal.assign_folds(keys, 5, groups=groups),
+        cal.assign_folds(fewer, 5, groups=groups),
+    )
+    assert sum(shuffled[k] != shuffled_fewer[k] for k in fewer) > len(fewer) / 2
+
+
+def test_a_blocks_deal_with_a_group_larger_than_a_folds_share_is_refused():
+    """Four groups into four folds, one of them three folds' share: in any order two share a block."""
+    keys = [f"V{i}" for i in range(12)]
+    groups = {k: "big" if i < 9 else f"small{i}" for i, k in enumerate(keys)}
+    for seed in (cal.SEED, 1, 2):
+        with pytest.raises(
+            ValueError, match=rf"the blocks deal with seed {seed} leaves fold\(s\) .* of 4 empty"
+        ):
+            cal.assign_folds(keys, 4, seed=seed, groups=groups, deal="blocks")
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    st.dictionaries(st.text(min_size=1, max_size=8), st.integers(1, 6), min_size=8, max_size=40),
+    st.integers(min_value=0, max_value=2**31),
+    st.integers(2, 5),
+    st.data(),
+)
+def test_blocks_folds_are_balanced_and_a_group_more_moves_few_others(sizes, seed, k, data):
+    """Every fold within the largest group's records of its share; one group more (s records) moves at most
+    s + 1 other groups at each of the k - 1 edges between blocks."""
+    keys = [f"{g}\x00{j}" for g, n in sizes.items() for j in range(n)]
+    groups = {key: key.split("\x00")[0] for key in keys}
+    new = data.draw(st.sampled_from(sorted(sizes)))
+    rest = [key for key in keys if groups[key] != new]
+    try:
+        full = cal.assign_folds(keys, k, seed=seed, groups=groups, deal="blocks")
+        part = cal.assign_folds(rest, k, seed=seed, groups=groups, deal="blocks")
+    except ValueError as exc:  # a fold left empty: refused, as tested above
+        assert "empty" in str(exc)
+        return
+    counts = np.bincount(list(full.values()), minlength=k)
+    assert np.all(np.abs(counts - len(keys) / k) <= max(sizes.values()))
+    moved = {groups[key] for key in rest if part[key] != full[key]}
+    assert len(moved) <= (k - 1) * (sizes[new] + 1)
+
+
 def test_leave_one_manufacturer_out_predicts_each_maker_from_the_others(tmp_path):
     run = run_fleet(
         write_list(tmp_path / "l.csv", bad_rows=False), group_by="manufacturer", peer=False, cycles=("hwy",)
@@ -232,6 +310,22 @@ def test_fleet_with_the_hash_deal_says_so_and_keeps_whole_families(tmp_path, cap
     assert err.count("\n") == 1 and "each manufacturer is its own fold" in err
     assert main([*args, "--deal", "deck"]) == 2
     assert "'deck' is not one of" in capsys.readouterr().err
+
+
+def test_fleet_with_the_blocks_deal_keeps_whole_families_in_the_hand_formulas_folds(tmp_path, capsys):
+    """``vpsim fleet --deal blocks``: each row's fold the hand formula's for its family's records on the list
+    the fleet used, the deal named in summary.json, report.md and on the screen."""
+    lst = write_list(tmp_path / "list.csv", bad_rows=False)
+    out = tmp_path / "o"
+    args = ["fleet", str(lst), "--out", str(out), "--folds", "3", "--cycles", "hwy", "--no-peer", "--quiet"]
+    assert main([*args, "--deal", "blocks"]) == 0
+    assert "blocks deal (the headline's: shuffle)" in capsys.readouterr().out
+    assert json.loads((out / "summary.json").read_text())["validation"]["deal"] == "blocks"
+    assert f"in the order a hash of seed {cal.SEED} and their names gives" in (out / "report.md").read_text()
+    rows = pd.read_csv(out / "vehicles.csv")
+    sizes = rows.groupby("family").size().to_dict()
+    hand = _blocks_by_hand(sizes, 3, cal.SEED)
+    assert len(rows) > 0 and list(rows["fold"]) == [hand[f] for f in rows["family"]]
 
 
 def test_on_bounds_sees_a_value_on_its_bound():

@@ -51,13 +51,14 @@ from .main import cli
 )
 @click.option(
     "--deal",
-    type=click.Choice(["shuffle", "hash"]),
+    type=click.Choice(["shuffle", "hash", "blocks"]),
     default="shuffle",
     show_default=True,
     help="How the groups are dealt into folds: shuffled with the seed and dealt to the emptiest fold (the "
-    "headline's: balanced folds), or each group to the fold a hash of the seed and its own name gives (folds "
-    'balanced on average; a family the list gains or loses moves no other family). docs/fleet.md, "How sure '
-    'the comparison is".',
+    "headline's: balanced folds); each group to the fold a hash of the seed and its own name gives (folds "
+    "balanced on average; a family the list gains or loses moves no other family); or the groups in the "
+    "order of that hash cut into blocks of equal records (balanced folds; a family gained or lost moves "
+    'only a few at the blocks\' edges). docs/fleet.md, "How sure the comparison is".',
 )
 @click.option("--method", type=click.Choice(["backward", "forward"]), default="backward", show_default=True)
 @click.option("--local-cluster", "local_cluster", type=int, default=None, help="Run on N local Dask workers.")

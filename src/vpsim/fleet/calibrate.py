@@ -72,7 +72,7 @@ ACCESSORY_COARSE = 4  # the first pass takes every 4th of them, on every 4th poi
 FUEL_FLOOR = 1e-3  # L/100 km: a cycle's fuel the linear accessory term may not take below (a lower bound)
 SEED = 20220
 # how groups are dealt into folds (:func:`assign_folds`); the fleet's headline is the first
-DEALS = ("shuffle", "hash")
+DEALS = ("shuffle", "hash", "blocks")
 DEFAULT_DEAL = "shuffle"
 
 
@@ -195,6 +195,12 @@ def assign_folds(
       fold whatever other groups the list holds: a new family moves only its own records. The folds are
       balanced only on average (their sizes vary as a binomial draw's); a deal that leaves a fold empty is
       refused.
+    * ``blocks``: the groups in the order of the same hash (:func:`hash_key`), cut into ``k`` blocks of about
+      equal records (a group to the block its middle record falls in). The folds are balanced to within a
+      group's records, and a group the list gains or loses (``s`` records) shifts every other group's place
+      in the order by at most ``s`` records, so at most ``s + 1`` groups at each of the ``k - 1`` block
+      edges change fold; no other group moves. A deal that leaves a fold empty (a group larger than a
+      fold's share) is refused.
     """
     if k < 2:
         raise ValueError(f"cross-validation needs at least 2 folds, got {k}")
@@ -220,6 +226,27 @@ def assign_folds(
         for name in names:
             for key in members[name]:
                 out[key] = fold_of_group[name]
+        return out
+    if deal == "blocks":
+        order = sorted(names, key=lambda name: (hash_key(name, seed), name))
+        total = len(ordered)
+        before = 0  # records of the groups before this one in the order
+        used = set()
+        for name in order:
+            size = len(members[name])
+            # the block of the group's middle record: 2 k (before + size / 2) // (2 total), in integers
+            fold = min(k - 1, (k * (2 * before + size)) // (2 * total))
+            used.add(fold)
+            for key in members[name]:
+                out[key] = fold
+            before += size
+        empty = sorted(set(range(k)) - used)
+        if empty:
+            raise ValueError(
+                f"the blocks deal with seed {seed} leaves fold(s) {', '.join(map(str, empty))} of {k} empty "
+                f"({len(names)} groups, {total} records: a group holds more than a fold's share); use fewer "
+                "folds or the shuffle deal"
+            )
         return out
     perm = np.random.default_rng(seed).permutation(len(names))
     size = [0] * k
@@ -252,12 +279,17 @@ class FoldSpec:
         return assign_folds(keys, k, seed=self.seed, groups=groups, deal=self.deal)
 
 
-def hash_fold(label: str, k: int, seed: int = SEED) -> int:
-    """The ``hash`` deal's fold of a group: SHA-256 of ``"<seed>:<label>"`` (UTF-8), its first 8 bytes as an
-    unsigned big-endian integer, modulo ``k``. Depends on nothing but these three, on every platform and
+def hash_key(label: str, seed: int = SEED) -> int:
+    """A group's place in the ``hash`` and ``blocks`` deals: SHA-256 of ``"<seed>:<label>"`` (UTF-8), its
+    first 8 bytes as an unsigned big-endian integer. Depends on nothing but these two, on every platform and
     Python version (unlike :func:`hash`, which is salted per process)."""
     digest = hashlib.sha256(f"{int(seed)}:{label}".encode()).digest()
-    return int.from_bytes(digest[:8], "big") % k
+    return int.from_bytes(digest[:8], "big")
+
+
+def hash_fold(label: str, k: int, seed: int = SEED) -> int:
+    """The ``hash`` deal's fold of a group: :func:`hash_key` modulo ``k``."""
+    return hash_key(label, seed) % k
 
 
 def _fine_axes():
@@ -408,6 +440,7 @@ __all__ = [
     "FoldSpec",
     "assign_folds",
     "hash_fold",
+    "hash_key",
     "cross_validate",
     "per_fold_and_class",
     "fit",

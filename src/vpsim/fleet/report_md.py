@@ -295,6 +295,7 @@ def _deal_words(run) -> str:
     how = {
         "shuffle": "shuffled with seed {} and dealt to the emptiest fold",
         "hash": "each to the fold a hash of seed {} and its name picks (folds balanced on average only)",
+        "blocks": "in the order a hash of seed {} and their names gives, cut into blocks of equal records",
     }[run.deal]
     return how.format(run.seed) + ("" if run.seed == cal.SEED else f"; the fleet's seed is {cal.SEED}")
 

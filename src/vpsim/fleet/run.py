@@ -440,9 +440,10 @@ def run_fleet(
     (default), ``record``, or ``manufacturer`` (one fold per manufacturer; ``folds`` is then not used).
     ``seed``: the order the groups are dealt into folds in (:func:`vpsim.fleet.calibrate.assign_folds`; every
     part of the fleet, and its peer's calibration, on the same deal); another seed is an equally valid deal.
-    ``deal``: ``shuffle`` (the default and the headline's) or ``hash``, where a family's fold depends on the
-    seed and its own label alone, so families the list gains or loses move no other family
-    (:func:`vpsim.fleet.calibrate.assign_folds`).
+    ``deal``: ``shuffle`` (the default and the headline's); ``hash``, where a family's fold depends on the
+    seed and its own label alone, so families the list gains or loses move no other family; or ``blocks``,
+    the families in that hash's order cut into folds of equal records, so the folds are balanced and a
+    family gained or lost moves only a few at the folds' edges (:func:`vpsim.fleet.calibrate.assign_folds`).
     ``memory``: a dict kept between calls (empty at first) in which the runs' chunk results are remembered
     (:class:`_Remembering`), so that runs of one list on several seeds compute the deal-independent grids
     and peer runs once; the figures are those of separate runs.
