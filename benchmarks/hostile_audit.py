@@ -662,6 +662,18 @@ def cases() -> list[Case]:
             [*fl, "--out", "o", "--deal", "hash", "--limit", "6"],
             match="empty",
         ),
+        Case(
+            S,
+            "--deal blocks by manufacturer",
+            [*fl, "--out", "o", "--deal", "blocks", "--group-by", "manufacturer"],
+            match="each manufacturer is its own fold",
+        ),
+        Case(
+            S,
+            "--deal blocks on too few families",
+            [*fl, "--out", "o", "--deal", "blocks", "--limit", "3"],
+            match="fold",
+        ),
         Case(S, "--out under a file", [*fl, "--out", "car.toml/sub"], match="cannot write there"),
         Case(S, "--out holds the list", [*fl, "--out", "."], match="holds an input"),
         Case(S, "--out is the list", [*fl, "--out", "list.csv"], match="list.csv"),
