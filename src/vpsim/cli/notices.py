@@ -19,21 +19,24 @@ import click
 # which kernels a module's compiled functions are, and what their compilation costs on a 2-core machine,
 # quiet to loaded (measured with an empty cache, 2026-12-03: benchmarks/first_run.py; the electric and hybrid
 # ones 2026-12-06, a process whose model's kernels were cached: bev 7.6-8.7 s, the P2 and mild hybrid 19-21 s
-# backward and inverse, 21-25 s forward, the power split 15-16 s, each on a quiet machine). ``pip install .``
-# compiles them all into the package (setup.py): these are heard only where that cache does not serve (an
-# editable install, another processor, a $NUMBA_CACHE_DIR of one's own, an edited source).
+# backward and inverse, 21-25 s forward, the power split 15-16 s, each on a quiet machine; the upper ends
+# since 2026-12-08, a quiet 2-core machine 2.5-3.5 times slower (FASTSim's UDDS run 25 ms against 7), each
+# process's wall time less its 1.5 s of start: the engine car's backward 37 s with the views and look-ups,
+# inverse 27 s, forward 76 s; bev 13-17 s; the P2 39-40 s per method; the power split 35-38 s).
+# ``pip install .`` compiles them all into the package (setup.py): these are heard only where that cache does
+# not serve (an editable install, another processor, a $NUMBA_CACHE_DIR of one's own, an edited source).
 KERNELS = {
     "vpsim.model.engine": ("model's array views", "1-3 s"),
     "vpsim.model.tables": ("model's table look-ups", "1-2 s"),
-    "vpsim.methods.backward": ("backward kernels", "15-30 s"),
+    "vpsim.methods.backward": ("backward kernels", "15-35 s"),
     "vpsim.methods.forward": ("forward method's start state and batch", "2-40 s"),
     "vpsim.methods._fdm_rosenbrock": ("forward integrator", "35-110 s"),
     "vpsim.methods._fdm_dopri5": ("forward method's Dormand-Prince integrator", "20-50 s"),
-    "vpsim.methods.inverse": ("inverse kernels", "10-20 s"),
-    "vpsim.methods.bev": ("battery-electric kernels", "5-12 s"),
-    "vpsim.methods.hev": ("hybrid kernels", "15-30 s"),
-    "vpsim.methods.hev_forward": ("hybrids' forward kernels", "15-35 s"),
-    "vpsim.methods.hev_split": ("power-split hybrid kernels", "15-35 s"),
+    "vpsim.methods.inverse": ("inverse kernels", "10-30 s"),
+    "vpsim.methods.bev": ("battery-electric kernels", "5-20 s"),
+    "vpsim.methods.hev": ("hybrid kernels", "15-45 s"),
+    "vpsim.methods.hev_forward": ("hybrids' forward kernels", "15-45 s"),
+    "vpsim.methods.hev_split": ("power-split hybrid kernels", "15-40 s"),
 }
 _MODEL = ("vpsim.model.engine", "vpsim.model.tables", "vpsim.methods.backward")  # maps and gear rule too
 METHOD_MODULES = {
