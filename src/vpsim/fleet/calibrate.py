@@ -215,39 +215,21 @@ def assign_folds(
     if len(names) < k:
         raise ValueError(f"{len(names)} group(s) cannot fill {k} folds; use fewer folds")
     out: dict[str, int] = {}
-    if deal == "hash":
-        fold_of_group = {name: hash_fold(name, k, seed) for name in names}
+    if deal != "shuffle":  # the hash and blocks deals: a fold per group, then the same check and expansion
+        if deal == "hash":
+            fold_of_group = {name: hash_fold(name, k, seed) for name in names}
+            why, other = f"{len(names)} groups", "fewer folds, another seed"
+        else:
+            fold_of_group = _block_folds(names, members, k, seed)
+            why = f"{len(names)} groups, {len(ordered)} records: a group holds more than a fold's share"
+            other = "fewer folds"
         empty = sorted(set(range(k)) - set(fold_of_group.values()))
         if empty:
             raise ValueError(
-                f"the hash deal with seed {seed} leaves fold(s) {', '.join(map(str, empty))} of {k} empty "
-                f"({len(names)} groups); use fewer folds, another seed or the shuffle deal"
+                f"the {deal} deal with seed {seed} leaves fold(s) {', '.join(map(str, empty))} of {k} empty "
+                f"({why}); use {other} or the shuffle deal"
             )
-        for name in names:
-            for key in members[name]:
-                out[key] = fold_of_group[name]
-        return out
-    if deal == "blocks":
-        order = sorted(names, key=lambda name: (hash_key(name, seed), name))
-        total = len(ordered)
-        before = 0  # records of the groups before this one in the order
-        used = set()
-        for name in order:
-            size = len(members[name])
-            # the block of the group's middle record: 2 k (before + size / 2) // (2 total), in integers
-            fold = min(k - 1, (k * (2 * before + size)) // (2 * total))
-            used.add(fold)
-            for key in members[name]:
-                out[key] = fold
-            before += size
-        empty = sorted(set(range(k)) - used)
-        if empty:
-            raise ValueError(
-                f"the blocks deal with seed {seed} leaves fold(s) {', '.join(map(str, empty))} of {k} empty "
-                f"({len(names)} groups, {total} records: a group holds more than a fold's share); use fewer "
-                "folds or the shuffle deal"
-            )
-        return out
+        return {key: fold_of_group[label[key]] for key in ordered}
     perm = np.random.default_rng(seed).permutation(len(names))
     size = [0] * k
     for j in perm:
@@ -255,6 +237,20 @@ def assign_folds(
         for key in members[names[j]]:
             out[key] = f
         size[f] += len(members[names[j]])
+    return out
+
+
+def _block_folds(names: list[str], members: dict[str, list[str]], k: int, seed: int) -> dict[str, int]:
+    """The ``blocks`` deal's fold of each group (:func:`assign_folds`): the groups in the order of
+    :func:`hash_key`, each to the block of ``k`` equal shares of the records its middle record falls in."""
+    total = sum(len(members[name]) for name in names)
+    before = 0  # records of the groups before this one in the order
+    out = {}
+    for name in sorted(names, key=lambda name: (hash_key(name, seed), name)):
+        size = len(members[name])
+        # the block of the group's middle record, k (before + size / 2) / total, in integers
+        out[name] = min(k - 1, (k * (2 * before + size)) // (2 * total))
+        before += size
     return out
 
 

@@ -91,7 +91,7 @@ def _run_evs(evs, spec: cal.FoldSpec, executor, peer_state, progress, timings) -
         return out
     try:
         fold_of = spec.assign([v.key for v in evs], groups)
-    except ValueError as exc:  # (the hash deal left a fold of a small part empty)
+    except ValueError as exc:  # (a hash or blocks deal left a fold of a small part empty)
         out["status"] = f"{len(evs)} battery-electric vehicle(s): {exc}"
         return out
     out.update(folds=k, groups=n_groups, fold_of=fold_of, group_of=groups)
@@ -316,7 +316,7 @@ def _run_hybrids(recs, part: HybridFleet, spec: cal.FoldSpec, executor, peer_sta
         return out
     try:
         fold_of = spec.assign([v.key for v in recs], groups)
-    except ValueError as exc:  # (the hash deal left a fold of a small part empty)
+    except ValueError as exc:  # (a hash or blocks deal left a fold of a small part empty)
         out["status"] = f"{len(recs)} {name}(s): {exc}"
         return out
     out.update(folds=k, groups=n_groups, fold_of=fold_of, group_of=groups)
